@@ -1,0 +1,199 @@
+"""Helpers shared by the readers: safe file access, sniffing, quirk repair.
+
+Every reader goes through :func:`read_bytes` (so a directory, a missing or
+unreadable file and a corrupt ``.gz`` all become :class:`~accal.errors.FormatError`)
+and through :func:`tidy` (so duplicated epochs, out-of-order rows and gaps are
+handled and counted the same way for every format).
+"""
+
+from __future__ import annotations
+
+import gzip
+import zlib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from accal.errors import FormatError
+
+GZIP_MAGIC = b"\x1f\x8b"
+PARQUET_MAGIC = b"PAR1"
+
+#: A time step larger than this many nominal steps is a gap.
+GAP_FACTOR = 1.5
+
+
+def read_bytes(path: str | Path) -> bytes:
+    """Return the (decompressed) content of ``path``.
+
+    Gzip is detected by its magic bytes, not by the file name.
+
+    Raises
+    ------
+    FormatError
+        Missing file, directory, unreadable file, corrupt gzip stream or empty file.
+    """
+    p = Path(path)
+    if p.is_dir():
+        raise FormatError("is a directory, not a file", p)
+    try:
+        raw = p.read_bytes()
+    except FileNotFoundError:
+        raise FormatError("no such file", p) from None
+    except PermissionError:
+        raise FormatError("permission denied (file not readable)", p) from None
+    except OSError as exc:
+        raise FormatError(f"cannot read file: {exc.strerror or exc}", p) from None
+    if raw[:2] == GZIP_MAGIC:
+        try:
+            raw = gzip.decompress(raw)
+        except (OSError, EOFError, zlib.error) as exc:
+            raise FormatError(f"corrupt gzip stream ({exc})", p) from None
+    if not raw.strip():
+        raise FormatError("empty file", p)
+    return raw
+
+
+def peek(path: str | Path, n: int = 8192) -> bytes:
+    """Return up to ``n`` leading (decompressed) bytes of ``path``; b"" on any error."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(n)
+            if head[:2] != GZIP_MAGIC:
+                return head
+            fh.seek(0)
+            with gzip.GzipFile(fileobj=fh) as gz:
+                return gz.read(n)
+    except Exception:
+        return b""
+
+
+def check_binary(text: bytes, path: str | Path, first_line: int = 1) -> None:
+    """Raise FormatError if ``text`` holds NUL or non-UTF-8 bytes (binary garbage)."""
+    if b"\x00" in text:
+        line = first_line + text[: text.index(b"\x00")].count(b"\n")
+        raise FormatError("binary data where text was expected", path, line)
+    try:
+        text.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = first_line + text[: exc.start].count(b"\n")
+        raise FormatError("binary data where text was expected (not UTF-8)", path, line) from None
+
+
+def bits_from_strings(arr: Any, path: str | Path, first_line: int, width: int = 8) -> NDArray:
+    """Convert an Arrow string array of ``width`` '0'/'1' characters to uint32 bitmasks.
+
+    Bit 0 is the rightmost character.  Vectorised on the Arrow buffers.
+
+    Raises
+    ------
+    FormatError
+        A value of the wrong length or with characters other than 0 and 1.
+    """
+    import pyarrow as pa
+
+    if isinstance(arr, pa.ChunkedArray):
+        arr = arr.combine_chunks()
+    n = len(arr)
+    if n == 0:
+        return np.zeros(0, dtype=np.uint32)
+    if pa.types.is_large_string(arr.type):
+        arr = arr.cast(pa.string())
+    _, off_buf, data_buf = arr.buffers()
+    offsets = np.frombuffer(off_buf, dtype=np.int32, count=n + 1, offset=4 * arr.offset)
+    lengths = np.diff(offsets)
+    bad = np.flatnonzero(lengths != width)
+    if bad.size:
+        i = int(bad[0])
+        raise FormatError(
+            f"quality flag {arr[i].as_py()!r} is not {width} characters of 0/1",
+            path,
+            first_line + i,
+        )
+    chars = np.frombuffer(data_buf, dtype=np.uint8, count=n * width, offset=int(offsets[0]))
+    digits = chars.reshape(n, width) - ord("0")
+    bad = np.flatnonzero((digits > 1).any(axis=1))
+    if bad.size:
+        i = int(bad[0])
+        raise FormatError(
+            f"quality flag {arr[i].as_py()!r} is not {width} characters of 0/1",
+            path,
+            first_line + i,
+        )
+    weights = (1 << np.arange(width - 1, -1, -1)).astype(np.uint32)
+    return digits.astype(np.uint32) @ weights
+
+
+@dataclass
+class Tidied:
+    """Result of :func:`tidy`: arrays reordered and the counts for the ReadReport."""
+
+    time: NDArray[np.float64]
+    arrays: dict[str, NDArray]
+    report: dict[str, Any] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+
+
+def tidy(time: NDArray[np.float64], arrays: dict[str, NDArray]) -> Tidied:
+    """Sort by time, drop duplicated epochs (first kept) and find gaps.
+
+    Parameters
+    ----------
+    time : ndarray of float64, shape (n,)
+        Epochs in file order [s].
+    arrays : dict of str to ndarray
+        Per-row arrays (first dimension n) to reorder the same way.
+
+    Returns
+    -------
+    Tidied
+        ``report`` holds ``n_rows``, ``n_duplicates``, ``n_out_of_order``, ``n_gaps``,
+        ``gap_seconds`` and ``nominal_step`` for :class:`~accal.series.ReadReport`.
+
+    Notes
+    -----
+    ``n_out_of_order`` counts rows whose epoch is smaller than that of the row
+    before them in the file.  Sorting is stable, so of duplicated epochs the one
+    that came first in the file is kept.  The nominal step is the median of the
+    positive steps; a step larger than ``GAP_FACTOR`` nominal steps is a gap and
+    contributes ``step − nominal_step`` to ``gap_seconds`` (the missing time).
+    """
+    n = time.shape[0]
+    warnings: list[str] = []
+    d = np.diff(time)
+    n_ooo = int(np.count_nonzero(d < 0))
+    if n_ooo:
+        order = np.argsort(time, kind="stable")
+        time = time[order]
+        arrays = {k: v[order] for k, v in arrays.items()}
+        warnings.append(f"{n_ooo} rows out of time order (sorted)")
+        d = np.diff(time)
+    dup = d == 0
+    n_dup = int(np.count_nonzero(dup))
+    if n_dup:
+        keep = np.concatenate(([True], ~dup))
+        time = time[keep]
+        arrays = {k: v[keep] for k, v in arrays.items()}
+        warnings.append(f"{n_dup} duplicated epochs dropped (first kept)")
+        d = np.diff(time)
+    step = float(np.median(d)) if d.size else float("nan")
+    if d.size:
+        gaps = d > GAP_FACTOR * step
+        n_gaps = int(np.count_nonzero(gaps))
+        gap_seconds = float(np.sum(d[gaps] - step))
+    else:
+        n_gaps, gap_seconds = 0, 0.0
+    if n_gaps:
+        warnings.append(f"{n_gaps} gaps totalling {gap_seconds:g} s")
+    report = {
+        "n_rows": n,
+        "n_duplicates": n_dup,
+        "n_out_of_order": n_ooo,
+        "n_gaps": n_gaps,
+        "gap_seconds": gap_seconds,
+        "nominal_step": step,
+    }
+    return Tidied(time, arrays, report, warnings)
