@@ -130,9 +130,7 @@ class AccSeries:
             raise ValueError(f"axes must be among 'x', 'y', 'z', got {bad}")
         if t.size > 1 and not np.all(np.diff(t) > 0):
             raise ValueError("time must be strictly increasing")
-        valid = (
-            np.ones(t.shape, dtype=bool) if self.valid is None else np.asarray(self.valid, bool)
-        )
+        valid = np.ones(t.shape, dtype=bool) if self.valid is None else np.asarray(self.valid, bool)
         quality = (
             np.zeros(t.shape, dtype=np.uint32)
             if self.quality is None
@@ -145,7 +143,9 @@ class AccSeries:
         for k, v in self.aux.items():
             v = np.asarray(v)
             if v.shape != t.shape:
-                raise ValueError(f"auxiliary channel {k!r} must have shape {t.shape}, got {v.shape}")
+                raise ValueError(
+                    f"auxiliary channel {k!r} must have shape {t.shape}, got {v.shape}"
+                )
             aux[k] = v
         object.__setattr__(self, "time", t)
         object.__setattr__(self, "acc", a)
