@@ -1,0 +1,362 @@
+"""GRACE / GRACE-FO L1B reader and writer on the real sample files and bad input."""
+
+import gzip
+import os
+import shutil
+import warnings
+
+import numpy as np
+import pytest
+
+from accal.errors import FormatError, UnsupportedFormatError, ValidationError
+from accal.io.grace_l1b import (
+    DEFAULT_INVALID_BITS,
+    read_grace_acc1b,
+    sniff_grace_acc1b,
+    write_grace_acc1b,
+)
+from accal.series import AccSeries
+
+
+def assert_same_series(a: AccSeries, b: AccSeries, *, meta: bool = True) -> None:
+    assert np.array_equal(a.time, b.time)
+    assert np.array_equal(a.acc, b.acc)
+    assert np.array_equal(a.quality, b.quality)
+    assert np.array_equal(a.valid, b.valid)
+    assert a.axes == b.axes and a.satellite == b.satellite and a.frame == b.frame
+    assert a.aux.keys() == b.aux.keys()
+    for k in a.aux:
+        assert np.array_equal(a.aux[k], b.aux[k]), k
+    assert a.units == b.units
+    if meta:
+        assert a.meta == b.meta
+
+
+# ---------------------------------------------------------------- real files, hand-written values
+
+
+def test_grace_a_2003(samples):
+    s = read_grace_acc1b(samples["grace_a"])
+    assert s.satellite == "GRACE-A" and s.frame == "SRF" and s.axes == ("x", "y", "z")
+    assert len(s) == 60
+    assert s.time[0] == 116769600.0 and s.time[-1] == 116769659.0
+    # First and last data lines of the file, copied by hand.
+    assert s.acc[0].tolist() == [
+        1.211359188507761e-06,
+        -2.851204513834005e-05,
+        5.299886746557486e-07,
+    ]
+    assert s.acc[-1].tolist() == [
+        1.215779963699485e-06,
+        -2.851230087871499e-05,
+        5.289192392699173e-07,
+    ]
+    assert s.aux["ang_accl_x"][0] == 0.0003327737600052262
+    assert s.aux["acl_z_res"][-1] == 1.728885676053505e-09
+    # REFERENCE_VALUES.md: raw 60-s means A (1.2136, -28.512, 0.5294) µm/s².
+    assert np.mean(s.acc, axis=0) * 1e6 == pytest.approx([1.2136, -28.512, 0.5294], abs=6e-4)
+    # Bit 5 ("00100000") is set on the first 32 records: it does not invalidate.
+    assert s.quality[0] == 0b0010_0000
+    assert np.count_nonzero(s.quality == 32) == 32 and s.valid.all()
+    r = s.report
+    assert (r.n_records_header, r.n_rows, r.n_flagged, r.n_gaps) == (60, 60, 0, 0)
+    assert r.nominal_step == 1.0 and r.warnings == ()
+    hdr = s.meta["grace"]
+    assert hdr["SATELLITE NAME"] == "GRACE A"
+    assert hdr["NUMBER OF DATA RECORDS"] == "60"
+    assert hdr["TIME FIRST OBS(SEC PAST EPOCH)"] == "116769600.000000 (2003-09-14 00:00:00.00)"
+    assert hdr["INPUT FILE NAME"][0] == "ACC1A<-ACC1A_2003-09-14_A_00.dat"  # repeated key -> list
+    assert s.units["ang_accl_y"] == "rad/s^2" and s.units["acl_x_res"] == "m/s^2"
+
+
+def test_grace_b_2003_flags(samples):
+    s = read_grace_acc1b(samples["grace_b"])
+    assert s.satellite == "GRACE-B"
+    assert np.mean(s.acc[:, 1]) * 1e6 == pytest.approx(-9.383, abs=1e-3)
+    assert s.quality[:3].tolist() == [0b1100_0000, 0b1000_0000, 0b1000_0000]
+    assert s.valid.all()  # bits 5-7 (gap interpolation in the CRN window) do not exclude
+    strict = read_grace_acc1b(samples["grace_b"], invalid_bits=0b1000_0000)
+    assert strict.report.n_flagged == int(np.count_nonzero(s.quality & 0x80)) == 11
+
+
+@pytest.mark.parametrize("sat", ["a", "b"])
+def test_binary_equals_ascii(samples, sat):
+    asc = read_grace_acc1b(samples[f"grace_{sat}"])
+    dat = read_grace_acc1b(samples[f"grace_{sat}_bin"])
+    assert_same_series(asc, dat, meta=False)
+    assert dat.meta["grace"]["FILE FORMAT 0=BINARY 1=ASCII"] == "0"
+
+
+def test_gracefo_c_short_file(samples):
+    s = read_grace_acc1b(samples["gracefo_c"])
+    assert s.satellite == "GRACE-FO-C"
+    assert len(s) == 100
+    assert s.time[0] == 738849600.0 and s.time[-1] == 738849699.0
+    assert s.acc[0].tolist() == [
+        -2.77938114592582e-07,
+        -1.064874232988739e-05,
+        -1.83231564779496e-07,
+    ]
+    assert s.report.n_records_header == 86400
+    assert s.report.warnings == ("header announces 86400 data records, file has 100",)
+    assert np.mean(s.acc, axis=0) * 1e6 == pytest.approx([-0.278, -10.651, -0.182], abs=1e-3)
+    assert not s.aux["ang_accl_z"].any()  # angular accelerations are 0 in ACT1B
+    hdr = s.meta["gracefo"]
+    assert hdr["dimensions"]["num_records"] == "86400"  # scalars kept as written
+    assert hdr["global_attributes"]["platform"] == "GRACE C"
+    assert hdr["non-standard_attributes"]["start_time_epoch_secs"] == "738849600"
+
+
+def test_gracefo_d(samples):
+    s = read_grace_acc1b(samples["gracefo_d"])
+    assert s.satellite == "GRACE-FO-D"
+    assert np.mean(s.acc, axis=0) * 1e6 == pytest.approx([0.278, 10.650, -0.183], abs=1e-3)
+
+
+@pytest.mark.parametrize("name", ["grace_ahk_a", "gracefo_ahk_c"])
+def test_housekeeping_unsupported(samples, name):
+    with pytest.raises(UnsupportedFormatError, match="not ACC1B/ACT1B"):
+        read_grace_acc1b(samples[name])
+
+
+def test_sniff(samples, tmp_path):
+    for name in ("grace_a", "grace_a_bin", "gracefo_c"):
+        assert sniff_grace_acc1b(samples[name])
+    for name in ("swarm_a", "gracefo_rpt_c"):
+        assert not sniff_grace_acc1b(samples[name])
+    assert not sniff_grace_acc1b(tmp_path)
+    assert not sniff_grace_acc1b(tmp_path / "missing")
+
+
+def test_gzip_transparent_by_content(samples, tmp_path):
+    p = tmp_path / "no_gz_suffix.asc"
+    p.write_bytes(gzip.compress(samples["gracefo_c"].read_bytes()))
+    assert sniff_grace_acc1b(p)
+    assert_same_series(read_grace_acc1b(p), read_grace_acc1b(samples["gracefo_c"]))
+
+
+def test_rl03_marker(samples, tmp_path):
+    text = samples["grace_a"].read_text().replace("END OF HEADER", "# END OF HEADER")
+    p = tmp_path / "rl03.asc"
+    p.write_text(text)
+    assert_same_series(read_grace_acc1b(p), read_grace_acc1b(samples["grace_a"]))
+
+
+# ---------------------------------------------------------------- quirks
+
+
+def _data_lines(path):
+    lines = path.read_text().splitlines(keepends=True)
+    end = next(i for i, ln in enumerate(lines) if ln.startswith("END OF HEADER")) + 1
+    return lines[:end], lines[end:]
+
+
+def test_duplicates_out_of_order_gaps(samples, tmp_path):
+    head, data = _data_lines(samples["grace_a"])
+    data = data[:10] + data[20:]  # gap of 10 s after 116769609
+    data[3], data[4] = data[4], data[3]  # one swap
+    data.insert(6, data[5].replace(" 1.2", " 9.9", 1))  # duplicated epoch, different value
+    p = tmp_path / "quirks.asc"
+    p.write_text("".join(head + data))
+    s = read_grace_acc1b(p)
+    r = s.report
+    assert (r.n_rows, r.n_out_of_order, r.n_duplicates, r.n_gaps) == (51, 1, 1, 1)
+    assert r.gap_seconds == 10.0
+    assert len(s) == 50 and np.all(np.diff(s.time) > 0)
+    assert s.acc[5, 0] < 2e-6  # first of the duplicated epochs was kept
+    assert "header announces 60 data records, file has 51" in r.warnings
+
+
+def test_flagged_default_bits(samples, tmp_path):
+    head, data = _data_lines(samples["grace_a"])
+    data[0] = data[0].replace("  00100000", "  00100001")  # bit 0: Vp out of range
+    data[1] = data[1].replace("  00100000", "  00000100")  # bit 2: residual > 10 µm/s²
+    p = tmp_path / "flags.asc"
+    p.write_text("".join(head + data))
+    s = read_grace_acc1b(p)
+    assert DEFAULT_INVALID_BITS == 0b101
+    assert s.valid[:3].tolist() == [False, False, True]
+    assert s.report.n_flagged == 2
+
+
+# ---------------------------------------------------------------- bad input
+
+
+def _write(tmp_path, content: bytes, name="bad.asc"):
+    p = tmp_path / name
+    p.write_bytes(content)
+    return p
+
+
+def test_empty_file(tmp_path):
+    with pytest.raises(FormatError, match="empty file"):
+        read_grace_acc1b(_write(tmp_path, b""))
+
+
+def test_header_but_no_data(samples, tmp_path):
+    head, _ = _data_lines(samples["grace_a"])
+    with pytest.raises(FormatError, match="header but no data") as e:
+        read_grace_acc1b(_write(tmp_path, "".join(head).encode()))
+    assert e.value.line == 31
+
+
+def test_no_end_of_header(samples, tmp_path):
+    text = samples["grace_a"].read_bytes().replace(b"END OF HEADER", b"END OF HEADR")
+    with pytest.raises(FormatError, match="no end-of-header marker"):
+        read_grace_acc1b(_write(tmp_path, text))
+    text = samples["gracefo_c"].read_bytes().replace(b"# End of YAML header", b"# end")
+    with pytest.raises(FormatError, match="'# End of YAML header'"):
+        read_grace_acc1b(_write(tmp_path, text))
+
+
+def test_truncated_last_line(samples, tmp_path):
+    raw = samples["grace_a"].read_bytes()
+    with pytest.raises(FormatError, match="truncated last line") as e:
+        read_grace_acc1b(_write(tmp_path, raw[:-20]))
+    assert e.value.line == 90
+
+
+@pytest.mark.parametrize("token", ["nan", "NaN", "inf", "1.2.3", "abc", "0x12"])
+def test_non_number(samples, tmp_path, token):
+    head, data = _data_lines(samples["grace_a"])
+    fields = data[4].split(" ")
+    fields[3] = token
+    data[4] = " ".join(fields)
+    with pytest.raises(FormatError, match=r"lin_accl_y: (not a number|non-finite)") as e:
+        read_grace_acc1b(_write(tmp_path, "".join(head + data).encode()))
+    assert e.value.line == 35
+    assert str(e.value).startswith(str(tmp_path / "bad.asc") + ":35: ")
+
+
+def test_wrong_column_count(samples, tmp_path):
+    head, data = _data_lines(samples["grace_a"])
+    data[7] = data[7].replace(" A ", " A 1.0 ", 1)
+    with pytest.raises(FormatError, match="wrong number of columns: expected 12, got 13") as e:
+        read_grace_acc1b(_write(tmp_path, "".join(head + data).encode()))
+    assert e.value.line == 38
+
+
+def test_bad_qualflg(samples, tmp_path):
+    head, data = _data_lines(samples["grace_a"])
+    data[2] = data[2].replace("  00100000", "  00120000")
+    with pytest.raises(FormatError, match="quality flag '00120000'") as e:
+        read_grace_acc1b(_write(tmp_path, "".join(head + data).encode()))
+    assert e.value.line == 33
+
+
+def test_bad_satellite_id(samples, tmp_path):
+    head, data = _data_lines(samples["grace_a"])
+    data[9] = data[9].replace(" A ", " Q ", 1)
+    with pytest.raises(FormatError, match="satellite id 'Q'") as e:
+        read_grace_acc1b(_write(tmp_path, "".join(head + data).encode()))
+    assert e.value.line == 40
+
+
+def test_bad_header_count(samples, tmp_path):
+    text = samples["grace_a"].read_bytes().replace(b": 60 ", b": six", 1)
+    with pytest.raises(FormatError, match="NUMBER OF DATA RECORDS' is not an integer") as e:
+        read_grace_acc1b(_write(tmp_path, text))
+    assert e.value.line == 14
+
+
+def test_binary_garbage(samples, tmp_path):
+    rng = np.random.default_rng(1)
+    with pytest.raises(FormatError, match="binary data|no end-of-header"):
+        read_grace_acc1b(_write(tmp_path, rng.bytes(5000)))
+    head, data = _data_lines(samples["grace_a"])
+    garbage = "".join(head).encode() + b"\x00\x01\xff\xfe garbage\n"
+    with pytest.raises(FormatError, match="binary data") as e:
+        read_grace_acc1b(_write(tmp_path, garbage))
+    assert e.value.line == 31
+
+
+def test_truncated_binary(samples, tmp_path):
+    with pytest.raises(FormatError, match="truncated binary record"):
+        read_grace_acc1b(_write(tmp_path, samples["grace_a_bin"].read_bytes()[:-5]))
+
+
+def test_corrupt_gz(samples, tmp_path):
+    gz = gzip.compress(samples["grace_a"].read_bytes())
+    with pytest.raises(FormatError, match="corrupt gzip"):
+        read_grace_acc1b(_write(tmp_path, gz[: len(gz) // 2], "bad.asc.gz"))
+
+
+def test_directory_and_missing(tmp_path):
+    with pytest.raises(FormatError, match="is a directory"):
+        read_grace_acc1b(tmp_path)
+    with pytest.raises(FormatError, match="no such file"):
+        read_grace_acc1b(tmp_path / "missing.asc")
+
+
+@pytest.mark.skipif(hasattr(os, "geteuid") and os.geteuid() == 0, reason="root reads anything")
+def test_unreadable(samples, tmp_path):
+    p = tmp_path / "locked.asc"
+    shutil.copy(samples["grace_a"], p)
+    p.chmod(0)
+    try:
+        with pytest.raises(FormatError, match="permission denied"):
+            read_grace_acc1b(p)
+    finally:
+        p.chmod(0o644)
+
+
+# ---------------------------------------------------------------- writer
+
+
+@pytest.mark.parametrize("name", ["grace_a", "grace_b", "gracefo_c", "gracefo_d"])
+def test_round_trip_real(samples, tmp_path, name):
+    s = read_grace_acc1b(samples[name])
+    p = write_grace_acc1b(s, tmp_path / "out.asc")
+    r = read_grace_acc1b(p)
+    assert_same_series(s, r, meta=False)
+    # The writer refreshes the record count; a second cycle is identical including meta.
+    r2 = read_grace_acc1b(write_grace_acc1b(r, tmp_path / "out2.asc.gz"))
+    assert_same_series(r, r2)
+    assert r2.report == r.report
+
+
+def test_writer_layout(samples, tmp_path):
+    s = read_grace_acc1b(samples["grace_a"])
+    text = write_grace_acc1b(s, tmp_path / "o.asc").read_text().splitlines()
+    assert text[29].rstrip() == "END OF HEADER"
+    assert text[30].startswith("116769600 A 1.211359188507761e-06 ")
+    assert text[30].endswith("  00100000")
+    # Same header lines as the original; repeated keys (INPUT FILE ...) come out grouped
+    # by key because meta["grace"] holds them as lists.
+    orig = samples["grace_a"].read_text().splitlines()[:30]
+    assert text[:20] == orig[:20]
+    assert sorted(text[:30]) == sorted(orig)
+
+
+def test_writer_synthesised_header(tmp_path):
+    n = 5
+    s = AccSeries(
+        time=738849600.0 + np.arange(n) + 0.25,
+        acc=np.full((n, 3), 1e-7),
+        quality=np.array([0, 1, 4, 32, 255], dtype=np.uint32),
+        valid=np.array([True, False, False, True, False]),
+        satellite="GRACE-FO-D",
+        aux={"acl_x_res": np.arange(n) * 1e-9},
+    )
+    r = read_grace_acc1b(write_grace_acc1b(s, tmp_path / "d.txt"))
+    assert np.array_equal(r.time, s.time) and np.array_equal(r.valid, s.valid)
+    assert r.meta["gracefo"]["global_attributes"]["platform"] == "GRACE D"
+    assert r.report.warnings[0] == "3 samples flagged invalid (qualflg bits 0b00000101)"
+
+
+def test_writer_rejects(tmp_path):
+    s = AccSeries(time=np.arange(3.0), acc=np.zeros((3, 3)), satellite="Swarm-A")
+    with pytest.raises(ValidationError, match="satellite must be one of"):
+        write_grace_acc1b(s, tmp_path / "x.asc")
+    s = s.replace(satellite="GRACE-A")
+    with pytest.raises(ValidationError, match="'flavour'"):
+        write_grace_acc1b(s, tmp_path / "x.asc", flavour="champ")
+    with pytest.raises(ValidationError, match="does not match"):
+        write_grace_acc1b(s, tmp_path / "x.asc", flavour="gracefo")
+    with (
+        warnings.catch_warnings(record=True) as w,
+    ):
+        warnings.simplefilter("always")
+        write_grace_acc1b(s.replace(aux={"temp": np.zeros(3)}), tmp_path / "x.asc")
+    assert "1 auxiliary channels" in str(w[0].message)
+    assert not list(tmp_path.glob(".*.tmp"))
