@@ -195,7 +195,7 @@ def structure_function(psd: PSD, n_lags: int, fs: float = 1.0) -> NDArray[np.flo
     from scipy.special import sici
 
     n_lags = int(n_lags)
-    m = 1 << int(np.ceil(np.log2(max(1 << 16, 32 * n_lags))))
+    m = 1 << int(np.ceil(np.log2(max(1 << 15, 8 * n_lags))))
     df = 0.5 * fs / m
     f = (np.arange(m) + 0.5) * df
     s = psd.regular(f) * df
