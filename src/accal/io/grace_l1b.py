@@ -119,6 +119,7 @@ GRACE_KEY_WIDTH = 30
 
 _GRACE_END_RE = re.compile(rb"^(?:# )?END OF HEADER[ \t]*\r?$", re.M)
 _GRACEFO_END_RE = re.compile(rb"^# End of YAML header[ \t]*\r?$", re.M)
+_GRACE_KEY_RE = re.compile(rb"^(?:# )?[A-Z][A-Za-z0-9 ()=/.\-]{3,}:")
 _HEADER_SEARCH = 1 << 20
 _SNIFF_BYTES = 8192
 
@@ -149,8 +150,11 @@ def sniff_grace_acc1b(path: str | Path) -> bool:
     head = peek(path, _SNIFF_BYTES)
     if head.startswith(b"header:"):
         return b"num_records" in head and b"GRACE" in head
-    return b"SATELLITE NAME" in head and (
-        b"FILE FORMAT 0=BINARY 1=ASCII" in head or b"END OF HEADER" in head
+    first = head.split(b"\n", 1)[0]
+    return (
+        _GRACE_KEY_RE.match(first) is not None
+        and b"\nSATELLITE NAME" in head
+        and (b"FILE FORMAT 0=BINARY 1=ASCII" in head or b"END OF HEADER" in head)
     )
 
 

@@ -115,7 +115,10 @@ def _read_csv(raw: bytes, path: Path) -> tuple[Any, dict, dict, int]:
             pa.py_buffer(body),
             parse_options=pacsv.ParseOptions(ignore_empty_lines=True),
             convert_options=pacsv.ConvertOptions(
-                timestamp_parsers=[pacsv.ISO8601], strings_can_be_null=False
+                timestamp_parsers=[pacsv.ISO8601],
+                strings_can_be_null=False,
+                # 8-character 0/1 flags must stay strings ("00100000" is not 100000).
+                column_types={"qualflg": pa.string()},
             ),
         )
     except (pa.ArrowException, ValueError) as exc:
@@ -253,7 +256,15 @@ def read_table_series(path: str | Path, *, columns: dict[str, str] | None = None
 
         qcol = table.column(qname)
         if pa.types.is_string(qcol.type) or pa.types.is_large_string(qcol.type):
-            quality = bits_from_strings(qcol, path, first_line or 1)
+            try:
+                quality = bits_from_strings(qcol, path, first_line or 1)
+            except FormatError:
+                try:  # an integer bitmask read as text
+                    quality = _numeric(qcol.cast(pa.int64()), qname, path).astype(np.uint32)
+                except (pa.ArrowException, FormatError):
+                    raise FormatError(
+                        f"column {qname!r} is neither 8-character 0/1 flags nor integers", path
+                    ) from None
         else:
             q = _numeric(qcol, qname, path)
             if not np.all(np.isfinite(q)) or np.any(q < 0) or np.any(q != np.round(q)):
