@@ -137,8 +137,11 @@ class TabulatedPSD:
         y = np.interp(x, lf, ls)
         lo_slope = (ls[1] - ls[0]) / (lf[1] - lf[0])
         hi_slope = (ls[-1] - ls[-2]) / (lf[-1] - lf[-2])
-        y = np.where(x < lf[0], ls[0] + lo_slope * (x - lf[0]), y)
-        y = np.where(x > lf[-1], ls[-1] + hi_slope * (x - lf[-1]), y)
+        with np.errstate(invalid="ignore"):
+            lo = ls[0] + lo_slope * (x - lf[0]) if lo_slope else np.full_like(x, ls[0])
+            hi = ls[-1] + hi_slope * (x - lf[-1]) if hi_slope else np.full_like(x, ls[-1])
+        y = np.where(x < lf[0], lo, y)
+        y = np.where(x > lf[-1], hi, y)
         with np.errstate(over="ignore"):
             return np.exp(y)
 
