@@ -325,7 +325,7 @@ def read_table_series(path: str | Path, *, columns: dict[str, str] | None = None
         frame = series_meta.get("frame", "SRF")
         meta = series_meta.get("meta", {})
         history = tuple(series_meta.get("history", ()))
-        col_units = {**col_units, **series_meta.get("units", {})}
+        col_units = dict(series_meta.get("units") or col_units)
     else:
         satellite = _guess_satellite(path)
         frame = "SRF"
