@@ -356,28 +356,32 @@ def _weights_gls(x, m, r_reg):
     q = q2 // 2
     w = np.full(x.shape, np.nan)
     ok = np.zeros(npr, bool)
-    cache: dict[bytes, tuple] = {}
     full = sla.toeplitz(r_reg[:q])
-    for i in range(npr):
-        mi = m[i] > 0
-        key = mi.tobytes()
-        if key not in cache:
-            idx = np.flatnonzero(mi)
-            cache[key] = (idx, sla.cho_factor(full[np.ix_(idx, idx)], lower=True))
-        idx, cf = cache[key]
-        xo = np.concatenate([x[i, :q][idx], x[i, q:][idx]], axis=0)
+    keys = [m[i].astype(bool).tobytes() for i in range(npr)]
+    groups: dict[bytes, list[int]] = {}
+    for i, k in enumerate(keys):
+        groups.setdefault(k, []).append(i)
+    for key, members in groups.items():
+        rows = np.array(members)
+        idx = np.flatnonzero(np.frombuffer(key, dtype=bool))
         n_o = idx.size
-        ox = np.concatenate(
-            [sla.cho_solve(cf, xo[:n_o]), sla.cho_solve(cf, xo[n_o:])], axis=0
-        )  # Ω⁻¹ X
-        nmat = xo.T @ ox
-        if not np.isfinite(np.linalg.cond(nmat)) or np.linalg.cond(nmat) > 1e12:
+        if n_o == 0:
             continue
-        wo = ox @ np.linalg.inv(nmat)
-        w[i] = 0.0
-        w[i, :q][idx] = wo[:n_o]
-        w[i, q:][idx] = wo[n_o:]
-        ok[i] = True
+        cf = sla.cho_factor(full[np.ix_(idx, idx)], lower=True)
+        # stack both data axes of every period in the group as right-hand sides
+        xo = np.concatenate([x[rows][:, :q][:, idx], x[rows][:, q:][:, idx]], axis=1)
+        g = len(members)
+        rhs = np.transpose(xo.reshape(g, 2, n_o, p), (2, 0, 1, 3)).reshape(n_o, -1)
+        sol = sla.cho_solve(cf, rhs).reshape(n_o, g, 2, p)
+        ox = np.transpose(sol, (1, 2, 0, 3)).reshape(g, 2 * n_o, p)  # Ω⁻¹ X
+        nmat = np.einsum("gna,gnb->gab", xo, ox)
+        inv, good = _batched_solve(nmat, np.broadcast_to(np.eye(p), nmat.shape).copy())
+        wo = np.einsum("gna,gab->gnb", ox, np.nan_to_num(inv))
+        wg = np.zeros((g, q2, p))
+        wg[:, idx] = wo[:, :n_o]
+        wg[:, q + idx] = wo[:, n_o:]
+        w[rows[good]] = wg[good]
+        ok[rows[good]] = True
     return w, ok
 
 
