@@ -76,7 +76,8 @@ class DemodResult:
     period_index : ndarray of int
         Index of the period from the start of the record.
     t_start, t_mid : ndarray
-        Start and middle time of each period [s, same origin as the input].
+        Time of the first sample and mean sample time of each period (the
+        epoch the per-period means and bias values refer to) [s, input origin].
     a_Y, a_Z : ndarray
         Mean non-gravitational acceleration per period, spacecraft axes Y, Z [m s⁻²].
     sigma_Y, sigma_Z : ndarray
@@ -86,8 +87,8 @@ class DemodResult:
     sigma_slope_Y, sigma_slope_Z : ndarray
         Their uncertainty [m s⁻³] (NaN for the mean model).
     bias_y, bias_z : ndarray, shape (n, pb)
-        Bias coefficients per period, in the order of ``bias_names``: value at
-        mid-period [m s⁻²], drift [m s⁻³], then one per auxiliary channel
+        Bias coefficients per period, in the order of ``bias_names``: value at ``t_mid``
+        [m s⁻²], drift [m s⁻³], then one per auxiliary channel
         [m s⁻² per channel unit] (channels centred on their period mean).
     bias_names : tuple of str
         Names of the bias coefficients.
@@ -490,8 +491,9 @@ def demodulate(
     th = arrs["theta"][:nn].reshape(n_per, q)
     m = rest.reshape(n_per, q).astype(float)
     c, s = np.cos(th), np.sin(th)
-    # normalised time within the period, centred: s_k = (k - q/2)/q  (t = s·τ)
-    u = (np.arange(q) - q / 2) / q
+    # normalised time within the period, centred on the mean sample time:
+    # u_k = (k - (q-1)/2)/q (t = u·τ), so intercepts are period means
+    u = (np.arange(q) - (q - 1) / 2) / q
     ones = np.ones((n_per, q))
     va = ones[..., None] if signal_model == "mean" else np.stack([ones, ones * u], axis=2)
     pa = va.shape[2]
@@ -586,7 +588,7 @@ def demodulate(
     return DemodResult(
         period_index=kk,
         t_start=t_start,
-        t_mid=t_start + 0.5 * q / fs,
+        t_mid=t_start + 0.5 * (q - 1) / fs,
         a_Y=est[kk, 0],
         a_Z=est[kk, pa],
         sigma_Y=sig[kk, 0],
