@@ -141,26 +141,27 @@ def test_bad_arguments_are_rejected_with_clear_messages():
         fit_trend(t[::-1], t)
 
 
-def test_covariance_matches_exact_quadratic_form_for_known_noise():
-    """For a stationary AR(1) process the exact Var(g'a) = g' C g (dense, small n)
-    must agree with the FFT lag-window evaluation given the true autocovariance."""
-    n = 600
+def test_covariance_expectation_matches_exact_quadratic_form():
+    """For AR(1) noise the exact Var(g'e) = g' C g (dense matrix, small n) must match
+    the mean of the residual-based estimates over realisations (within 15 %)."""
+    n = 1500
     t = np.arange(n, dtype=float)
-    phi = 0.8
+    phi = 0.9
     lags = np.abs(np.subtract.outer(np.arange(n), np.arange(n)))
     cmat = phi**lags / (1 - phi**2)
-    g = wavelet_weights(t, 1)
-    exact = g @ cmat @ g.T
-    # a residual whose sample autocovariance is the AR(1) one: a long realisation
     rng = np.random.default_rng(2)
-    e = scipy.signal.lfilter([1], [1, -phi], rng.standard_normal(400_000))[1000:]
-    # evaluate with a residual on a grid as long as g: use the first n samples'
-    # *shape* but the long series' autocovariance via max_lag
-    cov, lag = linear_estimator_covariance(t, e[:n], g, max_lag=60)
-    assert lag == 60
-    # one short realisation: agreement to the estimator's sampling scatter
-    assert cov[0, 0] == pytest.approx(exact[0, 0], rel=0.5)
-    assert cov[1, 1] == pytest.approx(exact[1, 1], rel=0.5)
+    for method in ("wavelet", "lsq"):
+        g = (wavelet_weights if method == "wavelet" else lsq_weights)(t, 1)
+        exact = g @ cmat @ g.T
+        est = []
+        for _ in range(100):
+            e = scipy.signal.lfilter([1], [1, -phi], rng.standard_normal(n + 500))[500:]
+            fit = fit_trend(t, e, method=method)
+            est.append(linear_estimator_covariance(t, e - fit.evaluate(t), g))
+        mean = np.mean(est, axis=0)
+        assert mean[0, 0] == pytest.approx(exact[0, 0], rel=0.15)
+        assert mean[1, 1] == pytest.approx(exact[1, 1], rel=0.15)
+        assert mean[0, 1] == pytest.approx(exact[0, 1], rel=0.25)
 
 
 @pytest.mark.parametrize("method", ["wavelet", "lsq"])
@@ -169,10 +170,7 @@ def test_monte_carlo_sigma_is_honest_for_coloured_noise(method, phi):
     """Empirical scatter / reported sigma in [0.7, 1.4] for white and AR(1) noise
     (correlation times 0, 20 and 100 samples in a 4,320-sample record) plus white.
 
-    Measured on this test's seeds (200 runs): ratios 0.9–1.15.  Known limit
-    (docs/grace_bias.md): when the noise correlation time exceeds ~1/40 of the
-    record, the residual cannot reveal the low-frequency power and the sigma is
-    too small (ratio ~1.7 at 1/9 of the record).
+    See docs/grace_bias.md for the ratios measured.
     """
     rng = np.random.default_rng(int(phi * 100) + (method == "lsq"))
     n = 4320
@@ -184,6 +182,30 @@ def test_monte_carlo_sigma_is_honest_for_coloured_noise(method, phi):
         fit = fit_trend(t, 3.0 + 2e-4 * t + e, method=method)
         eb.append(fit.bias - 3.0)
         ed.append(fit.drift - 2e-4)
+        sb.append(fit.sigma[0])
+        sd.append(fit.sigma[1])
+    rb = np.std(eb) / np.sqrt(np.mean(np.square(sb)))
+    rd = np.std(ed) / np.sqrt(np.mean(np.square(sd)))
+    assert 0.7 <= rb <= 1.4, rb
+    assert 0.7 <= rd <= 1.4, rd
+
+
+@pytest.mark.parametrize("method", ["wavelet", "lsq"])
+def test_monte_carlo_sigma_is_honest_for_one_over_f_noise(method):
+    """SuperSTAR-like noise over a 1 Hz day: white 1e-10 m/s²/√Hz with a 1/f rise below
+    1 mHz (the simulator's noise).  The low-frequency power that the trend fit
+    absorbs is restored by the projection correction; scatter/sigma in [0.7, 1.4]."""
+    from accal.simulate.grace import coloured_noise
+
+    rng = np.random.default_rng(11 + (method == "lsq"))
+    n = 86400
+    t = np.arange(n, dtype=float)
+    eb, ed, sb, sd = [], [], [], []
+    for _ in range(60):
+        e = coloured_noise(n, 1.0, 1e-10, 1e-3, rng)
+        fit = fit_trend(t, e, method=method)
+        eb.append(fit.bias)
+        ed.append(fit.drift)
         sb.append(fit.sigma[0])
         sd.append(fit.sigma[1])
     rb = np.std(eb) / np.sqrt(np.mean(np.square(sb)))

@@ -1,0 +1,53 @@
+# accal developer tasks.  Every target installs what it needs into .venv first.
+PYTHON ?= python3
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed
+OUT    ?= out
+
+.PHONY: install run test test-all lint bench bench-readers mc-sigma clean
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e ".[test]"
+	touch $(STAMP)
+
+install: $(STAMP)
+
+## run: the main job on the bundled real sample files (GRACE 2003, GRACE-FO 2023)
+run: $(STAMP)
+	$(BIN)/accal grace-bias data/samples/ACC1B_2003-09-14_A_00.asc data/samples/ACC1B_2003-09-14_B_00.asc \
+	    data/samples/ACT1B_2023-06-01_C_04.txt data/samples/ACT1B_2023-06-01_D_04.txt \
+	    --method both --format csv --out $(OUT)/grace-bias
+	$(BIN)/accal simulate grace --date 2005-01-01 --satellite A --out $(OUT)/sim/ACC1B_2005-01-01_A_sim.asc
+	$(BIN)/accal grace-bias $(OUT)/sim/ACC1B_2005-01-01_A_sim.asc --method both --scale tn02 \
+	    --format csv --out $(OUT)/grace-bias
+	@echo "--- $(OUT)/grace-bias/bias_drift.csv"
+	@grep -v '^#' $(OUT)/grace-bias/bias_drift.csv | cut -d, -f1-12 | column -s, -t
+
+## test: the full default test suite (what CI runs)
+test: $(STAMP)
+	$(BIN)/python -m pytest -q -m "not slow"
+
+## test-all: also the long Monte-Carlo studies
+test-all: $(STAMP)
+	$(BIN)/python -m pytest -q
+
+lint: $(STAMP)
+	$(BIN)/ruff check src tests properties benchmarks
+	$(BIN)/ruff format --check src tests properties benchmarks
+
+## bench: end-to-end and estimator benchmarks on a 1 Hz, 86,400-row day
+bench: $(STAMP)
+	$(BIN)/python benchmarks/bench_grace_bias.py
+
+## mc-sigma: Monte-Carlo study of the bias/drift sigmas (a few minutes)
+mc-sigma: $(STAMP)
+	$(BIN)/python benchmarks/mc_sigma.py
+
+bench-readers: $(STAMP)
+	$(BIN)/python benchmarks/bench_readers.py
+
+clean:
+	rm -rf $(OUT) .pytest_cache .hypothesis .benchmarks build dist

@@ -1,0 +1,293 @@
+"""Command-line interface (click).  Thin: parse options, call the pipeline, map errors.
+
+Exit status: 0 when every input was processed, 1 when some failed (the others are
+still processed and written), 2 for usage errors.  Every failure is one line on
+stderr: ``accal: FILE[:LINE]: what is wrong``.
+"""
+
+from __future__ import annotations
+
+import sys
+import tomllib
+from pathlib import Path
+from typing import Any
+
+import click
+
+from accal import __version__
+
+CONTEXT_SETTINGS = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
+
+
+def _load_config(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
+    """Eager ``--config`` callback: a TOML file's ``[<command>]`` table becomes the defaults."""
+    if not value:
+        return value
+    path = Path(value)
+    try:
+        with open(path, "rb") as fh:
+            data = tomllib.load(fh)
+    except (OSError, tomllib.TOMLDecodeError) as exc:
+        raise click.BadParameter(f"{path}: {exc}", ctx=ctx, param=param) from None
+    section = data.get(ctx.info_name, data)
+    if not isinstance(section, dict):
+        raise click.BadParameter(f"{path}: [{ctx.info_name}] must be a table", ctx=ctx, param=param)
+    # config keys are the long option names ("format", "keep-going"), or the
+    # parameter names; "columns" is accepted for the repeatable --column
+    known: dict[str, str] = {}
+    for p in ctx.command.params:
+        if not isinstance(p, click.Option) or p.name == "config":
+            continue
+        known[p.name] = p.name
+        for opt in (*p.opts, *p.secondary_opts):
+            if opt.startswith("--"):
+                known[opt[2:].replace("-", "_")] = p.name
+    known["columns"] = known.get("column", "columns")
+    defaults = {}
+    for key, val in section.items():
+        name = known.get(key.replace("-", "_"))
+        if name is None:
+            raise click.BadParameter(
+                f"{path}: unknown key {key!r} for '{ctx.info_name}' "
+                f"(known: {', '.join(sorted({k for k in known if not k.startswith('fail')}))})",
+                ctx=ctx,
+                param=param,
+            )
+        if key.replace("-", "_") == "fail_fast":
+            val = not val
+        defaults[name] = val
+    ctx.default_map = {**(ctx.default_map or {}), **defaults}
+    return value
+
+
+def config_option(f: Any) -> Any:
+    """The ``--config FILE`` option shared by the commands."""
+    return click.option(
+        "--config",
+        type=click.Path(dir_okay=False),
+        is_eager=True,
+        expose_value=False,
+        callback=_load_config,
+        help="TOML file whose [<command>] table sets option defaults (see configs/).",
+    )(f)
+
+
+def _err(msg: str) -> None:
+    click.echo(f"accal: {msg}", err=True)
+
+
+def _progress(quiet: bool, desc: str) -> Any:
+    if quiet or not sys.stderr.isatty():
+        return None
+    from tqdm import tqdm
+
+    return lambda it: tqdm(it, desc=desc, unit="file", file=sys.stderr)
+
+
+@click.group(context_settings=CONTEXT_SETTINGS)
+@click.version_option(__version__, prog_name="accal")
+def main() -> None:
+    """accal: calibrate spacecraft electrostatic-accelerometer data.
+
+    \b
+    grace-bias  per-day, per-axis bias and drift of GRACE / GRACE-FO ACC1B/ACT1B
+    simulate    synthetic inputs with a truth file
+    """
+
+
+@main.command("grace-bias")
+@click.argument("inputs", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.option(
+    "--out",
+    "out",
+    type=click.Path(file_okay=False, path_type=Path),
+    required=True,
+    help="Output directory (created).",
+)
+@click.option(
+    "--method",
+    type=click.Choice(["wavelet", "lsq", "both"]),
+    default="wavelet",
+    show_default=True,
+    help="Estimator; with 'both' the wavelet fit calibrates the series.",
+)
+@click.option(
+    "--format",
+    "fmt",
+    type=click.Choice(["parquet", "csv"]),
+    default="parquet",
+    show_default=True,
+    help="Output format.",
+)
+@click.option(
+    "--order",
+    type=click.Choice(["1", "2"]),
+    default="1",
+    show_default=True,
+    help="Trend order: 1 = bias + drift, 2 = + quadratic term.",
+)
+@click.option(
+    "--scale",
+    default=None,
+    help="Scale applied to the calibrated series: 'tn02' (GRACE TN-02 a-priori) or "
+    "'sx,sy,sz'; a_cal = scale*(a_raw - trend).",
+)
+@click.option(
+    "--reference",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Reference accelerations (table or L1B); the fit uses raw - reference.",
+)
+@click.option(
+    "--column",
+    "columns",
+    multiple=True,
+    metavar="AXIS=COLUMN",
+    help="Map a table column to an axis, e.g. --column x=a_cal_x (repeatable).",
+)
+@click.option(
+    "--input-format",
+    type=click.Choice(["grace-l1b", "table"]),
+    default=None,
+    help="Force the input format (default: sniffed from the content).",
+)
+@click.option("--keep-flagged", is_flag=True, help="Use samples the quality flags mark invalid.")
+@click.option(
+    "--keep-going/--fail-fast",
+    default=True,
+    show_default=True,
+    help="Go on with the other inputs after a failure.",
+)
+@click.option("--quiet", "-q", is_flag=True, help="No progress bar or summary.")
+@config_option
+def grace_bias(
+    inputs: tuple[Path, ...],
+    out: Path,
+    method: str,
+    fmt: str,
+    order: str,
+    scale: str | None,
+    reference: Path | None,
+    columns: tuple[str, ...],
+    input_format: str | None,
+    keep_flagged: bool,
+    keep_going: bool,
+    quiet: bool,
+) -> None:
+    """Estimate per-day, per-axis bias and drift of accelerometer files.
+
+    Writes OUT/bias_drift.<fmt> (one row per input, axis and method),
+    OUT/<stem>.calibrated.<fmt> and OUT/<stem>.report.json for each input.
+    """
+    from accal.errors import AccalError
+    from accal.pipeline import GraceBiasOptions, run
+
+    colmap = {}
+    for item in columns:
+        ax, sep, col = item.partition("=")
+        if not sep or ax not in ("x", "y", "z") or not col:
+            raise click.BadParameter(
+                f"expected AXIS=COLUMN with AXIS in x|y|z, got {item!r}", param_hint="--column"
+            )
+        colmap[ax] = col
+    try:
+        opts = GraceBiasOptions(
+            methods=("wavelet", "lsq") if method == "both" else (method,),
+            order=int(order),
+            fmt=fmt,
+            scale=scale,
+            keep_flagged=keep_flagged,
+            reference=reference,
+            columns=colmap,
+            input_format=input_format,
+        )
+    except AccalError as exc:
+        raise click.UsageError(str(exc)) from None
+    summary = run(
+        inputs, out, opts, fail_fast=not keep_going, progress=_progress(quiet, "grace-bias")
+    )
+    for o in summary.outcomes:
+        if not o.ok:
+            _err(o.message)
+    if not quiet:
+        n = sum(o.n_samples for o in summary.outcomes)
+        click.echo(
+            f"accal grace-bias: {summary.n_ok} ok, {summary.n_failed} failed, "
+            f"{len(inputs) - len(summary.outcomes)} not run; {n} samples in "
+            f"{summary.seconds:.2f} s; table: {summary.table_path}",
+            err=True,
+        )
+    if summary.n_failed or len(summary.outcomes) < len(inputs):
+        sys.exit(1)
+
+
+@main.group()
+def simulate() -> None:
+    """Write synthetic input files with a truth file."""
+
+
+@simulate.command("grace")
+@click.option(
+    "--date", "date", default="2005-01-01", show_default=True, help="UTC day (YYYY-MM-DD)."
+)
+@click.option(
+    "--satellite", type=click.Choice(["A", "B", "C", "D"]), default="A", show_default=True
+)
+@click.option(
+    "--out",
+    "out",
+    type=click.Path(dir_okay=False, path_type=Path),
+    required=True,
+    help="Output ACC1B file (.asc/.txt, .gz to compress); truth goes to <out>.truth.json.",
+)
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--duration", type=float, default=86400.0, show_default=True, help="Seconds.")
+@click.option("--gaps", type=int, default=0, show_default=True, help="Number of data gaps.")
+@click.option(
+    "--flagged",
+    type=float,
+    default=0.0,
+    show_default=True,
+    help="Fraction of samples flagged invalid.",
+)
+@click.option(
+    "--noise",
+    type=float,
+    default=1e-10,
+    show_default=True,
+    help="Noise level [m/s^2/sqrt(Hz)] in the measurement band.",
+)
+@config_option
+def simulate_grace(
+    date: str,
+    satellite: str,
+    out: Path,
+    seed: int,
+    duration: float,
+    gaps: int,
+    flagged: float,
+    noise: float,
+) -> None:
+    """Write a realistic synthetic GRACE/GRACE-FO ACC1B day file and its truth JSON."""
+    from accal.errors import AccalError
+    from accal.simulate.grace import write_simulated_grace
+
+    try:
+        truth_path = write_simulated_grace(
+            out,
+            date=date,
+            satellite=satellite,
+            seed=seed,
+            duration=duration,
+            n_gaps=gaps,
+            flagged_fraction=flagged,
+            noise=noise,
+        )
+    except AccalError as exc:
+        _err(str(exc))
+        sys.exit(1)
+    click.echo(f"wrote {out} and {truth_path}", err=True)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

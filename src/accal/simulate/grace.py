@@ -1,0 +1,225 @@
+"""Synthetic GRACE / GRACE-FO ACC1B days with a known bias, drift and scale.
+
+The simulated raw reading follows the wavelet paper's eq. (9),
+``a_raw = s·a_true + b + d·(t − t0)``, with
+
+* ``a_true``: non-gravitational acceleration at GRACE altitude (magnitudes from
+  ``shared/data/REFERENCE_VALUES.md``): along-track (x) drag ~ −2e-7 m/s² modulated
+  once and twice per revolution (orbital period ~5,600 s) with a slow day-scale
+  variation; solar-radiation pressure ~5e-8 m/s² once per revolution on y and z,
+  switched off in eclipse;
+* ``b``, ``s``: the GRACE TN-02 a-priori values for the satellite and date
+  (``s = 1/scale``, raw-data sign ``b = −bias_TN02·s``), GRACE-FO C/D values from the
+  measured 2023 means;
+* ``d``: a random drift of a few 1e-14 m/s³;
+* noise: white at ``noise`` m/s²/√Hz plus a 1/f rise below 1 mHz
+  (SuperSTAR-like), drawn by FFT shaping.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from accal.errors import ValidationError
+
+ORBIT_PERIOD = 5600.0  # [s]
+
+#: Raw-data offsets (m/s², eq. 9 sign) for GRACE-FO C and D, from the measured
+#: 100-s means on 2023-06-01 (shared/data/SOURCES.md).
+GRACEFO_OFFSETS = {"C": (-0.278e-6, -10.651e-6, -0.182e-6), "D": (0.278e-6, 10.650e-6, -0.183e-6)}
+
+
+@dataclass(frozen=True)
+class SimulatedDay:
+    """A simulated day: times, raw accelerations and the truth.
+
+    Attributes
+    ----------
+    time : ndarray, shape (n,)
+        GPS seconds [s].
+    raw : ndarray, shape (n, 3)
+        Raw readings [m/s²].
+    true : ndarray, shape (n, 3)
+        True non-gravitational acceleration [m/s²].
+    valid : ndarray of bool, shape (n,)
+        False for flagged samples.
+    truth : dict
+        ``bias`` [m/s²] (at ``t0``), ``drift`` [m/s³], ``scale_s`` (eq. 9 ``s``),
+        ``t0`` [s], plus ``signal_trend``: the LS bias/drift of ``s·a_true`` alone
+        (the part of the true signal any trend estimator will also see).
+    """
+
+    time: NDArray[np.float64]
+    raw: NDArray[np.float64]
+    true: NDArray[np.float64]
+    valid: NDArray[np.bool_]
+    truth: dict[str, Any]
+
+
+def coloured_noise(
+    n: int, dt: float, level: float, corner: float, rng: np.random.Generator
+) -> NDArray[np.float64]:
+    """Gaussian noise with one-sided ASD ``level·sqrt(1 + corner/f)`` [m/s²/√Hz]."""
+    f = np.fft.rfftfreq(n, dt)
+    shape = np.zeros_like(f)
+    shape[1:] = np.sqrt(1.0 + corner / f[1:])
+    # white N(0, 1) samples have one-sided PSD 2·dt; shape it, then scale to `level`
+    white = np.fft.rfft(rng.standard_normal(n))
+    return np.fft.irfft(white * shape, n) * level / np.sqrt(2.0 * dt)
+
+
+def simulate_grace_day(
+    *,
+    date: str = "2005-01-01",
+    satellite: str = "A",
+    seed: int = 0,
+    duration: float = 86400.0,
+    dt: float = 1.0,
+    n_gaps: int = 0,
+    flagged_fraction: float = 0.0,
+    noise: float = 1e-10,
+) -> SimulatedDay:
+    """Simulate one day of raw ACC1B data.
+
+    Parameters
+    ----------
+    date : str
+        UTC day, ``YYYY-MM-DD``.
+    satellite : {"A", "B", "C", "D"}
+        GRACE A/B or GRACE-FO C/D.
+    seed : int
+        Random seed.
+    duration : float
+        Length [s].
+    dt : float
+        Sampling interval [s].
+    n_gaps : int
+        Number of gaps (each 60–1800 s) cut out of the record.
+    flagged_fraction : float
+        Fraction of samples flagged invalid (in short bursts).
+    noise : float
+        White noise level [m/s²/√Hz].
+
+    Returns
+    -------
+    SimulatedDay
+    """
+    from accal.calibration import tn02_bias, tn02_scale
+    from accal.timescale import gps_day_start
+
+    if satellite not in ("A", "B", "C", "D"):
+        raise ValidationError(f"satellite must be A, B, C or D, got {satellite!r}")
+    if not duration > 0 or not dt > 0:
+        raise ValidationError("duration and dt must be positive")
+    rng = np.random.default_rng(seed)
+    t0 = gps_day_start(date)
+    n = int(round(duration / dt))
+    t = t0 + dt * np.arange(n)
+    tau = t - t0
+    phase = rng.uniform(0, 2 * np.pi)
+    w = 2 * np.pi / ORBIT_PERIOD
+    drag_level = rng.uniform(0.5e-7, 3e-7)
+    slow = 1.0 + 0.3 * np.sin(2 * np.pi * tau / 86400.0 + rng.uniform(0, 2 * np.pi))
+    ax = (
+        -drag_level
+        * slow
+        * (1 + 0.25 * np.cos(w * tau + phase) + 0.08 * np.cos(2 * w * tau + 2 * phase))
+    )
+    sun = np.cos(w * tau + phase + 1.0)
+    eclipse = sun < -0.55
+    srp = 5e-8 * np.where(eclipse, 0.0, 1.0)
+    ay = srp * (0.3 + 0.7 * np.sin(w * tau + phase)) + 2e-9 * np.cos(2 * w * tau)
+    az = srp * 0.4 * np.cos(w * tau + phase) + 1e-8 * np.sin(w * tau)
+    true = np.column_stack([ax, ay, az])
+
+    if satellite in ("A", "B"):
+        sat = f"GRACE-{satellite}"
+        scale = np.array(tn02_scale(sat))
+        mjd = 51544.0 + (t0 + 43200.0) / 86400.0
+        bias = -np.array(tn02_bias(sat, mjd)) / scale
+    else:
+        scale = np.ones(3)
+        bias = np.array(GRACEFO_OFFSETS[satellite])
+    s = 1.0 / scale
+    drift = rng.uniform(-5e-14, 5e-14, 3)
+    nz = np.column_stack([coloured_noise(n, dt, noise, 1e-3, rng) for _ in range(3)])
+    raw = s * true + bias + np.outer(tau, drift) + nz
+
+    keep = np.ones(n, dtype=bool)
+    for _ in range(n_gaps):
+        length = int(rng.uniform(60, 1800) / dt)
+        start = int(rng.integers(1, max(2, n - length - 1)))
+        keep[start : start + length] = False
+    keep[0] = True  # t0 of the truth is the first sample
+    valid = np.ones(n, dtype=bool)
+    n_flag = int(flagged_fraction * n)
+    while n_flag > 0:
+        burst = int(min(n_flag, rng.integers(5, 120)))
+        start = int(rng.integers(1, max(2, n - burst)))
+        valid[start : start + burst] = False
+        n_flag -= burst
+    t, raw, true, valid = t[keep], raw[keep], true[keep], valid[keep]
+
+    from accal.estimators.trend import fit_trend
+
+    sig_trend = [fit_trend(t, s[i] * true[:, i], method="lsq", valid=valid) for i in range(3)]
+    truth = {
+        "satellite": satellite,
+        "date": date,
+        "t0": float(t[0]),
+        "bias": bias.tolist(),
+        "drift": drift.tolist(),
+        "scale_s": s.tolist(),
+        "scale_tn02": scale.tolist(),
+        "noise_asd": noise,
+        "signal_trend": {
+            "bias": [f.bias for f in sig_trend],
+            "drift": [f.drift for f in sig_trend],
+        },
+        "n_samples": int(t.size),
+        "n_flagged": int((~valid).sum()),
+        "n_gaps": n_gaps,
+        "units": {"bias": "m/s^2", "drift": "m/s^3", "t0": "s (GPS)"},
+    }
+    return SimulatedDay(t, raw, true, valid, truth)
+
+
+def write_simulated_grace(out: str | Path, **kwargs: Any) -> Path:
+    """Simulate a day and write it as an ACC1B file plus ``<out>.truth.json``.
+
+    Keyword arguments go to :func:`simulate_grace_day`.  GRACE A/B days are
+    written in the GRACE RL02 ASCII layout, C/D in the GRACE-FO RL04 YAML layout.
+
+    Returns
+    -------
+    Path
+        The truth file.
+    """
+    from accal.io.grace_l1b import DEFAULT_INVALID_BITS, write_grace_acc1b
+    from accal.io.writers import atomic_path
+    from accal.series import AccSeries
+
+    out = Path(out)
+    day = simulate_grace_day(**kwargs)
+    sat = day.truth["satellite"]
+    # flagged samples get the lowest bit that the reader treats as invalid (bit 0: Vp)
+    flag = DEFAULT_INVALID_BITS & -DEFAULT_INVALID_BITS
+    quality = np.where(day.valid, 0, flag).astype(np.uint32)
+    series = AccSeries(
+        time=day.time,
+        acc=day.raw,
+        valid=day.valid,
+        quality=quality,
+        satellite=f"GRACE-{sat}" if sat in "AB" else f"GRACE-FO-{sat}",
+    )
+    write_grace_acc1b(series, out, flavour="grace" if sat in "AB" else "gracefo")
+    truth_path = out.with_name(out.name + ".truth.json")
+    with atomic_path(truth_path) as tmp:
+        tmp.write_text(json.dumps(day.truth, indent=2) + "\n")
+    return truth_path

@@ -1,0 +1,307 @@
+"""End-to-end tests of `accal grace-bias` and `accal simulate grace` (CliRunner and a real process)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pyarrow.parquet as pq
+import pytest
+from click.testing import CliRunner
+
+from accal import __version__
+from accal.cli import main
+
+SAMPLES = Path(__file__).resolve().parents[1] / "data" / "samples"
+GRACE_A = SAMPLES / "ACC1B_2003-09-14_A_00.asc"
+GRACE_B = SAMPLES / "ACC1B_2003-09-14_B_00.asc"
+FO_C = SAMPLES / "ACT1B_2023-06-01_C_04.txt"
+FO_D = SAMPLES / "ACT1B_2023-06-01_D_04.txt"
+SWARM = SAMPLES / "SW_A_ACCACAL_20240511_a_cal_x.csv.gz"
+
+
+def invoke(*args: str) -> tuple[int, str, str]:
+    runner = CliRunner()
+    res = runner.invoke(main, [str(a) for a in args], catch_exceptions=False)
+    return res.exit_code, res.stdout, res.stderr
+
+
+def table(out: Path, fmt: str = "parquet") -> pd.DataFrame:
+    from accal.pipeline import read_bias_drift
+
+    return read_bias_drift(out / f"bias_drift.{fmt}")
+
+
+def test_real_samples_end_to_end(tmp_path):
+    code, _, err = invoke(
+        "grace-bias", GRACE_A, GRACE_B, FO_C, FO_D, "--method", "both", "--out", tmp_path
+    )
+    assert code == 0, err
+    df = table(tmp_path)
+    assert len(df) == 4 * 3 * 2
+    assert set(df["satellite"]) == {"GRACE-A", "GRACE-B", "GRACE-FO-C", "GRACE-FO-D"}
+    assert not df.duplicated(["source", "axis", "method"]).any()
+    a_y = df[(df.satellite == "GRACE-A") & (df.axis == "y") & (df.method == "wavelet")].iloc[0]
+    # SOURCES.md: raw 60-s mean of GRACE-A y is -28.512 µm/s²; 60 s of data, drift tiny
+    assert a_y["bias"] == pytest.approx(-28.512e-6, abs=0.01e-6)
+    assert a_y["date"] == "2003-09-14"
+    assert a_y["t0"] == 116769600.0
+    assert a_y["n"] == 60
+    c = df[(df.satellite == "GRACE-FO-C") & (df.method == "lsq")].set_index("axis")
+    # SOURCES.md: 100-s means C ≈ (−0.278, −10.651, −0.182) µm/s²
+    np.testing.assert_allclose(
+        c.loc[["x", "y", "z"], "bias"] + c.loc[["x", "y", "z"], "drift"] * 49.5,
+        [-0.278e-6, -10.651e-6, -0.182e-6],
+        atol=0.002e-6,
+    )
+    assert (df["bias_sigma"] > 0).all() and (df["drift_sigma"] > 0).all()
+    # units travel in the Parquet schema metadata
+    md = pq.read_schema(tmp_path / "bias_drift.parquet").metadata
+    units = json.loads(md[b"accal.units"])
+    assert units["bias"].startswith("m/s^2") and units["drift"] == "m/s^3"
+    # per-file report with the reader's findings (the GRACE-FO file is cut short)
+    rep = json.loads((tmp_path / "ACT1B_2023-06-01_C_04.report.json").read_text())
+    assert rep["read_report"]["n_records_header"] == 86400
+    assert any("86400" in w for w in rep["read_report"]["warnings"])
+    cal = pd.read_parquet(tmp_path / "ACC1B_2003-09-14_A_00.calibrated.parquet")
+    assert list(cal.columns) == [
+        "gps_time",
+        "lin_accl_x",
+        "lin_accl_y",
+        "lin_accl_z",
+        "valid",
+        "qualflg",
+    ]
+    # trend removed: the calibrated series has (near) zero mean and no slope
+    assert abs(cal["lin_accl_y"].mean()) < 1e-10
+
+
+def test_calibrated_output_reads_back_through_the_table_reader(tmp_path):
+    from accal.io import read
+
+    assert invoke("grace-bias", GRACE_A, "--out", tmp_path)[0] == 0
+    series = read(tmp_path / "ACC1B_2003-09-14_A_00.calibrated.parquet")
+    assert len(series) == 60
+    assert series.axes == ("x", "y", "z")
+
+
+@pytest.fixture(scope="module")
+def simulated_day(tmp_path_factory):
+    d = tmp_path_factory.mktemp("sim")
+    out = d / "ACC1B_2005-01-01_A_sim.asc"
+    code, _, err = invoke(
+        "simulate",
+        "grace",
+        "--date",
+        "2005-01-01",
+        "--satellite",
+        "A",
+        "--seed",
+        "3",
+        "--gaps",
+        "2",
+        "--flagged",
+        "0.02",
+        "--out",
+        out,
+    )
+    assert code == 0, err
+    return out, json.loads(out.with_name(out.name + ".truth.json").read_text())
+
+
+def test_simulated_day_recovers_truth_within_sigma(simulated_day, tmp_path):
+    """LS estimate minus truth (instrument bias/drift + LS trend of the scaled true
+    signal, which any trend estimator sees) within 4 reported sigmas."""
+    day, truth = simulated_day
+    code, _, err = invoke(
+        "grace-bias", day, "--method", "lsq", "--format", "csv", "--out", tmp_path
+    )
+    assert code == 0, err
+    df = table(tmp_path, "csv").set_index("axis")
+    assert truth["n_flagged"] > 0
+    for i, ax in enumerate("xyz"):
+        row = df.loc[ax]
+        expected_b = truth["bias"][i] + truth["signal_trend"]["bias"][i]
+        expected_d = truth["drift"][i] + truth["signal_trend"]["drift"][i]
+        assert abs(row["bias"] - expected_b) < 4 * row["bias_sigma"]
+        assert abs(row["drift"] - expected_d) < 4 * row["drift_sigma"]
+        assert row["n"] == truth["n_samples"] - truth["n_flagged"]
+        assert row["n_gaps"] >= 1
+
+
+def test_reference_removes_the_signal(simulated_day, tmp_path):
+    """--reference with the true (scaled) signal: the fit sees only bias + drift + noise."""
+    from accal.io.writers import write_table
+    from accal.simulate.grace import simulate_grace_day
+
+    day, truth = simulated_day
+    sim = simulate_grace_day(
+        date="2005-01-01", satellite="A", seed=3, n_gaps=2, flagged_fraction=0.02
+    )
+    s = np.array(truth["scale_s"])
+    ref = pd.DataFrame(
+        {
+            "gps_time": sim.time,
+            **{f"lin_accl_{ax}": s[i] * sim.true[:, i] for i, ax in enumerate("xyz")},
+        }
+    )
+    ref_path = write_table(ref, tmp_path / "ref.parquet")
+    code, _, err = invoke(
+        "grace-bias", day, "--method", "lsq", "--reference", ref_path, "--out", tmp_path / "o"
+    )
+    assert code == 0, err
+    df = table(tmp_path / "o").set_index("axis")
+    for i, ax in enumerate("xyz"):
+        assert abs(df.loc[ax, "bias"] - truth["bias"][i]) < 4 * df.loc[ax, "bias_sigma"]
+        assert abs(df.loc[ax, "drift"] - truth["drift"][i]) < 4 * df.loc[ax, "drift_sigma"]
+        # and the noise-only fit is much tighter than the signal-laden one
+        assert df.loc[ax, "rms"] < 1e-9
+
+
+def test_scale_tn02_applied_to_calibrated_series(tmp_path):
+    code, _, err = invoke("grace-bias", GRACE_A, "--scale", "tn02", "--out", tmp_path)
+    assert code == 0, err
+    df = table(tmp_path).set_index("axis")
+    np.testing.assert_allclose(df.loc[["x", "y", "z"], "scale"], [0.9595, 0.9797, 0.9485])
+    np.testing.assert_allclose(df["bias_correction"], -df["scale"] * df["bias"])
+
+
+def test_scale_tn02_on_gracefo_is_a_clear_failure(tmp_path):
+    code, _, err = invoke("grace-bias", FO_C, GRACE_A, "--scale", "tn02", "--out", tmp_path)
+    assert code == 1
+    lines = [x for x in err.splitlines() if x.startswith("accal:")]
+    assert len(lines) == 1
+    assert "ACT1B_2023-06-01_C_04.txt" in lines[0] and "no TN-02 scale preset" in lines[0]
+    assert (tmp_path / "ACC1B_2003-09-14_A_00.calibrated.parquet").exists()
+    assert not (tmp_path / "ACT1B_2023-06-01_C_04.calibrated.parquet").exists()
+
+
+BAD_INPUTS = {
+    "empty.asc": b"",
+    "garbage.asc": bytes(range(256)) * 20,
+    "nodata.asc": GRACE_A.read_bytes().split(b"END OF HEADER")[0] + b"END OF HEADER\n",
+    "noend.asc": GRACE_A.read_bytes().split(b"END OF HEADER")[0],
+    "nan.asc": GRACE_A.read_bytes().replace(b"1.211359188507761e-06", b"nan", 1),
+    "corrupt.asc.gz": b"\x1f\x8b\x08\x00" + b"not really gzip" * 10,
+}
+
+
+def test_bad_inputs_fail_one_line_each_and_the_batch_goes_on(tmp_path):
+    inputs = []
+    for name, data in BAD_INPUTS.items():
+        p = tmp_path / "in" / name
+        p.parent.mkdir(exist_ok=True)
+        p.write_bytes(data)
+        inputs.append(p)
+    (tmp_path / "in" / "adir").mkdir()
+    inputs += [tmp_path / "in" / "adir", tmp_path / "in" / "missing.asc", GRACE_A]
+    out = tmp_path / "out"
+    code, _, err = invoke("grace-bias", *inputs, "--out", out, "-q")
+    assert code == 1
+    lines = err.strip().splitlines()
+    assert len(lines) == len(inputs) - 1, err
+    for p, line in zip(inputs[:-1], lines, strict=True):
+        assert line.startswith(f"accal: {p}"), line
+    assert "nan.asc:31" in err  # the offending line number
+    # the good file is processed; nothing partial or temporary is left behind
+    names = sorted(p.name for p in out.iterdir())
+    assert names == [
+        "ACC1B_2003-09-14_A_00.calibrated.parquet",
+        "ACC1B_2003-09-14_A_00.report.json",
+        "bias_drift.parquet",
+    ]
+    assert len(table(out)) == 3
+
+
+def test_fail_fast_stops_at_first_failure(tmp_path):
+    bad = tmp_path / "empty.asc"
+    bad.write_bytes(b"")
+    code, _, err = invoke("grace-bias", bad, GRACE_A, "--fail-fast", "--out", tmp_path / "o")
+    assert code == 1
+    assert "not run" in err or not (tmp_path / "o" / "ACC1B_2003-09-14_A_00.report.json").exists()
+    assert not (tmp_path / "o" / "ACC1B_2003-09-14_A_00.report.json").exists()
+
+
+def test_table_is_cumulative_and_never_duplicates(tmp_path):
+    assert invoke("grace-bias", GRACE_A, "--out", tmp_path)[0] == 0
+    assert invoke("grace-bias", GRACE_B, "--out", tmp_path)[0] == 0
+    assert invoke("grace-bias", GRACE_A, "--method", "both", "--out", tmp_path)[0] == 0
+    df = table(tmp_path)
+    assert len(df) == 3 + 3 + 3  # A wavelet (replaced), A lsq (new), B wavelet
+    assert not df.duplicated(["source", "axis", "method"]).any()
+
+
+def test_config_file_sets_defaults_and_flags_win(tmp_path):
+    cfg = tmp_path / "c.toml"
+    cfg.write_text('[grace-bias]\nmethod = "both"\nformat = "csv"\norder = 2\n')
+    code, _, err = invoke("grace-bias", GRACE_A, "--config", cfg, "--out", tmp_path / "o")
+    assert code == 0, err
+    df = table(tmp_path / "o", "csv")
+    assert set(df["method"]) == {"wavelet", "lsq"}
+    assert (df["order"] == 2).all() and df["quadratic"].notna().all()
+    code, _, _ = invoke(
+        "grace-bias", GRACE_A, "--config", cfg, "--method", "lsq", "--out", tmp_path / "p"
+    )
+    assert set(table(tmp_path / "p", "csv")["method"]) == {"lsq"}
+    cfg.write_text('[grace-bias]\nmethd = "both"\n')
+    code, _, err = invoke("grace-bias", GRACE_A, "--config", cfg, "--out", tmp_path / "q")
+    assert code == 2 and "unknown key 'methd'" in err
+
+
+def test_bundled_configs_are_valid(tmp_path):
+    cfgs = sorted((SAMPLES.parents[1] / "configs").glob("*.toml"))
+    assert cfgs
+    for cfg in cfgs:
+        res = CliRunner().invoke(main, ["grace-bias", "--config", str(cfg), "--help"])
+        assert res.exit_code == 0, (cfg, res.output)
+
+
+def test_swarm_single_axis_table_input(tmp_path):
+    code, _, err = invoke(
+        "grace-bias", SWARM, "--column", "x=a_cal_x", "--method", "both", "--out", tmp_path
+    )
+    assert code == 0, err
+    df = table(tmp_path)
+    assert list(df["axis"].unique()) == ["x"]
+    assert (df["satellite"] == "Swarm-A").all()
+    assert (df["date"] == "2024-05-11").all()
+    row = df[df.method == "wavelet"].iloc[0]
+    assert 0.85 * 86400 < row["n"] < 0.95 * 86400  # ~90 % valid (flag_val)
+    assert row["n_flagged"] > 0
+
+
+def test_usage_errors_exit_2(tmp_path):
+    assert invoke("grace-bias", GRACE_A, "--out", tmp_path, "--method", "spline")[0] == 2
+    assert invoke("grace-bias", GRACE_A)[0] == 2
+    assert invoke("grace-bias", GRACE_A, "--column", "q=a", "--out", tmp_path)[0] == 2
+
+
+def test_version_and_python_m_in_a_real_process(tmp_path):
+    res = subprocess.run(
+        [sys.executable, "-m", "accal", "--version"], capture_output=True, text=True, check=True
+    )
+    assert __version__ in res.stdout
+    res = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "accal",
+            "grace-bias",
+            str(GRACE_A),
+            str(tmp_path / "nope.asc"),
+            "--out",
+            str(tmp_path / "o"),
+            "--format",
+            "csv",
+        ],
+        capture_output=True,
+        text=True,
+    )
+    assert res.returncode == 1
+    assert "Traceback" not in res.stderr
+    assert f"accal: {tmp_path / 'nope.asc'}" in res.stderr
+    assert (tmp_path / "o" / "bias_drift.csv").exists()
