@@ -8,7 +8,6 @@ stderr: ``accal: FILE[:LINE]: what is wrong``.
 from __future__ import annotations
 
 import sys
-import tomllib
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +22,8 @@ def _load_config(ctx: click.Context, param: click.Parameter, value: str | None) 
     """Eager ``--config`` callback: a TOML file's ``[<command>]`` table becomes the defaults."""
     if not value:
         return value
+    import tomllib
+
     path = Path(value)
     try:
         with open(path, "rb") as fh:

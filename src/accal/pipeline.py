@@ -16,7 +16,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pandas as pd
 
 from accal import __version__
 from accal.errors import AccalError, ValidationError, check_option
@@ -275,14 +274,14 @@ def table_rows(
     return rows
 
 
-def calibrated_frame(series: AccSeries, use: np.ndarray) -> pd.DataFrame:
-    """The calibrated series as a table (``gps_time``, ``lin_accl_*``, ``valid``, ``qualflg``)."""
+def calibrated_frame(series: AccSeries, use: np.ndarray) -> dict[str, np.ndarray]:
+    """The calibrated series as columns (``gps_time``, ``lin_accl_*``, ``valid``, ``qualflg``)."""
     data: dict[str, Any] = {"gps_time": series.time}
     for ax in series.axes:
         data[f"lin_accl_{ax}"] = series.axis(ax)
     data["valid"] = use
     data["qualflg"] = series.quality
-    return pd.DataFrame(data)
+    return data
 
 
 def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutcome:
@@ -356,41 +355,121 @@ def _nan_to_none(obj: Any) -> Any:
     return obj
 
 
+_NP_TYPES = {"string": object, "int64": np.int64, "double": np.float64}
+
+
+def _bias_drift_schema():
+    import pyarrow as pa
+
+    strings = {"source", "satellite", "date", "axis", "frame", "method", "accal_version"}
+    ints = {"order", "n", "n_total", "n_flagged", "n_duplicates", "n_out_of_order", "n_gaps"}
+    return pa.schema(
+        [
+            (c, pa.string() if c in strings else pa.int64() if c in ints else pa.float64())
+            for c in BIAS_DRIFT_UNITS
+        ]
+    )
+
+
+def _read_bias_drift_arrow(path: Path):
+    """Read a ``bias_drift`` table as a pyarrow Table in the current schema."""
+    import pyarrow as pa
+
+    schema = _bias_drift_schema()
+    if path.suffix == ".csv":
+        import pyarrow.csv as pacsv
+
+        with open(path, "rb") as fh:
+            skip = 0
+            for line in fh:
+                if not line.startswith(b"#"):
+                    break
+                skip += 1
+        table = pacsv.read_csv(
+            path,
+            read_options=pacsv.ReadOptions(skip_rows=skip),
+            convert_options=pacsv.ConvertOptions(
+                column_types={f.name: f.type for f in schema}, strings_can_be_null=False
+            ),
+        )
+    else:
+        import pyarrow.parquet as pq
+
+        table = pq.ParquetFile(path).read()
+    cols = [
+        table.column(f.name).cast(f.type)
+        if f.name in table.column_names
+        else pa.nulls(table.num_rows, f.type)
+        for f in schema
+    ]
+    return pa.Table.from_arrays(cols, schema=schema)
+
+
 def merge_bias_drift(out_dir: Path, rows: list[dict[str, Any]], fmt: str) -> Path | None:
     """Merge ``rows`` into ``out_dir/bias_drift.<fmt>`` atomically.
 
     Rows of an existing table with the same (source, axis, method) are replaced;
     all others are kept, so the table accumulates every input processed there.
     """
-    from accal.io.writers import write_table
+    import pyarrow as pa
+
+    from accal.io.writers import arrow_column, write_table
 
     path = out_dir / f"bias_drift.{fmt}"
-    new = pd.DataFrame(rows, columns=list(BIAS_DRIFT_UNITS))
+    schema = _bias_drift_schema()
+    new = pa.Table.from_arrays(
+        [
+            arrow_column(np.array([r[f.name] for r in rows], dtype=_NP_TYPES[str(f.type)]))
+            for f in schema
+        ],
+        schema=schema,
+    )
     if path.exists():
-        old = read_bias_drift(path)
-        if len(new):
-            keys = set(map(tuple, new[KEY_COLUMNS].astype(str).to_numpy()))
-            keep = [tuple(k) not in keys for k in old[KEY_COLUMNS].astype(str).to_numpy()]
-            old = old.loc[keep]
-        frames = [f for f in (old, new) if len(f)]
-        new = pd.concat(frames, ignore_index=True) if frames else new
+        old = _read_bias_drift_arrow(path)
+        if new.num_rows:
+            replaced = set(_keys(new))
+            keep = np.array([k not in replaced for k in _keys(old)], dtype=bool)
+            old = _take(old, np.flatnonzero(keep))
+        new = pa.concat_tables([old, new])
     elif not rows:
         return None
-    new = new.sort_values(["satellite", "date", "source", "axis", "method"], kind="stable")
+    # sort by satellite, date, source, axis, method (numpy: pyarrow.compute imports pandas)
+    cols = [np.array(new.column(c).to_pylist(), dtype=str) for c in reversed(_SORT_COLUMNS)]
+    order = np.lexsort(cols) if new.num_rows else np.zeros(0, np.int64)
+    new = _take(new, order)
     return write_table(
-        new.reset_index(drop=True),
-        path,
-        fmt=fmt,
-        units=BIAS_DRIFT_UNITS,
-        meta={"accal_version": __version__},
+        new, path, fmt=fmt, units=BIAS_DRIFT_UNITS, meta={"accal_version": __version__}
     )
 
 
-def read_bias_drift(path: Path) -> pd.DataFrame:
-    """Read a ``bias_drift`` table written by :func:`merge_bias_drift`."""
-    if path.suffix == ".csv":
-        return pd.read_csv(path, comment="#", dtype={"date": str})
-    return pd.read_parquet(path)
+_SORT_COLUMNS = ("satellite", "date", "source", "axis", "method")
+
+
+def _take(table: Any, index: np.ndarray) -> Any:
+    """Rows ``index`` of an Arrow table, via numpy (``Table.take`` imports pyarrow.compute)."""
+    import pyarrow as pa
+
+    from accal.io._common import arrow_to_numpy
+    from accal.io.writers import arrow_column
+
+    cols = []
+    for f, col in zip(table.schema, table.columns, strict=True):
+        if pa.types.is_string(f.type):
+            vals = np.array(col.to_pylist(), dtype=object)[index]
+        else:
+            vals = arrow_to_numpy(col)[index]
+        arr = arrow_column(vals)
+        cols.append(arr if arr.type == f.type else arr.cast(f.type))
+    return pa.Table.from_arrays(cols, schema=table.schema)
+
+
+def _keys(table: Any) -> list[tuple[str, ...]]:
+    return list(zip(*(table.column(k).to_pylist() for k in KEY_COLUMNS), strict=True))
+
+
+def read_bias_drift(path: str | Path) -> Any:
+    """Read a ``bias_drift`` table written by :func:`merge_bias_drift` as a pandas DataFrame."""
+    return _read_bias_drift_arrow(Path(path)).to_pandas()
 
 
 def run(

@@ -83,6 +83,27 @@ def check_binary(text: bytes, path: str | Path, first_line: int = 1) -> None:
         raise FormatError("binary data where text was expected (not UTF-8)", path, line) from None
 
 
+def arrow_to_numpy(col: Any) -> NDArray:
+    """A numeric Arrow (chunked) array without nulls as a writable numpy array.
+
+    Reads the value buffer directly: pyarrow's own ``to_numpy`` imports pandas
+    (~0.3 s), which would dominate the start-up time of a one-file run.
+    Booleans and arrays with nulls fall back to pyarrow's conversion.
+    """
+    import pyarrow as pa
+
+    if isinstance(col, pa.ChunkedArray):
+        col = col.combine_chunks()
+    t = col.type
+    if col.null_count == 0 and (pa.types.is_integer(t) or pa.types.is_floating(t)):
+        dtype = np.dtype(t.to_pandas_dtype())
+        buf = col.buffers()[1]
+        return np.frombuffer(
+            buf, dtype=dtype, count=len(col), offset=col.offset * dtype.itemsize
+        ).copy()
+    return np.asarray(col.to_numpy(zero_copy_only=False))
+
+
 def bits_from_strings(arr: Any, path: str | Path, first_line: int, width: int = 8) -> NDArray:
     """Convert an Arrow string array of ``width`` '0'/'1' characters to uint32 bitmasks.
 

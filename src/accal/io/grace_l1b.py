@@ -31,10 +31,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from accal.errors import FormatError, UnsupportedFormatError, ValidationError, check_option
-from accal.io._common import bits_from_strings, check_binary, peek, read_bytes, tidy
+from accal.io._common import arrow_to_numpy, bits_from_strings, check_binary, peek, read_bytes, tidy
 from accal.io.writers import atomic_path
 from accal.series import UNITS, AccSeries, ReadReport
 from accal.timescale import gps_to_gps_calendar
@@ -124,18 +123,23 @@ _HEADER_SEARCH = 1 << 20
 _SNIFF_BYTES = 8192
 
 
-class _StrLoader(yaml.SafeLoader):
-    """YAML loader that keeps every plain scalar as the string written in the file."""
+def _yaml() -> tuple[Any, Any, Any]:
+    """Import pyyaml lazily (only GRACE-FO files need it) and build our loader/dumper.
 
+    The loader keeps every plain scalar as the string written in the file; the
+    dumper writes strings plain where YAML allows it (like the real files).
+    """
+    import yaml
 
-_StrLoader.yaml_implicit_resolvers = {}
+    class _StrLoader(yaml.SafeLoader):
+        pass
 
+    class _StrDumper(yaml.SafeDumper):
+        pass
 
-class _StrDumper(yaml.SafeDumper):
-    """YAML dumper that writes strings plain where YAML allows it (like the real files)."""
-
-
-_StrDumper.yaml_implicit_resolvers = {}
+    _StrLoader.yaml_implicit_resolvers = {}
+    _StrDumper.yaml_implicit_resolvers = {}
+    return yaml, _StrLoader, _StrDumper
 
 
 # --------------------------------------------------------------------------- sniff
@@ -245,8 +249,9 @@ def _interpret_grace(header: bytes, path: Path) -> dict[str, Any]:
 
 
 def _interpret_gracefo(header: bytes, path: Path) -> dict[str, Any]:
+    yaml, str_loader, _ = _yaml()
     try:
-        doc = yaml.load(header.decode("utf-8"), Loader=_StrLoader)  # noqa: S506 (safe loader)
+        doc = yaml.load(header.decode("utf-8"), Loader=str_loader)  # noqa: S506 (safe loader)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         line = None if mark is None else mark.line + 1
@@ -315,8 +320,12 @@ def _locate_bad_line(data: bytes, first_line: int, n_fields: int, path: Path) ->
                 path,
                 lineno,
             )
-        values = line.split()
-        for name, tok in zip(COLUMNS, values, strict=True):
+        if "\t" in line:
+            return FormatError(
+                "tab character inside a record (fields are space-separated)", path, lineno
+            )
+        values = [tok for tok in tokens if tok]
+        for name, tok in zip(COLUMNS, values, strict=False):
             if DTYPES[name] != "float64":
                 continue
             try:
@@ -370,7 +379,7 @@ def _parse_ascii(data: bytes, first_line: int, path: Path) -> dict[str, np.ndarr
         col = table.column(name)
         if col.null_count:
             raise _locate_bad_line(data, first_line, len(names), path)
-        arr = col.to_numpy()
+        arr = arrow_to_numpy(col)
         if not np.isfinite(arr).all():
             raise _locate_bad_line(data, first_line, len(names), path)
         out[name] = arr
@@ -403,20 +412,30 @@ def _parse_binary(data: bytes, path: Path) -> dict[str, np.ndarray]:
 
 
 def _check_ids(ids: Any, letter: str, path: Path, first_line: int) -> list[str]:
+    """Check the satellite-id column (one character per record) without pyarrow.compute."""
     import pyarrow as pa
-    import pyarrow.compute as pc
 
     if not isinstance(ids, pa.ChunkedArray | pa.Array):
         ids = pa.array(ids)
-    uniq = pc.unique(ids).to_pylist()
-    bad = [u for u in uniq if u not in SATELLITES]
-    if bad:
-        i = ids.to_pylist().index(bad[0])
+    if isinstance(ids, pa.ChunkedArray):
+        ids = ids.combine_chunks()
+    n = len(ids)
+    if pa.types.is_large_string(ids.type):
+        ids = ids.cast(pa.string())
+    _, off_buf, data_buf = ids.buffers()
+    offsets = np.frombuffer(off_buf, dtype=np.int32, count=n + 1, offset=4 * ids.offset)
+    lengths = np.diff(offsets)
+    chars = np.frombuffer(data_buf, dtype=np.uint8, count=int(offsets[-1]))[offsets[:-1]]
+    ok = (lengths == 1) & np.isin(chars, np.frombuffer("".join(SATELLITES).encode(), np.uint8))
+    if not ok.all():
+        i = int(np.flatnonzero(~ok)[0])
+        bad = ids[i].as_py()
         raise FormatError(
-            f"satellite id {bad[0][:10]!r} is not one of A, B, C, D", path, first_line + i
+            f"satellite id {bad[:10]!r} is not one of A, B, C, D", path, first_line + i
         )
+    uniq = sorted({chr(c) for c in np.unique(chars)})
     if len(uniq) > 1:
-        raise FormatError(f"mixed satellite ids {sorted(uniq)} in one file", path)
+        raise FormatError(f"mixed satellite ids {uniq} in one file", path)
     if uniq and uniq[0] != letter:
         return [f"records carry satellite id {uniq[0]!r} but the header names {letter!r}"]
     return []
@@ -584,8 +603,9 @@ def _gracefo_header(series: AccSeries, letter: str) -> list[str]:
     nsa = hdr.setdefault("non-standard_attributes", {})
     nsa["start_time_epoch_secs"] = f"{t0:.0f}" if t0 == int(t0) else repr(t0)
     nsa["stop_time_epoch_secs"] = f"{t1:.0f}" if t1 == int(t1) else repr(t1)
+    yaml, _, str_dumper = _yaml()
     text = yaml.dump(
-        {"header": hdr}, Dumper=_StrDumper, sort_keys=False, allow_unicode=True, width=1 << 16
+        {"header": hdr}, Dumper=str_dumper, sort_keys=False, allow_unicode=True, width=1 << 16
     )
     return [*text.rstrip("\n").split("\n"), HEADER_END["gracefo"][0]]
 

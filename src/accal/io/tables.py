@@ -27,7 +27,15 @@ from typing import Any
 import numpy as np
 
 from accal.errors import FormatError, ValidationError, check_option
-from accal.io._common import PARQUET_MAGIC, bits_from_strings, check_binary, peek, read_bytes, tidy
+from accal.io._common import (
+    PARQUET_MAGIC,
+    arrow_to_numpy,
+    bits_from_strings,
+    check_binary,
+    peek,
+    read_bytes,
+    tidy,
+)
 from accal.io.grace_l1b import DEFAULT_INVALID_BITS
 from accal.io.writers import write_table
 from accal.series import UNITS, AccSeries, ReadReport
@@ -156,7 +164,7 @@ def _numeric(col: Any, name: str, path: Path) -> np.ndarray:
     t = col.type
     if not (pa.types.is_integer(t) or pa.types.is_floating(t) or pa.types.is_boolean(t)):
         raise FormatError(f"column {name!r} is not numeric (type {t})", path)
-    arr = col.to_numpy(zero_copy_only=False)
+    arr = arrow_to_numpy(col)
     if col.null_count:
         arr = np.asarray(col.cast(pa.float64()).fill_null(np.nan).to_numpy(), float)
     return arr
