@@ -1,0 +1,823 @@
+"""The ``demod`` pipeline: read → validate → demodulate → write, per run file.
+
+Like :mod:`accal.pipeline`, this module sequences the other layers (the reader
+:func:`accal.io.rawlog.read_rawlog`, the estimators of
+:mod:`accal.estimators.demod`, the writers of :mod:`accal.io.writers`); the
+numbers come from the estimators.  It also holds the library side of
+``accal design``, ``accal budget`` and ``accal simulate gap`` so that the CLI stays
+thin.
+
+Outputs of :func:`run_demod`
+----------------------------
+With one input: ``DIR/periods.<fmt>``, ``DIR/summary.json``, ``DIR/summary.md``.
+With several: ``DIR/<stem>.periods.<fmt>``, ``DIR/<stem>.summary.json``,
+``DIR/<stem>.summary.md`` where ``<stem>`` is the input name without its
+suffixes (``run1.csv.gz`` → ``run1``); inputs whose stems collide are refused
+before anything runs.  The three files of an input are written together: either
+all of them appear or none (a failed input leaves no output, and an existing
+output of an earlier run is left untouched).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import time as _time
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from accal import __version__
+from accal.errors import AccalError, ValidationError, check_option
+from accal.series import AccSeries
+
+#: Standard integration time for σ(T) in the summary: 3 h, as in the paper (Fig. 5) [s].
+STANDARD_INTEGRATION = 3 * 3600.0
+#: Relative tolerance on the sampling step before a record counts as irregular.
+STEP_RTOL = 1e-6
+#: Measured masked time differing from --mask by more than this fraction is flagged.
+MASK_RTOL = 0.1
+
+PERIOD_UNITS = {
+    "period": "index of the modulation period from the start of the run",
+    "t_start": "s (first sample of the period; time origin of the input)",
+    "t_mid": "s (mean sample time of the period: the epoch a_Y, a_Z and the bias refer to)",
+    "a_Y": "m/s^2 (period mean of the acceleration along Y, bias removed)",
+    "a_Z": "m/s^2 (period mean of the acceleration along Z, bias removed)",
+    "sigma_Y": "m/s^2 (1 sigma of a_Y from the noise PSD)",
+    "sigma_Z": "m/s^2 (1 sigma of a_Z from the noise PSD)",
+    "slope_Y": "m/s^3 (slope of a_Y within the period; affine signal model)",
+    "slope_Z": "m/s^3 (slope of a_Z within the period; affine signal model)",
+    "sigma_slope_Y": "m/s^3 (1 sigma)",
+    "sigma_slope_Z": "m/s^3 (1 sigma)",
+    "bias_y": "m/s^2 (bias of m_y at t_mid)",
+    "bias_z": "m/s^2 (bias of m_z at t_mid)",
+    "drift_y": "m/s^3 (bias drift of m_y)",
+    "drift_z": "m/s^3 (bias drift of m_z)",
+    "n_used": "unmasked samples used",
+    "masked_time": "s (measured masked time of the period)",
+    "leakage": "normalised eq. 16 residual, max |v'Lambda b|/(|v||Mb|) (0 = exact rejection)",
+}
+
+
+@dataclass(frozen=True)
+class DemodOptions:
+    """Options of ``accal demod`` (CLI flags and ``[demod]`` config keys of the same names).
+
+    Attributes
+    ----------
+    tau : float
+        Modulation period τ [s].
+    mask : float
+        Nominal masking time TM per period [s].
+    method : str
+        ``"ls"`` or ``"gls"``.
+    psd : str
+        ``"microstar"`` (eq. 1) or a path to a CSV/Parquet table with ``f``, ``S``.
+    signal_model : str
+        ``"mean"`` or ``"affine"``.
+    bias_model : str
+        ``"affine"`` or ``"affine+CHANNEL[+CHANNEL...]"`` (auxiliary channels of the run file).
+    fmt : str
+        ``"parquet"`` or ``"csv"``.
+    sinusoid_period : float or None
+        Fit ``α cos + β sin`` of this period [s] to the per-period values (eq. 24).
+    resample : bool
+        Interpolate an irregularly sampled record onto a uniform grid instead of refusing it.
+    integration : float
+        Integration time of the "standard" σ(T) in the summary [s].
+    """
+
+    tau: float
+    mask: float
+    method: str = "ls"
+    psd: str = "microstar"
+    signal_model: str = "mean"
+    bias_model: str = "affine"
+    fmt: str = "parquet"
+    sinusoid_period: float | None = None
+    resample: bool = False
+    integration: float = STANDARD_INTEGRATION
+
+    def __post_init__(self) -> None:
+        check_option("method", self.method, ("ls", "gls"))
+        check_option("signal_model", self.signal_model, ("mean", "affine"))
+        check_option("format", self.fmt, ("parquet", "csv"))
+        head, *chans = self.bias_model.split("+")
+        if head != "affine" or any(not c for c in chans):
+            raise ValidationError(
+                f"Invalid value for the 'bias_model' parameter: expected 'affine' or "
+                f"'affine+CHANNEL[+CHANNEL]', got {self.bias_model!r}"
+            )
+        if not self.tau > 0:
+            raise ValidationError(f"tau must be positive, got {self.tau} s")
+        if self.sinusoid_period is not None and not self.sinusoid_period > 0:
+            raise ValidationError(f"sinusoid period must be positive, got {self.sinusoid_period}")
+
+    @property
+    def aux_channels(self) -> tuple[str, ...]:
+        """Auxiliary channels of the bias model."""
+        return tuple(self.bias_model.split("+")[1:])
+
+
+@dataclass(frozen=True)
+class RunOutcome:
+    """What happened to one run file.
+
+    Attributes
+    ----------
+    path : Path
+        The input.
+    ok : bool
+        True if processed and written.
+    message : str
+        One-line error ``FILE[:LINE]: what is wrong`` when not ok.
+    outputs : tuple of Path
+        Files written (periods table, summary JSON, summary Markdown).
+    summary : dict
+        The JSON summary (empty on failure).
+    warnings : tuple of str
+        Findings worth telling the user (mask mismatch, dropped periods, ...).
+    """
+
+    path: Path
+    ok: bool
+    message: str = ""
+    outputs: tuple[Path, ...] = ()
+    summary: dict[str, Any] = field(default_factory=dict)
+    warnings: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class DemodRunSummary:
+    """Result of :func:`run_demod` over a batch."""
+
+    outcomes: list[RunOutcome]
+    seconds: float
+
+    @property
+    def n_ok(self) -> int:
+        """Inputs processed."""
+        return sum(o.ok for o in self.outcomes)
+
+    @property
+    def n_failed(self) -> int:
+        """Inputs that failed."""
+        return sum(not o.ok for o in self.outcomes)
+
+
+# ---------------------------------------------------------------------------
+# steps
+
+
+def load_psd(spec: str | None):
+    """``"microstar"``/None → eq. 1; anything else is a PSD table file (``f``, ``S``).
+
+    Raises
+    ------
+    AccalError
+        Unreadable table or invalid values (the message names the file).
+    """
+    from accal.estimators.noise import as_psd
+    from accal.io.rawlog import read_psd
+
+    if spec is None or str(spec).lower() == "microstar":
+        return as_psd(None)
+    path = Path(spec)
+    f, s = read_psd(path)
+    try:
+        return as_psd((f, s))
+    except ValidationError as exc:
+        raise ValidationError(f"{path}: {exc}") from None
+
+
+def validate_run(series: AccSeries, opts: DemodOptions) -> AccSeries:
+    """Checks that need the options: NaNs, uniform sampling, run length, channels.
+
+    With ``opts.resample`` an irregular (jittered) record is interpolated onto the
+    uniform grid of its median step; a gap longer than 1.5 steps is refused even
+    then (interpolating across it would invent data).  The remaining checks (τ·fs,
+    mask, θ in radians and reaching π, usable periods) are the demodulation's.
+
+    Raises
+    ------
+    ValidationError
+        One line describing the problem.
+    """
+    names = {"m_y": series.axis("y"), "m_z": series.axis("z"), "theta": series.aux["theta"]}
+    for ch in opts.aux_channels:
+        if ch not in series.aux or ch == "theta":
+            avail = [k for k in series.aux if k != "theta"]
+            raise ValidationError(
+                f"--bias-model {opts.bias_model}: no auxiliary channel {ch!r} "
+                f"(channels: {', '.join(avail) or 'none'})"
+            )
+        names[ch] = series.aux[ch]
+    for name, x in names.items():
+        bad = np.flatnonzero(~np.isfinite(x))
+        if bad.size:
+            raise ValidationError(
+                f"{name} has {bad.size} NaN/inf value(s), first at t = {series.time[bad[0]]:.9g} s "
+                f"(row {int(bad[0]) + 1})"
+            )
+    t = series.time
+    if t.size < 3:
+        raise ValidationError(f"need at least 3 samples, got {t.size}")
+    step = np.diff(t)
+    dt = float(np.median(step))
+    off = np.abs(step - dt) > STEP_RTOL * dt
+    if off.any():
+        k = int(np.argmax(np.abs(step - dt)))
+        where = f"{int(off.sum())} of {step.size} steps differ from the median {dt:.9g} s"
+        if not opts.resample:
+            raise ValidationError(
+                f"irregular sampling: {where} (largest: {step[k]:.9g} s at t = {t[k]:.9g} s); "
+                "use --resample to interpolate onto a uniform grid"
+            )
+        if step.max() > 1.5 * dt:
+            k = int(np.argmax(step))
+            raise ValidationError(
+                f"gap of {step[k]:.9g} s at t = {t[k]:.9g} s (median step {dt:.9g} s): "
+                "--resample does not fill gaps; split the record there"
+            )
+        series = resample_uniform(series, dt)
+        t = series.time
+    duration = (t.size) * dt
+    if duration < opts.tau * (1 - 1e-9):
+        raise ValidationError(
+            f"run lasts {duration:.9g} s ({t.size} samples), shorter than one modulation "
+            f"period (tau = {opts.tau:g} s)"
+        )
+    return series
+
+
+def resample_uniform(series: AccSeries, dt: float) -> AccSeries:
+    """Linear interpolation of every channel onto ``t0 + k·dt`` within the record."""
+    t = series.time
+    n = int(np.floor((t[-1] - t[0]) / dt + 1e-9)) + 1
+    grid = t[0] + np.arange(n) * dt
+    acc = np.column_stack(
+        [np.interp(grid, t, series.acc[:, i]) for i in range(series.acc.shape[1])]
+    )
+    aux = {k: np.interp(grid, t, np.asarray(v, float)) for k, v in series.aux.items()}
+    return series.replace(
+        time=grid,
+        acc=acc,
+        aux=aux,
+        valid=np.ones(n, bool),
+        quality=np.zeros(n, np.uint32),
+    ).with_history(f"accal {__version__}: resample_uniform(dt={dt:.9g})")
+
+
+def estimate(series: AccSeries, opts: DemodOptions, psd: Any):
+    """Demodulate ``series`` with the options (see :func:`accal.estimators.demod.demodulate`)."""
+    from accal.estimators.demod import demodulate
+
+    aux = {ch: series.aux[ch] for ch in opts.aux_channels}
+    return demodulate(
+        series.time,
+        series.axis("y"),
+        series.axis("z"),
+        series.aux["theta"],
+        tau=opts.tau,
+        mask=opts.mask,
+        method=opts.method,
+        signal_model=opts.signal_model,
+        bias_aux=aux or None,
+        psd=psd,
+    )
+
+
+def periods_frame(res: Any, series: AccSeries) -> tuple[Any, dict[str, str]]:
+    """The per-period table and its units."""
+    import pandas as pd
+
+    data: dict[str, Any] = {
+        "period": res.period_index,
+        "t_start": res.t_start,
+        "t_mid": res.t_mid,
+        "a_Y": res.a_Y,
+        "a_Z": res.a_Z,
+        "sigma_Y": res.sigma_Y,
+        "sigma_Z": res.sigma_Z,
+    }
+    if res.signal_model == "affine":
+        for k in ("slope_Y", "slope_Z", "sigma_slope_Y", "sigma_slope_Z"):
+            data[k] = getattr(res, k)
+    units = {k: PERIOD_UNITS[k] for k in data}
+    for j, name in enumerate(res.bias_names):
+        for ax, b in (("y", res.bias_y), ("z", res.bias_z)):
+            if name in ("bias", "drift"):
+                col = f"{name}_{ax}"
+                units[col] = PERIOD_UNITS[col]
+            else:
+                col = f"bias_{ax}_{name}"
+                units[col] = f"m/s^2 per {series.units.get(name, 'unit')} of {name} (m_{ax})"
+            data[col] = b[:, j]
+    data["n_used"] = res.n_used
+    data["masked_time"] = res.masked_time
+    data["leakage"] = res.leakage
+    units.update({k: PERIOD_UNITS[k] for k in ("n_used", "masked_time", "leakage")})
+    return pd.DataFrame(data), units
+
+
+def _points_cov(index: np.ndarray, rd: np.ndarray) -> np.ndarray:
+    lag = np.abs(index[:, None] - index[None, :])
+    full = np.zeros(int(lag.max()) + 1)
+    full[: min(full.size, rd.size)] = rd[: full.size]
+    return full[lag]
+
+
+def summarise(path: Path, series: AccSeries, res: Any, opts: DemodOptions) -> dict[str, Any]:
+    """The run summary (JSON-ready): Rd, σ(T), leakage, masking, drops, sinusoid fit."""
+    from accal.estimators.demod import fit_sinusoid, sigma_mean
+
+    n = res.a_Y.size
+    rd = np.asarray(res.Rd, float)
+    n_std = max(1, int(round(opts.integration / res.tau)))
+    dropped = sorted(set(range(res.n_periods)) - set(res.period_index.tolist()))
+    mt = res.masked_time
+    measured = float(np.median(mt))
+    mismatch = abs(measured - opts.mask) > MASK_RTOL * max(opts.mask, 1.0 / res.fs)
+    scatter = {}
+    for ax in ("Y", "Z"):
+        a, s = getattr(res, f"a_{ax}"), getattr(res, f"sigma_{ax}")
+        sc = float(np.std(np.diff(a)) / np.sqrt(2.0)) if n > 2 else float("nan")
+        scatter[ax] = {
+            "scatter": sc,
+            "median_sigma": float(np.median(s)),
+            "ratio": sc / float(np.median(s)) if n > 2 else float("nan"),
+        }
+    out: dict[str, Any] = {
+        "source": str(path),
+        "accal_version": __version__,
+        "input": {
+            "n_samples": len(series),
+            "fs": res.fs,
+            "duration": len(series) / res.fs,
+            "t_first": float(series.time[0]),
+            "resampled": any("resample_uniform" in h for h in series.history),
+            "axes": list(series.axes),
+            "aux_channels": [k for k in series.aux if k != "theta"],
+        },
+        "options": {
+            "tau": opts.tau,
+            "mask": opts.mask,
+            "method": opts.method,
+            "psd": opts.psd,
+            "signal_model": opts.signal_model,
+            "bias_model": opts.bias_model,
+        },
+        "solver": res.solver,
+        "n_periods": res.n_periods,
+        "n_kept": n,
+        "dropped": res.dropped,
+        "dropped_periods": dropped,
+        "masked_fraction": res.masked_fraction,
+        "mask": {
+            "nominal": opts.mask,
+            "measured_median": measured,
+            "measured_min": float(mt.min()),
+            "measured_max": float(mt.max()),
+            "mismatch": bool(mismatch),
+            "tolerance": MASK_RTOL,
+        },
+        "leakage_max": res.max_leakage,
+        "Rd": rd.tolist(),
+        "Rd_units": "m^2/s^4 (autocovariance of a_Y per period lag, eq. 23)",
+        "sigma_T": {
+            "run": {"T": n * res.tau, "n_periods": n, "sigma": sigma_mean(rd, n)},
+            "standard": {
+                "T": n_std * res.tau,
+                "n_periods": n_std,
+                "sigma": sigma_mean(rd, n_std),
+            },
+            "units": "m/s^2 (1 sigma of the mean over T, full Rd[k])",
+        },
+        "mean": {
+            "a_Y": float(np.mean(res.a_Y)),
+            "a_Z": float(np.mean(res.a_Z)),
+            "sigma": sigma_mean(rd, n),
+            "units": "m/s^2 (plain mean of the kept periods)",
+        },
+        "scatter": scatter,
+    }
+    if opts.sinusoid_period is not None:
+        cov = _points_cov(res.period_index, rd)
+        fits = {}
+        for ax in ("Y", "Z"):
+            fit = fit_sinusoid(
+                res.t_mid, getattr(res, f"a_{ax}"), 1.0 / opts.sinusoid_period, cov=cov
+            )
+            fits[ax] = {
+                "alpha": fit.alpha,
+                "beta": fit.beta,
+                "cov": fit.cov.tolist(),
+                "sigma_alpha": fit.sigma_alpha,
+                "sigma_beta": fit.sigma_beta,
+            }
+        out["sinusoid"] = {
+            "period": opts.sinusoid_period,
+            "f_star": 1.0 / opts.sinusoid_period,
+            "t_origin": 0.0,
+            "model": "a(t) = alpha cos(2 pi f* t) + beta sin(2 pi f* t), t = t_mid",
+            "units": "m/s^2 (alpha, beta), m^2/s^4 (cov)",
+            **fits,
+        }
+    return out
+
+
+def summary_warnings(summary: dict[str, Any]) -> tuple[str, ...]:
+    """Findings of a summary worth a line on stderr."""
+    w = []
+    m = summary["mask"]
+    if m["mismatch"]:
+        w.append(
+            f"measured masked time {m['measured_median']:g} s per period differs from "
+            f"--mask {m['nominal']:g} s by more than {100 * m['tolerance']:g} %"
+        )
+    if summary["dropped"]:
+        w.append(f"{summary['dropped']} of {summary['n_periods']} periods dropped")
+    return tuple(w)
+
+
+def summary_markdown(s: dict[str, Any]) -> str:
+    """Human-readable version of the summary."""
+
+    def e(x: Any) -> str:
+        return "n/a" if x is None or (isinstance(x, float) and not np.isfinite(x)) else f"{x:.4g}"
+
+    o = s["options"]
+    lines = [
+        f"# accal demod: {Path(s['source']).name}",
+        "",
+        f"accal {s['accal_version']}; tau = {o['tau']:g} s, mask = {o['mask']:g} s, "
+        f"method = {o['method']} ({s['solver']}), signal model = {o['signal_model']}, "
+        f"bias model = {o['bias_model']}, PSD = {o['psd']}.",
+        "",
+        "| quantity | value |",
+        "| --- | --- |",
+        f"| samples, fs | {s['input']['n_samples']}, {s['input']['fs']:g} Hz"
+        f"{' (resampled)' if s['input']['resampled'] else ''} |",
+        f"| periods kept / whole | {s['n_kept']} / {s['n_periods']} |",
+        f"| dropped periods | {', '.join(map(str, s['dropped_periods'])) or 'none'} |",
+        f"| masked fraction | {s['masked_fraction']:.4f} |",
+        f"| masked time per period (median, min–max) | {s['mask']['measured_median']:g} s "
+        f"({s['mask']['measured_min']:g}–{s['mask']['measured_max']:g}); --mask {o['mask']:g} s"
+        f"{' **MISMATCH**' if s['mask']['mismatch'] else ''} |",
+        f"| max eq. 16 leakage | {e(s['leakage_max'])} |",
+        f"| Rd[0..{len(s['Rd']) - 1}] [m²/s⁴] | {', '.join(e(x) for x in s['Rd'])} |",
+        f"| σ of the mean over the run ({s['sigma_T']['run']['T']:g} s) | "
+        f"{e(s['sigma_T']['run']['sigma'])} m/s² |",
+        f"| σ of the mean over {s['sigma_T']['standard']['T']:g} s | "
+        f"{e(s['sigma_T']['standard']['sigma'])} m/s² |",
+        f"| mean a_Y, a_Z | {e(s['mean']['a_Y'])}, {e(s['mean']['a_Z'])} m/s² |",
+        f"| scatter/σ (Y, Z) | {e(s['scatter']['Y']['ratio'])}, {e(s['scatter']['Z']['ratio'])} |",
+    ]
+    if "sinusoid" in s:
+        sn = s["sinusoid"]
+        for ax in ("Y", "Z"):
+            f = sn[ax]
+            lines.append(
+                f"| sinusoid {ax} (P = {sn['period']:g} s): α, β ± σ | "
+                f"{e(f['alpha'])} ± {e(f['sigma_alpha'])}, {e(f['beta'])} ± {e(f['sigma_beta'])}"
+                f" m/s², cov(α,β) = {e(f['cov'][0][1])} |"
+            )
+    return "\n".join(lines) + "\n"
+
+
+# ---------------------------------------------------------------------------
+# the batch
+
+
+def output_paths(paths: Sequence[Path], out_dir: Path, fmt: str) -> list[tuple[Path, Path, Path]]:
+    """``(periods, summary.json, summary.md)`` of each input (see the module notes).
+
+    Raises
+    ------
+    ValidationError
+        Two inputs would write the same files.
+    """
+    from accal.pipeline import output_stem
+
+    if len(paths) == 1:
+        return [(out_dir / f"periods.{fmt}", out_dir / "summary.json", out_dir / "summary.md")]
+    seen: dict[str, Path] = {}
+    out = []
+    for p in paths:
+        stem = output_stem(Path(p))
+        if stem in seen:
+            raise ValidationError(
+                f"inputs {seen[stem]} and {p} would both write {stem}.periods.{fmt}; rename one"
+            )
+        seen[stem] = Path(p)
+        out.append(
+            (
+                out_dir / f"{stem}.periods.{fmt}",
+                out_dir / f"{stem}.summary.json",
+                out_dir / f"{stem}.summary.md",
+            )
+        )
+    return out
+
+
+def process_run(
+    path: Path, targets: tuple[Path, Path, Path], opts: DemodOptions, psd: Any
+) -> RunOutcome:
+    """read → validate → demodulate → write for one run file (all three outputs or none).
+
+    Raises
+    ------
+    AccalError
+        On bad input; nothing is written then.
+    """
+    from accal.io.rawlog import read_rawlog
+    from accal.io.writers import _json_default, atomic_path, write_table
+
+    series = read_rawlog(path)
+    series = validate_run(series, opts)
+    res = estimate(series, opts, psd)
+    df, units = periods_frame(res, series)
+    summary = summarise(path, series, res, opts)
+    meta = {
+        "source": path.name,
+        "tau": opts.tau,
+        "mask": opts.mask,
+        "method": opts.method,
+        "solver": res.solver,
+        "signal_model": opts.signal_model,
+        "bias_model": opts.bias_model,
+        "psd": opts.psd,
+        "Rd": summary["Rd"],
+        "accal_version": __version__,
+        "history": [*series.history, f"accal {__version__}: demodulate"],
+    }
+    p_path, j_path, m_path = targets
+    with contextlib.ExitStack() as stack:
+        tmp = [stack.enter_context(atomic_path(p)) for p in targets]
+        write_table(df, tmp[0], fmt=opts.fmt, units=units, meta=meta)
+        tmp[1].write_text(json.dumps(_nan_to_none(summary), indent=2, default=_json_default) + "\n")
+        tmp[2].write_text(summary_markdown(summary))
+    return RunOutcome(
+        path, True, outputs=targets, summary=summary, warnings=summary_warnings(summary)
+    )
+
+
+def _nan_to_none(obj: Any) -> Any:
+    from accal.pipeline import _nan_to_none as f
+
+    return f(obj)
+
+
+def run_demod(
+    paths: Iterable[Path],
+    out_dir: Path,
+    opts: DemodOptions,
+    *,
+    progress: Callable[[Iterable[Path]], Iterable[Path]] | None = None,
+) -> DemodRunSummary:
+    """Demodulate every run file; failures are recorded, not raised.
+
+    Parameters
+    ----------
+    paths : iterable of Path
+        Run files.
+    out_dir : Path
+        Output directory (created).
+    opts : DemodOptions
+        Options.
+    progress : callable, optional
+        Wraps the iterable of paths (e.g. ``tqdm``).
+
+    Returns
+    -------
+    DemodRunSummary
+
+    Raises
+    ------
+    AccalError
+        Before any input is processed: unreadable ``--psd`` table, colliding output names.
+    """
+    start = _time.perf_counter()
+    paths = [Path(p) for p in paths]
+    targets = output_paths(paths, out_dir, opts.fmt)
+    psd = load_psd(opts.psd)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    outcomes: list[RunOutcome] = []
+    pairs = list(zip(paths, targets, strict=True))
+    for path, tgt in progress(pairs) if progress else pairs:
+        try:
+            outcomes.append(process_run(path, tgt, opts, psd))
+        except AccalError as exc:
+            msg = str(exc).replace("\n", " ")
+            if getattr(exc, "path", None) is None:
+                msg = f"{path}: {msg}"
+            outcomes.append(RunOutcome(path, False, msg))
+        except Exception as exc:  # a bug, not bad input: keep the batch going
+            outcomes.append(
+                RunOutcome(path, False, f"{path}: internal error ({type(exc).__name__}: {exc})")
+            )
+    return DemodRunSummary(outcomes, _time.perf_counter() - start)
+
+
+# ---------------------------------------------------------------------------
+# design, budget, simulate
+
+
+def write_design(
+    out: Path, tau: float, mask: float, fs: float, *, kind: str = "fig2", periods: int = 1
+) -> tuple[Path, Any]:
+    """Design a calibration pattern and write θ(t) for ``periods`` periods.
+
+    Columns ``time`` [s], ``theta`` [rad], ``rest`` (discrete θ̇ = θ̈ = 0 mask, as
+    ``accal demod`` will find it) and ``rest_nominal``.  Format by suffix
+    (``.csv`` → CSV, else Parquet).
+
+    Returns
+    -------
+    (Path, CalibrationPattern)
+    """
+    import pandas as pd
+
+    from accal.estimators.design import design_pattern, tile
+    from accal.io.writers import write_table
+
+    if periods < 1:
+        raise ValidationError(f"periods must be >= 1, got {periods}")
+    pat = design_pattern(tau, mask, fs, kind=kind)
+    t, theta = tile(pat, periods)
+    df = pd.DataFrame(
+        {
+            "time": t,
+            "theta": theta,
+            "rest": np.tile(pat.mask, periods),
+            "rest_nominal": np.tile(pat.mask_nominal, periods),
+        }
+    )
+    units = {
+        "time": "s (from the start of the first period)",
+        "theta": "rad",
+        "rest": "True where the discrete dtheta = d2theta = 0 (samples demod uses)",
+        "rest_nominal": "True outside the nominal rotation windows",
+    }
+    meta = {
+        "kind": pat.kind,
+        "tau": pat.tau,
+        "mask": pat.tm,
+        "fs": pat.fs,
+        "periods": periods,
+        "segments": [list(s) for s in pat.segments],
+        "residuals": pat.residuals,
+        "residuals_nominal": pat.residuals_nominal,
+        "accal_version": __version__,
+    }
+    return write_table(df, out, units=units, meta=meta), pat
+
+
+def parse_taus(spec: str | None, tm: float, fs: float) -> np.ndarray:
+    """``START:STOP:STEP`` [s] → array; default ``TM+40 .. 3600`` in 40 s steps (Fig. 6)."""
+    if not spec:
+        step = 40.0
+        return np.arange(tm + step, 3600.0 + 0.5 / fs, step)
+    try:
+        a, b, c = (float(x) for x in spec.split(":"))
+    except ValueError:
+        raise ValidationError(f"--taus must be START:STOP:STEP in seconds, got {spec!r}") from None
+    if not (0 < a <= b and c > 0):
+        raise ValidationError(f"--taus needs 0 < START <= STOP and STEP > 0, got {spec!r}")
+    return np.arange(a, b + 1e-9 * b, c)
+
+
+def budget_report(
+    mask: float,
+    *,
+    tau: float | None = None,
+    fs: float = 1.0,
+    method: str = "ls",
+    integration: float = 3600.0,
+    psd: str = "microstar",
+    taus: str | None = None,
+) -> dict[str, Any]:
+    """Uncertainty budget as a JSON-ready dict (``accal budget``).
+
+    With ``tau``: Rd[k] and σ over ``integration`` for that τ.  Without: the Fig. 6
+    scan (``tau``, ``sigma``, ``tau_opt``) and the budget at ``tau_opt``.
+    ``sigma_curve`` holds σ of the mean versus the number of periods (Fig. 5).
+    """
+    from accal.estimators.demod import budget, sigma_mean, tau_scan
+
+    check_option("method", method, ("ls", "gls"))
+    p = load_psd(psd)
+    out: dict[str, Any] = {"mask": mask, "fs": fs, "method": method, "integration": integration}
+    if tau is None:
+        ts, ss, t_opt = tau_scan(
+            mask, parse_taus(taus, mask, fs), fs, psd=p, method=method, T=integration
+        )
+        out.update({"tau": ts.tolist(), "sigma": ss.tolist(), "tau_opt": t_opt})
+        tau_b = t_opt
+    else:
+        tau_b = tau
+    b = budget(tau_b, mask, fs, psd=p, method=method, T=integration)
+    n = max(1, int(round(integration / b.pattern.tau)))
+    out.update(
+        {
+            "tau_budget": b.pattern.tau,
+            "kind": b.pattern.kind,
+            "Rd": b.Rd.tolist(),
+            "sigma_T": b.sigma_T,
+            "sigma_T_indep": b.sigma_T_indep,
+            "n_periods": n,
+            "sigma_curve": {
+                "T": [k * b.pattern.tau for k in range(1, n + 1)],
+                "sigma": [sigma_mean(b.Rd, k) for k in range(1, n + 1)],
+            },
+            "units": {
+                "Rd": "m^2/s^4",
+                "sigma_T": "m/s^2",
+                "sigma": "m/s^2",
+                "tau": "s",
+                "integration": "s",
+            },
+        }
+    )
+    return out
+
+
+def plot_budget(report: dict[str, Any], path: Path) -> Path:
+    """PNG of the budget: σ vs τ (Fig. 6) when scanned, else σ of the mean vs T (Fig. 5)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from accal.io.writers import atomic_path
+
+    fig, ax = plt.subplots(figsize=(6, 4), dpi=100)
+    if "tau_opt" in report:
+        ax.plot(report["tau"], np.asarray(report["sigma"]) * 1e12, ".-")
+        ax.axvline(report["tau_opt"], color="k", ls=":", label=f"τ_opt = {report['tau_opt']:g} s")
+        ax.set_xlabel("modulation period τ [s]")
+        ax.set_ylabel(f"σ over {report['integration']:g} s [pm s⁻²]")
+        ax.set_title(f"TM = {report['mask']:g} s, {report['method'].upper()}")
+        ax.legend()
+    else:
+        c = report["sigma_curve"]
+        ax.loglog(c["T"], np.asarray(c["sigma"]) * 1e12, ".-")
+        ax.set_xlabel("integration time T [s]")
+        ax.set_ylabel("σ of the mean [pm s⁻²]")
+        ax.set_title(
+            f"τ = {report['tau_budget']:g} s, TM = {report['mask']:g} s, "
+            f"{report['method'].upper()}: Rd[0] = {report['Rd'][0]:.3g} m²s⁻⁴"
+        )
+    ax.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png")
+    plt.close(fig)
+    return path
+
+
+def write_simulated_gap(out: Path, **params: Any) -> tuple[Path, Path]:
+    """Simulate a run (:func:`accal.simulate.gap.simulate_gap`) and write it with its truth.
+
+    The run goes to ``out`` (``.csv`` → CSV, else Parquet) and the per-period true
+    means to ``<stem>.truth.<ext>`` next to it; both or neither are written.
+    """
+    from accal.io.writers import atomic_path, write_table
+    from accal.simulate.gap import simulate_gap
+
+    out = Path(out)
+    if out.name.lower().endswith(".gz"):
+        raise ValidationError(f"{out}: compressed output is not supported; use .parquet or .csv")
+    fmt = "csv" if out.suffix.lower() == ".csv" else "parquet"
+    data, truth = simulate_gap(**params)
+    truth_path = out.with_name(f"{out.stem}.truth{out.suffix or '.parquet'}")
+    run_units = {
+        "time": "s (from the start of the run)",
+        "m_y": "m/s^2",
+        "m_z": "m/s^2",
+        "m_x": "m/s^2",
+        "theta": "rad",
+        "temperature": "K",
+    }
+    truth_units = {
+        "period": "index of the modulation period",
+        "t_start": "s",
+        "t_mid": "s",
+        "a_Y": "m/s^2 (true period mean)",
+        "a_Z": "m/s^2 (true period mean)",
+        "bias_y": "m/s^2 (true period-mean bias of m_y)",
+        "bias_z": "m/s^2 (true period-mean bias of m_z)",
+    }
+    meta = {"simulate_gap": params, "accal_version": __version__}
+    with contextlib.ExitStack() as stack:
+        t_run = stack.enter_context(atomic_path(out))
+        t_truth = stack.enter_context(atomic_path(truth_path))
+        write_table(
+            data, t_run, fmt=fmt, units={k: v for k, v in run_units.items() if k in data}, meta=meta
+        )
+        write_table(truth, t_truth, fmt=fmt, units=truth_units, meta=meta)
+    return out, truth_path
