@@ -1,0 +1,362 @@
+"""Commands of the rotating-platform side: ``demod``, ``design``, ``budget``, ``simulate gap``.
+
+Thin, like :mod:`accal.cli`: parse options, call :mod:`accal.pipeline_demod`, map
+errors to exit codes (0 all inputs processed, 1 bad input, 2 usage) and one-line
+messages ``accal: FILE[:LINE]: what is wrong``.  This module does not import
+:mod:`accal.cli` at import time (``cli.py`` registers these commands), so either
+module can be imported first.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+import click
+
+CONTEXT_SETTINGS = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
+
+
+def _load_config(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
+    from accal.cli import _load_config as load
+
+    return load(ctx, param, value)
+
+
+def config_option(f: Any) -> Any:
+    """``--config FILE``: the TOML file's ``[<command>]`` table sets option defaults."""
+    return click.option(
+        "--config",
+        type=click.Path(dir_okay=False),
+        is_eager=True,
+        expose_value=False,
+        callback=_load_config,
+        help="TOML file whose [<command>] table sets option defaults.",
+    )(f)
+
+
+def _err(msg: str) -> None:
+    click.echo(f"accal: {msg}", err=True)
+
+
+def _fail(msg: str) -> None:
+    _err(msg)
+    sys.exit(1)
+
+
+def _progress(quiet: bool, desc: str) -> Any:
+    if quiet or not sys.stderr.isatty():
+        return None
+    from tqdm import tqdm
+
+    return lambda it: tqdm(it, desc=desc, unit="file", file=sys.stderr)
+
+
+PSD_HELP = "Noise PSD: 'microstar' (eq. 1 of Lenoir et al. 2013) or a CSV/Parquet table with columns f [Hz], S [m^2 s^-4 Hz^-1] (two-sided)."
+
+
+@click.command("demod", context_settings=CONTEXT_SETTINGS)
+@click.argument("runs", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.option("--tau", type=float, required=True, help="Modulation period τ [s].")
+@click.option("--mask", type=float, required=True, help="Nominal masking time TM per period [s].")
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    required=True,
+    help="Output directory (created).",
+)
+@click.option("--method", type=click.Choice(["ls", "gls"]), default="ls", show_default=True)
+@click.option(
+    "--psd", default="microstar", show_default=True, metavar="microstar|FILE", help=PSD_HELP
+)
+@click.option(
+    "--signal-model", type=click.Choice(["mean", "affine"]), default="mean", show_default=True
+)
+@click.option(
+    "--bias-model",
+    default="affine",
+    show_default=True,
+    metavar="affine|affine+CHANNEL",
+    help="Bias basis: affine, optionally plus auxiliary channels of the run file (affine+temperature).",
+)
+@click.option(
+    "--format", "fmt", type=click.Choice(["parquet", "csv"]), default="parquet", show_default=True
+)
+@click.option(
+    "--sinusoid-period",
+    type=float,
+    default=None,
+    help="Fit α cos + β sin of this period [s] to the per-period values (eq. 24).",
+)
+@click.option(
+    "--integration",
+    type=float,
+    default=10800.0,
+    show_default=True,
+    help="Integration time of the standard σ(T) in the summary [s].",
+)
+@click.option(
+    "--resample", is_flag=True, help="Interpolate irregular sampling onto a uniform grid."
+)
+@click.option("--quiet", "-q", is_flag=True, help="No progress bar or summary lines.")
+@config_option
+def demod(
+    runs: tuple[Path, ...],
+    tau: float,
+    mask: float,
+    out: Path,
+    method: str,
+    psd: str,
+    signal_model: str,
+    bias_model: str,
+    fmt: str,
+    sinusoid_period: float | None,
+    integration: float,
+    resample: bool,
+    quiet: bool,
+) -> None:
+    """Demodulate rotating-platform runs: unbiased a_Y, a_Z per modulation period.
+
+    With one RUN writes OUT/periods.<fmt>, OUT/summary.json and OUT/summary.md;
+    with several, OUT/<stem>.periods.<fmt>, OUT/<stem>.summary.json/.md.
+    """
+    from accal.errors import AccalError
+    from accal.pipeline_demod import DemodOptions, run_demod
+
+    try:
+        opts = DemodOptions(
+            tau=tau,
+            mask=mask,
+            method=method,
+            psd=psd,
+            signal_model=signal_model,
+            bias_model=bias_model,
+            fmt=fmt,
+            sinusoid_period=sinusoid_period,
+            resample=resample,
+            integration=integration,
+        )
+    except AccalError as exc:
+        raise click.UsageError(str(exc)) from None
+    try:
+        summary = run_demod(runs, out, opts, progress=_progress(quiet, "demod"))
+    except AccalError as exc:
+        _fail(str(exc))
+    for o in summary.outcomes:
+        if not o.ok:
+            _err(o.message)
+            continue
+        for w in o.warnings:
+            _err(f"{o.path}: warning: {w}")
+        if not quiet:
+            s = o.summary
+            click.echo(
+                f"{o.path}: {s['n_kept']}/{s['n_periods']} periods, "
+                f"mean a_Y = {s['mean']['a_Y']:.4g}, a_Z = {s['mean']['a_Z']:.4g} "
+                f"± {s['mean']['sigma']:.3g} m/s^2; Rd[0] = {s['Rd'][0]:.4g} m^2/s^4 -> "
+                f"{o.outputs[0]}",
+                err=True,
+            )
+    if not quiet:
+        click.echo(
+            f"accal demod: {summary.n_ok} ok, {summary.n_failed} failed in {summary.seconds:.2f} s",
+            err=True,
+        )
+    if summary.n_failed:
+        sys.exit(1)
+
+
+@click.command("design", context_settings=CONTEXT_SETTINGS)
+@click.option("--tau", type=float, required=True, help="Modulation period τ [s].")
+@click.option("--mask", type=float, required=True, help="Total rotation time per period TM [s].")
+@click.option("--fs", type=float, default=1.0, show_default=True, help="Sampling frequency [Hz].")
+@click.option(
+    "--signal-model",
+    type=click.Choice(["mean", "affine"]),
+    default="mean",
+    show_default=True,
+    help="Conditions that must vanish: Σc, Σct (mean); also Σct² (affine).",
+)
+@click.option(
+    "--kind",
+    type=click.Choice(["fig2", "fig1"]),
+    default="fig2",
+    show_default=True,
+    help="Pattern: four rotations (Fig. 2) or two (Fig. 1a).",
+)
+@click.option("--periods", type=click.IntRange(min=1), default=1, show_default=True)
+@click.option(
+    "--out",
+    type=click.Path(dir_okay=False, path_type=Path),
+    required=True,
+    help="θ(t) table; .csv → CSV, else Parquet.",
+)
+@config_option
+def design(
+    tau: float, mask: float, fs: float, signal_model: str, kind: str, periods: int, out: Path
+) -> None:
+    """Design a calibration pattern θ(t) and print the eq. 16 residuals.
+
+    Prints Σc, Σct, Σct² (normalised, c = cos θ on the samples used) for the
+    discrete rest mask (what demod uses) and for the nominal one.  The sin
+    conditions vanish identically: at rest θ is 0 or π.
+    """
+    from accal.errors import AccalError
+    from accal.pipeline_demod import write_design
+
+    try:
+        path, pat = write_design(out, tau, mask, fs, kind=kind, periods=periods)
+    except AccalError as exc:
+        raise click.UsageError(str(exc)) from None
+    need = ("sum_c", "sum_ct") + (("sum_ct2",) if signal_model == "affine" else ())
+    click.echo(
+        f"pattern {pat.kind}: segments [s] "
+        + " | ".join(
+            f"{'R' if a is None else ('+' if a == 0 else '-')}{n / fs:g}" for n, a in pat.segments
+        )
+    )
+    click.echo(f"{'condition':<10} {'discrete':>12} {'nominal':>12}  required ({signal_model})")
+    for k in ("sum_c", "sum_ct", "sum_ct2"):
+        r, rn = pat.residuals[k], pat.residuals_nominal[k]
+        flag = ("ok" if abs(r) < 1e-9 else "NOT ZERO") if k in need else "-"
+        click.echo(f"{k:<10} {r:>12.3e} {rn:>12.3e}  {flag}")
+    click.echo(f"wrote {path} ({periods} period(s), {pat.q * periods} samples)", err=True)
+
+
+@click.command("budget", context_settings=CONTEXT_SETTINGS)
+@click.option("--mask", type=float, required=True, help="Masking time TM per period [s].")
+@click.option("--tau", type=float, default=None, help="Modulation period [s]; scan τ if omitted.")
+@click.option("--fs", type=float, default=1.0, show_default=True, help="Sampling frequency [Hz].")
+@click.option("--method", type=click.Choice(["ls", "gls"]), default="ls", show_default=True)
+@click.option(
+    "--integration", type=float, default=3600.0, show_default=True, help="Integration time T [s]."
+)
+@click.option(
+    "--psd", default="microstar", show_default=True, metavar="microstar|FILE", help=PSD_HELP
+)
+@click.option(
+    "--taus",
+    default=None,
+    metavar="START:STOP:STEP",
+    help="τ values to scan [s] (default TM+40 to 3600 by 40).",
+)
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object on stdout.")
+@click.option(
+    "--plot", type=click.Path(dir_okay=False, path_type=Path), default=None, help="Write a PNG."
+)
+@config_option
+def budget(
+    mask: float,
+    tau: float | None,
+    fs: float,
+    method: str,
+    integration: float,
+    psd: str,
+    taus: str | None,
+    as_json: bool,
+    plot: Path | None,
+) -> None:
+    """Uncertainty budget: Rd[k] and σ over T for τ, or the optimal τ (Fig. 6)."""
+    from accal.errors import AccalError
+    from accal.pipeline_demod import budget_report, plot_budget
+
+    try:
+        rep = budget_report(
+            mask, tau=tau, fs=fs, method=method, integration=integration, psd=psd, taus=taus
+        )
+    except AccalError as exc:
+        _fail(str(exc))
+    if plot is not None:
+        plot_budget(rep, plot)
+    if as_json:
+        click.echo(json.dumps(rep))
+        return
+    if "tau_opt" in rep:
+        click.echo(f"{'tau [s]':>9} {'sigma [m/s^2]':>14}")
+        for t, s in zip(rep["tau"], rep["sigma"], strict=True):
+            mark = "  <- tau_opt" if t == rep["tau_opt"] else ""
+            click.echo(f"{t:>9g} {s:>14.4e}{mark}")
+        click.echo(f"tau_opt = {rep['tau_opt']:g} s (TM = {mask:g} s, T = {integration:g} s)")
+    click.echo(
+        f"tau = {rep['tau_budget']:g} s, TM = {mask:g} s, {method.upper()}, pattern {rep['kind']}"
+    )
+    for k, r in enumerate(rep["Rd"][:6]):
+        click.echo(f"Rd[{k}] = {r:.4e} m^2/s^4")
+    click.echo(
+        f"sigma over T = {integration:g} s ({rep['n_periods']} periods): {rep['sigma_T']:.4e} m/s^2 "
+        f"(independent periods: {rep['sigma_T_indep']:.4e})"
+    )
+    if plot is not None:
+        click.echo(f"wrote {plot}", err=True)
+
+
+@click.command("gap", context_settings=CONTEXT_SETTINGS)
+@click.option("--days", type=float, default=1.0, show_default=True, help="Duration [day].")
+@click.option("--tau", type=float, default=600.0, show_default=True, help="Modulation period [s].")
+@click.option("--mask", type=float, default=200.0, show_default=True, help="Masking time [s].")
+@click.option("--fs", type=float, default=1.0, show_default=True, help="Sampling frequency [Hz].")
+@click.option(
+    "--out",
+    type=click.Path(dir_okay=False, path_type=Path),
+    required=True,
+    help="Run file (.parquet or .csv); truth goes to <stem>.truth.<ext> next to it.",
+)
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option(
+    "--temperature-coupling",
+    type=float,
+    default=0.0,
+    show_default=True,
+    help="Bias sensitivity to temperature [m s^-2 K^-1].",
+)
+@click.option(
+    "--quadratic", type=float, default=0.0, show_default=True, help="Quadratic factor k2 [s^2/m]."
+)
+@click.option(
+    "--signal-amplitude",
+    type=float,
+    default=0.0,
+    show_default=True,
+    help="Amplitude of a sinusoid on a_Y (sin) and a_Z (cos) [m/s^2].",
+)
+@click.option(
+    "--signal-period", type=float, default=86400.0, show_default=True, help="Its period [s]."
+)
+@click.option("--with-x", is_flag=True, help="Also write an m_x column.")
+@config_option
+def simulate_gap(
+    days: float,
+    tau: float,
+    mask: float,
+    fs: float,
+    out: Path,
+    seed: int,
+    temperature_coupling: float,
+    quadratic: float,
+    signal_amplitude: float,
+    signal_period: float,
+    with_x: bool,
+) -> None:
+    """Write a synthetic rotating-platform run (MicroSTAR noise) and its truth table."""
+    from accal.errors import AccalError
+    from accal.pipeline_demod import write_simulated_gap
+
+    try:
+        run, truth = write_simulated_gap(
+            out,
+            days=days,
+            tau=tau,
+            mask=mask,
+            fs=fs,
+            seed=seed,
+            temperature_coupling=temperature_coupling,
+            quadratic=quadratic,
+            signal_amplitude=signal_amplitude,
+            signal_period=signal_period,
+            with_x=with_x,
+        )
+    except AccalError as exc:
+        _fail(str(exc))
+    click.echo(f"wrote {run} and {truth}", err=True)
