@@ -766,6 +766,10 @@ def plot_budget(report: dict[str, Any], path: Path) -> Path:
     else:
         c = report["sigma_curve"]
         ax.loglog(c["T"], np.asarray(c["sigma"]) * 1e12, ".-")
+        from matplotlib.ticker import FormatStrFormatter
+
+        ax.yaxis.set_major_formatter(FormatStrFormatter("%g"))
+        ax.yaxis.set_minor_formatter(FormatStrFormatter("%g"))
         ax.set_xlabel("integration time T [s]")
         ax.set_ylabel("σ of the mean [pm s⁻²]")
         ax.set_title(
