@@ -92,6 +92,9 @@ def main() -> None:
 
     \b
     grace-bias  per-day, per-axis bias and drift of GRACE / GRACE-FO ACC1B/ACT1B
+    demod       unbiased acceleration from a rotating-platform accelerometer
+    design      a theta(t) calibration pattern for the rotating platform
+    budget      uncertainty budget of the rotating-platform measurement
     simulate    synthetic inputs with a truth file
     """
 
@@ -289,6 +292,13 @@ def simulate_grace(
         sys.exit(1)
     click.echo(f"wrote {out} and {truth_path}", err=True)
 
+
+from accal.cli_demod import budget, demod, design, simulate_gap  # noqa: E402
+
+main.add_command(demod)
+main.add_command(design)
+main.add_command(budget)
+simulate.add_command(simulate_gap, name="gap")
 
 if __name__ == "__main__":  # pragma: no cover
     main()
