@@ -12,46 +12,15 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
-from typing import Any
 
 import click
 
+from accal._cliutil import config_option
+from accal._cliutil import err as _err
+from accal._cliutil import fail as _fail
+from accal._cliutil import progress as _progress
+
 CONTEXT_SETTINGS = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
-
-
-def _load_config(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
-    from accal.cli import _load_config as load
-
-    return load(ctx, param, value)
-
-
-def config_option(f: Any) -> Any:
-    """``--config FILE``: the TOML file's ``[<command>]`` table sets option defaults."""
-    return click.option(
-        "--config",
-        type=click.Path(dir_okay=False),
-        is_eager=True,
-        expose_value=False,
-        callback=_load_config,
-        help="TOML file whose [<command>] table sets option defaults.",
-    )(f)
-
-
-def _err(msg: str) -> None:
-    click.echo(f"accal: {msg}", err=True)
-
-
-def _fail(msg: str) -> None:
-    _err(msg)
-    sys.exit(1)
-
-
-def _progress(quiet: bool, desc: str) -> Any:
-    if quiet or not sys.stderr.isatty():
-        return None
-    from tqdm import tqdm
-
-    return lambda it: tqdm(it, desc=desc, unit="file", file=sys.stderr)
 
 
 PSD_HELP = "Noise PSD: 'microstar' (eq. 1 of Lenoir et al. 2013) or a CSV/Parquet table with columns f [Hz], S [m^2 s^-4 Hz^-1] (two-sided)."
