@@ -1,0 +1,33 @@
+"""Close the loop: trace a fit's residual to effects the model lacks, add them, refit.
+
+Layer 2 (see ``shared/STYLE.md`` §4): arrays in, findings out; only
+:mod:`accal.closure.report` writes files, and only where its caller says.
+
+>>> from accal.closure import close_loop                      # doctest: +SKIP
+>>> res = close_loop(t, a_x, aux={"temp": temp}, orbit_period=5600.0)
+>>> res.to_dict()["effects"]
+"""
+
+from accal.closure.candidates import BUILDERS, EFFECT_NAMES, Context, Proposal
+from accal.closure.residual import ResidualStats, characterise
+from accal.closure.select import (
+    DEFAULT_CANDIDATES,
+    BaseCoefficient,
+    ClosureResult,
+    Effect,
+    close_loop,
+)
+
+__all__ = [
+    "BUILDERS",
+    "DEFAULT_CANDIDATES",
+    "EFFECT_NAMES",
+    "BaseCoefficient",
+    "ClosureResult",
+    "Context",
+    "Effect",
+    "Proposal",
+    "ResidualStats",
+    "characterise",
+    "close_loop",
+]

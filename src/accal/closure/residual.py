@@ -1,0 +1,483 @@
+"""Residual characterisation and the coloured-noise significance test.
+
+Two jobs, both pure functions over arrays:
+
+* :func:`characterise`: what is left in a residual (gap-tolerant Welch PSD on the
+  continuous segments, per-segment means, low-frequency share, kurtosis);
+* :func:`wald_test`: is a block of extra regressors significant *under the
+  residual's own coloured noise*?
+
+Why a sandwich Wald test and not AR prewhitening
+------------------------------------------------
+Accelerometer noise rises as 1/f below ~1 mHz, and the effects we look for (drifts,
+steps, slow couplings) live at 1e-5–1e-4 Hz.  A low-order AR model fitted at 1 Hz
+is dominated by the white part and cannot represent that rise; prewhitening with
+it leaves red noise in the "whitened" data and an F-test then reports steps and
+quadratics in clean data.  Instead we estimate the PSD ``S(f)`` of the residual on
+the nominal grid, resolved down to ``min_bin/T`` (the estimator already validated
+for :func:`accal.estimators.trend.linear_estimator_covariance`), and evaluate the
+covariance of the extra coefficients exactly as the quadratic form
+``Σ = G C Gᵀ = (1/N) Σ_f G(f) S(f) G(f)*`` (a sandwich covariance, no N×N matrix).
+The statistic ``W = γᵀ Σ⁻¹ γ / q`` is referred to ``F(q, ν)``, where ``ν`` is the
+Satterthwaite number of degrees of freedom of ``Σ``: each PSD bin ``b`` is an
+average of ``m_b`` periodogram ordinates (``2 m_b`` degrees of freedom) and
+contributes ``c_b`` to ``tr(Σ⁻¹ Σ)``, so ``ν = q² / Σ_b c_b² / (2 m_b)``.  This is
+what makes the test honest for the slowest regressors, whose variance rests on a
+handful of periodogram ordinates.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = [
+    "Grid",
+    "NoisePSD",
+    "ResidualStats",
+    "WaldResult",
+    "characterise",
+    "estimate_psd",
+    "make_grid",
+    "wald_test",
+    "white_plus_flicker",
+]
+
+
+@dataclass(frozen=True)
+class Grid:
+    """The used samples placed on their nominal uniform sampling grid.
+
+    Attributes
+    ----------
+    idx : ndarray of int, shape (n,)
+        Grid index of each used sample.
+    size : int
+        Number of grid points ``N`` (gaps included).
+    step : float
+        Nominal sampling interval [s].
+    """
+
+    idx: NDArray[np.int64]
+    size: int
+    step: float
+
+    def place(self, cols: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Put columns (n, k) or a vector (n,) on the grid, zeros in gaps -> (k, N)."""
+        cols = np.asarray(cols, dtype=np.float64)
+        if cols.ndim == 1:
+            cols = cols[:, None]
+        out = np.zeros((cols.shape[1], self.size))
+        out[:, self.idx] = cols.T
+        return out
+
+    @property
+    def freqs(self) -> NDArray[np.float64]:
+        """Frequencies of the one-sided DFT of the grid [Hz]."""
+        return np.fft.rfftfreq(self.size, self.step)
+
+
+def make_grid(t: NDArray[np.float64]) -> Grid:
+    """Nominal-grid indices of increasing sample times ``t`` [s]."""
+    t = np.asarray(t, dtype=np.float64)
+    if t.size < 2:
+        return Grid(np.zeros(t.size, dtype=np.int64), max(t.size, 1), 1.0)
+    step = float(np.median(np.diff(t)))
+    idx = np.rint((t - t[0]) / step).astype(np.int64)
+    idx = np.maximum.accumulate(np.maximum(idx, np.arange(idx.size)))
+    return Grid(idx, int(idx[-1]) + 1, step)
+
+
+@dataclass(frozen=True)
+class NoisePSD:
+    """Binned, projection-corrected two-sided PSD estimate of a residual.
+
+    Attributes
+    ----------
+    level : ndarray, shape (nbins,)
+        PSD value of each bin (two-sided, per grid sample: ``E|R(f)|²/n``) [(m/s²)²].
+    which : ndarray of int, shape (nf,)
+        Bin of each DFT frequency (frequency 0 belongs to bin 0).
+    counts : ndarray, shape (nbins,)
+        Effective number of periodogram ordinates in each bin (ordinates weighted by
+        the share of their power the fitted design left in the residual).
+    pgram : ndarray, shape (nf,)
+        The corrected periodogram itself.
+    """
+
+    level: NDArray[np.float64]
+    which: NDArray[np.int64]
+    counts: NDArray[np.float64]
+    pgram: NDArray[np.float64]
+
+    @property
+    def psd(self) -> NDArray[np.float64]:
+        """The bin levels expanded to every DFT frequency."""
+        return self.level[self.which]
+
+
+def _two_sided(size: int, nf: int) -> NDArray[np.float64]:
+    w = np.full(nf, 2.0)
+    w[0] = 1.0
+    if size % 2 == 0:
+        w[-1] = 1.0
+    return w
+
+
+def estimate_psd(
+    grid: Grid,
+    residual: NDArray[np.float64],
+    basis_fft: NDArray[np.complex128],
+    *,
+    min_bin: int = 3,
+    growth: float = 0.25,
+) -> NoisePSD:
+    """PSD of ``residual`` from its periodogram, corrected for the fitted model.
+
+    Parameters
+    ----------
+    grid : Grid
+        Sample placement.
+    residual : ndarray, shape (n,)
+        Residual of a least-squares fit [m/s²].
+    basis_fft : ndarray, shape (k, nf)
+        rfft of an orthonormal basis of the fitted design on the grid; removing it
+        removed the share ``Σ_j |Q_j(f)|²/n`` of the white-noise power at ``f``.
+        Each bin's level is then ``Σ P_f / Σ (1 − share_f)`` (unbiased for noise
+        that is white within the bin), and bins are widened until they hold
+        ``min_bin/2`` effective ordinates.
+    min_bin, growth : int, float
+        Bins of ``min_bin`` ordinates at the low end, each growing by ``growth``.
+
+    Returns
+    -------
+    NoisePSD
+    """
+    n = residual.size
+    spec = np.fft.rfft(grid.place(residual)[0])
+    nf = spec.size
+    raw = np.abs(spec) ** 2 / n
+    if basis_fft.size:
+        supp = np.clip(1.0 - np.sum(np.abs(basis_fft) ** 2, axis=0) / n, 0.0, 1.0)
+    else:
+        supp = np.ones(nf)
+    # bins: at least `min_bin` ordinates and `min_bin/2` effective (unsuppressed) ones
+    csum = np.concatenate([[0.0], np.cumsum(supp)])
+    edges = [1]
+    while edges[-1] < nf:
+        a = edges[-1]
+        width = max(min_bin, int(growth * a))
+        b = a + width
+        need = csum[a] + 0.5 * width
+        if b < nf and csum[b] < need:
+            b = max(b, int(np.searchsorted(csum, need)))
+        edges.append(min(b, nf))
+    if len(edges) > 2 and csum[edges[-1]] - csum[edges[-2]] < 0.5 * min_bin:
+        edges.pop(-2)  # merge a starved last bin into its neighbour
+    edges_arr = np.asarray(edges)
+    which = np.zeros(nf, dtype=np.int64)
+    which[1:] = np.searchsorted(edges_arr, np.arange(1, nf), side="right") - 1
+    nb = max(edges_arr.size - 1, 1)
+    # ratio estimator: E[Σ raw] = S · Σ supp within a bin (white within the bin)
+    sums = np.bincount(which[1:], weights=raw[1:], minlength=nb)
+    effective = np.bincount(which[1:], weights=supp[1:], minlength=nb)
+    level = sums / np.maximum(effective, 1e-12)
+    counts = np.maximum(effective, 0.5)
+    pgram = raw / np.maximum(supp, 0.2)
+    return NoisePSD(level, which, counts, pgram)
+
+
+@dataclass(frozen=True)
+class WaldResult:
+    """Outcome of :func:`wald_test`.
+
+    Attributes
+    ----------
+    gamma : ndarray, shape (q,)
+        Coefficients of the orthonormalised extra regressors.
+    cov : ndarray, shape (q, q)
+        Their sandwich covariance.
+    stat : float
+        ``W/q`` (F-distributed under the null).
+    dof : float
+        Satterthwaite denominator degrees of freedom.
+    pvalue : float
+        ``P(F(q, dof) > stat)`` (not corrected for multiplicity).
+    residual : ndarray, shape (n,)
+        Residual of the augmented model.
+    """
+
+    gamma: NDArray[np.float64]
+    cov: NDArray[np.float64]
+    stat: float
+    dof: float
+    pvalue: float
+    residual: NDArray[np.float64]
+
+    @property
+    def q(self) -> int:
+        return int(self.gamma.size)
+
+
+def orthonormal_complement(
+    z: NDArray[np.float64], qx: NDArray[np.float64], tol: float = 1e-8
+) -> NDArray[np.float64]:
+    """Orthonormal basis of the part of the columns ``z`` orthogonal to ``qx``.
+
+    Columns that are (numerically) in the span of ``qx`` or of each other are dropped.
+    """
+    z = np.asarray(z, dtype=np.float64)
+    if z.ndim == 1:
+        z = z[:, None]
+    zt = z - qx @ (qx.T @ z)
+    norms0 = np.linalg.norm(z, axis=0)
+    if not np.any(norms0 > 0):
+        return np.zeros((z.shape[0], 0))
+    u, s, _ = np.linalg.svd(zt, full_matrices=False)
+    keep = s > tol * max(float(norms0.max()), 1e-300)
+    return u[:, keep]
+
+
+def wald_test(
+    grid: Grid,
+    residual: NDArray[np.float64],
+    zt: NDArray[np.float64],
+    qx_fft: NDArray[np.complex128],
+    *,
+    min_bin: int = 3,
+    psd: NDArray[np.float64] | None = None,
+) -> WaldResult:
+    """Sandwich Wald/F test of extra regressors ``zt`` against coloured noise.
+
+    Parameters
+    ----------
+    grid : Grid
+        Sample placement.
+    residual : ndarray, shape (n,)
+        Residual of the current model (orthogonal to its design).
+    zt : ndarray, shape (n, q)
+        Orthonormal extra regressors, orthogonal to the current design
+        (:func:`orthonormal_complement`).
+    qx_fft : ndarray, shape (p, nf)
+        rfft of the orthonormal basis of the current design on the grid.
+    min_bin : int
+        Lowest PSD bin width, in DFT ordinates.
+    psd : ndarray, shape (nf,), optional
+        A given (model) two-sided PSD instead of the estimate; the statistic is
+        then referred to χ²_q (no estimation uncertainty).
+
+    Returns
+    -------
+    WaldResult
+        The PSD is estimated from the residual of the *augmented* model, so a real
+        effect does not inflate its own uncertainty.
+    """
+    from scipy import stats
+
+    q = zt.shape[1]
+    if q == 0:
+        return WaldResult(np.zeros(0), np.zeros((0, 0)), 0.0, np.inf, 1.0, residual)
+    gamma = zt.T @ residual  # OLS coefficients of orthonormal columns: weights G = ztᵀ
+    r1 = residual - zt @ gamma
+    z_fft = np.fft.rfft(grid.place(zt), axis=1)
+    noise = estimate_psd(grid, r1, np.vstack([qx_fft, z_fft]), min_bin=min_bin)
+    w = _two_sided(grid.size, z_fft.shape[1]) * (noise.psd if psd is None else psd)
+    cov = ((z_fft * w) @ np.conj(z_fft).T).real / grid.size
+    cov = 0.5 * (cov + cov.T)
+    try:
+        cinv = np.linalg.pinv(cov, rcond=1e-12)
+    except np.linalg.LinAlgError:
+        return WaldResult(gamma, cov, 0.0, np.inf, 1.0, r1)
+    stat = float(gamma @ cinv @ gamma) / q
+    if psd is not None:
+        return WaldResult(gamma, cov, stat, np.inf, float(stats.chi2.sf(stat * q, q)), r1)
+    # Satterthwaite: contribution of each PSD bin to tr(Σ⁻¹Σ) = q
+    h = np.einsum("if,ij,jf->f", np.conj(z_fft), cinv, z_fft).real * w / grid.size
+    c = np.bincount(noise.which, weights=h, minlength=noise.level.size)
+    m = noise.counts.astype(float)
+    denom = float(np.sum(c**2 / (2.0 * m)))
+    dof = float(max(q**2 / denom, 2.0)) if denom > 0 else np.inf
+    pvalue = (
+        float(stats.f.sf(stat, q, dof)) if np.isfinite(dof) else float(stats.chi2.sf(stat * q, q))
+    )
+    return WaldResult(gamma, cov, stat, dof, pvalue, r1)
+
+
+def sandwich_cov(
+    grid: Grid,
+    residual: NDArray[np.float64],
+    weights: NDArray[np.float64],
+    design_q: NDArray[np.float64],
+    *,
+    min_bin: int = 3,
+) -> NDArray[np.float64]:
+    """Covariance ``G C Gᵀ`` of linear estimators ``weights @ y`` (shape (p, n)).
+
+    ``design_q`` is an orthonormal basis of the fitted design (for the projection
+    correction of the PSD estimate).
+    """
+    q_fft = np.fft.rfft(grid.place(design_q), axis=1)
+    noise = estimate_psd(grid, residual, q_fft, min_bin=min_bin)
+    g_fft = np.fft.rfft(grid.place(np.atleast_2d(weights).T), axis=1)
+    w = _two_sided(grid.size, g_fft.shape[1]) * noise.psd
+    cov = ((g_fft * w) @ np.conj(g_fft).T).real / grid.size
+    return 0.5 * (cov + cov.T)
+
+
+def white_plus_flicker(
+    grid: Grid, noise: NoisePSD, f_lo: float
+) -> tuple[NDArray[np.float64], tuple[float, float]]:
+    """Fit ``S(f) = a + b/f`` to the binned PSD above ``f_lo`` and extrapolate it.
+
+    The accelerometer noise model (white plus 1/f below the corner, as in
+    :func:`accal.simulate.grace.coloured_noise`), fitted with non-negative least
+    squares in relative error to the bins whose frequencies are all ≥ ``f_lo``.
+    Used by the final ``unexplained`` test: slow structure is power in excess of this
+    extrapolation.  Returns ``(psd on every DFT frequency, (a, b))``.
+    """
+    from scipy.optimize import nnls
+
+    f = grid.freqs
+    nb = noise.level.size
+    lo = np.full(nb, np.inf)
+    np.minimum.at(lo, noise.which[1:], f[1:])
+    fc = np.bincount(noise.which[1:], weights=f[1:], minlength=nb) / np.maximum(
+        np.bincount(noise.which[1:], minlength=nb), 1
+    )
+    sel = (lo >= f_lo) & (noise.level > 0)
+    if sel.sum() < 3:
+        return noise.psd, (float("nan"), float("nan"))
+    wgt = np.sqrt(noise.counts[sel]) / noise.level[sel]
+    amat = np.column_stack([np.ones(sel.sum()), 1.0 / fc[sel]]) * wgt[:, None]
+    (a, b), _ = nnls(amat, noise.level[sel] * wgt)
+    model = np.empty_like(f)
+    model[1:] = a + b / f[1:]
+    model[0] = model[1]
+    return model, (float(a), float(b))
+
+
+# --------------------------------------------------------------------------------------
+# characterisation
+# --------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ResidualStats:
+    """What is left in a residual.
+
+    Attributes
+    ----------
+    rms : float
+        Root mean square [m/s²].
+    kurtosis : float
+        Excess kurtosis (0 for Gaussian; large values mean outliers/steps).
+    freq : ndarray
+        Frequencies of the Welch PSD [Hz].
+    psd : ndarray
+        One-sided Welch PSD averaged over continuous segments [(m/s²)²/Hz]
+        (empty if no segment is long enough).
+    segment_edges : ndarray
+        Start times of the segments used for ``segment_means`` [s].
+    segment_means : ndarray
+        Mean residual per segment (per orbit when the orbit period is known) [m/s²].
+    lowfreq_fraction : float
+        Share of the residual variance below 1/(segment length) (slow structure).
+    """
+
+    rms: float
+    kurtosis: float
+    freq: NDArray[np.float64]
+    psd: NDArray[np.float64]
+    segment_edges: NDArray[np.float64]
+    segment_means: NDArray[np.float64]
+    lowfreq_fraction: float
+
+
+def continuous_segments(t: NDArray[np.float64], step: float) -> list[slice]:
+    """Slices of runs of samples without a gap (> 1.5 nominal steps)."""
+    if t.size == 0:
+        return []
+    breaks = np.flatnonzero(np.diff(t) > 1.5 * step) + 1
+    starts = np.r_[0, breaks]
+    stops = np.r_[breaks, t.size]
+    return [slice(int(a), int(b)) for a, b in zip(starts, stops, strict=True)]
+
+
+def welch_segments(
+    t: NDArray[np.float64], r: NDArray[np.float64], nperseg: int
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Welch PSD averaged over the continuous segments of at least ``nperseg`` samples.
+
+    Returns ``(freq [Hz], psd [(m/s²)²/Hz])``, weighted by each segment's number of
+    Welch windows; empty arrays when no segment is long enough.
+    """
+    from scipy.signal import welch
+
+    step = float(np.median(np.diff(t))) if t.size > 1 else 1.0
+    acc = None
+    total = 0.0
+    freq = np.zeros(0)
+    for sl in continuous_segments(t, step):
+        seg = r[sl]
+        if seg.size < nperseg:
+            continue
+        freq, p = welch(seg, fs=1.0 / step, nperseg=nperseg, detrend="constant")
+        nwin = 1 + (seg.size - nperseg) // (nperseg // 2)
+        acc = p * nwin if acc is None else acc + p * nwin
+        total += nwin
+    if acc is None:
+        return np.zeros(0), np.zeros(0)
+    return freq, acc / total
+
+
+def characterise(
+    t: NDArray[np.float64],
+    r: NDArray[np.float64],
+    *,
+    segment: float | None = None,
+    nperseg: int | None = None,
+) -> ResidualStats:
+    """Characterise a residual (used samples only).
+
+    Parameters
+    ----------
+    t : ndarray, shape (n,)
+        Times of the used samples [s].
+    r : ndarray, shape (n,)
+        Residual [m/s²].
+    segment : float, optional
+        Length of the segments for the segment means [s], e.g. the orbit period;
+        default span/16.
+    nperseg : int, optional
+        Welch window length [samples]; default the largest power of two ≤ span/8
+        (at least 64).
+    """
+    from scipy.stats import kurtosis
+
+    t = np.asarray(t, dtype=np.float64)
+    r = np.asarray(r, dtype=np.float64)
+    span = float(t[-1] - t[0]) if t.size > 1 else 1.0
+    step = float(np.median(np.diff(t))) if t.size > 1 else 1.0
+    if segment is None or not segment > 0:
+        segment = span / 16.0
+    if nperseg is None:
+        nperseg = int(2 ** np.floor(np.log2(max(span / step / 8.0, 64))))
+    freq, psd = welch_segments(t, r, nperseg)
+    edges = np.arange(t[0], t[-1] + segment, segment)
+    which = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, edges.size - 1)
+    counts = np.bincount(which, minlength=edges.size)
+    sums = np.bincount(which, weights=r, minlength=edges.size)
+    means = np.where(counts > 0, sums / np.maximum(counts, 1), np.nan)
+    var = float(np.mean(r**2)) if r.size else np.nan
+    seg_var = float(np.nansum(counts * np.nan_to_num(means) ** 2) / max(r.size, 1))
+    return ResidualStats(
+        rms=float(np.sqrt(var)),
+        kurtosis=float(kurtosis(r)) if r.size > 3 else np.nan,
+        freq=freq,
+        psd=psd,
+        segment_edges=edges,
+        segment_means=means,
+        lowfreq_fraction=seg_var / var if var > 0 else 0.0,
+    )
