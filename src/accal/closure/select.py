@@ -9,7 +9,9 @@
    (orthogonalised against the design) with the sandwich Wald/F test, and multiply
    its p-value by the proposal's multiplicity (epochs, frequencies or lags searched)
    and by the number of candidate families (Bonferroni): the family-wise false
-   detection probability per iteration is then ≤ ``alpha``;
+   detection probability per iteration is then ≤ ``alpha``.  Among the significant
+   proposals the one that explains the most residual power is taken (p-values of
+   very significant effects say little about which one is *the* cause);
 3. periodic and auxiliary effects must also be *consistent*: their coefficients in
    the three thirds of the record may not differ significantly (p < 1e-3) and by more
    than 30 %, otherwise the structure is reported as ``unexplained`` (a chirp is not
@@ -443,10 +445,12 @@ def close_loop(
                     continue
                 w = wald_test(grid, fit.resid, zt, qx_fft)
                 p_adj = min(1.0, w.pvalue * prop.multiplicity * n_families)
-                tested.append((p_adj, -w.stat, len(tested), prop, w))
+                # gate: significance; rank: explained power (RSS reduction)
+                gain = float(w.gamma @ w.gamma)
+                tested.append((p_adj >= alpha, -gain, len(tested), p_adj, prop, w))
         tested.sort(key=lambda e: e[:3])
         accepted = None
-        for p_adj, _, _, prop, w in tested:
+        for _, _, _, p_adj, prop, w in tested:
             if p_adj >= alpha:
                 break
             info: dict[str, Any] = {"stat": w.stat, "dof": w.dof, "multiplicity": prop.multiplicity}
@@ -486,7 +490,6 @@ def close_loop(
         fit = _lsq(np.column_stack(cols)[use], y_u)
 
     x_all = np.column_stack(cols)
-    x_u = x_all[use]
     cov = sandwich_cov(grid, fit.resid, fit.weights, fit.qx)
     cov0 = sandwich_cov(grid, fit0.resid, fit0.weights, fit0.qx)
     dw = fit.weights[:p0] - fit0.weights

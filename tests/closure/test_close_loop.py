@@ -1,0 +1,188 @@
+"""close_loop on simulated days: one test per effect kind, two at once, clean data, a chirp.
+
+Noise: accal.simulate.grace.coloured_noise, 1e-10 m/s²/√Hz white with a 1/f rise
+below 1 mHz (GRACE SuperSTAR-like), one day at 2 s (43,200 samples) to keep the
+suite fast; two gaps unless stated.  "3σ" checks use the coloured-noise sigma the
+result reports.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from accal.closure import EFFECT_NAMES, close_loop
+from accal.errors import ValidationError
+
+ORBIT = 5600.0
+DAY = {"n": 43200, "dt": 2.0, "n_gaps": 2}
+
+
+def _run(d, **kw):
+    kw.setdefault("aux", {"temp": d["temp"]})
+    kw.setdefault("orbit_period", ORBIT)
+    return close_loop(d["t"], d["y"], valid=d["valid"], **kw)
+
+
+def _names(res):
+    return [e.name for e in res.effects]
+
+
+def _err(res, d):
+    return res.true_error(d["truth"])
+
+
+def test_quadratic_drift_found_and_bias_error_drops(sim):
+    d = sim(1, quadratic=2e-19, **DAY)  # 1.5e-9 m/s² over the day
+    res = _run(d)
+    assert _names(res)[0] == "quadratic_drift"
+    e = res.effects[0]
+    assert abs(e.coefficient - 2e-19) < 3 * e.sigma
+    err = _err(res, d)
+    # measured: bias error 2.5e-10 -> 5e-12, drift 1.7e-14 -> 1.5e-16 (≥ 10x)
+    assert abs(err["bias"]["after"]) < 0.1 * abs(err["bias"]["before"])
+    assert abs(err["drift"]["after"]) < 0.1 * abs(err["drift"]["before"])
+    assert res.base_coefficient("bias").change_significant
+
+
+def test_cubic_drift_found(sim):
+    d = sim(2, cubic=4e-24, **DAY)  # 2.6e-9 m/s² over the day
+    res = _run(d)
+    names = _names(res)
+    assert "cubic_drift" in names
+    e = res.effects[names.index("cubic_drift")]
+    assert abs(e.coefficient - 4e-24) < 3 * e.sigma
+    err = _err(res, d)
+    assert abs(err["drift"]["after"]) < 0.1 * abs(err["drift"]["before"])
+
+
+def test_bias_step_found_at_right_epoch(sim):
+    d = sim(3, step=(0.4, 2e-9), **DAY)
+    res = _run(d)
+    assert _names(res)[0] == "bias_step"
+    e = res.effects[0]
+    true_epoch = d["t"][0] + 0.4 * (d["t"][-1] - d["t"][0])
+    assert abs(e.epoch - true_epoch) <= 120.0  # within 1 % of a day even with red noise
+    assert abs(e.coefficient - 2e-9) < 3 * e.sigma
+    err = _err(res, d)
+    # measured: bias 2.2e-10 -> ~4e-12, drift 3.3e-14 -> ~1e-16
+    assert abs(err["bias"]["after"]) < 0.1 * abs(err["bias"]["before"])
+    assert abs(err["drift"]["after"]) < 0.1 * abs(err["drift"]["before"])
+
+
+def test_orbit_periodic_found_with_estimated_frequency(sim):
+    d = sim(4, orbit=(3e-9, 1e-9), **DAY)
+    res = _run(d)
+    assert _names(res)[0] == "periodic"
+    e = res.effects[0]
+    assert e.channel == "orbit"
+    assert e.frequency == pytest.approx(1 / ORBIT, rel=0.005)
+    assert abs(e.coefficient - 3e-9) < 3 * e.sigma + 0.01 * 3e-9  # frequency grid: 0.15 %
+    assert e.details["amplitudes"][1] == pytest.approx(1e-9, rel=0.1)
+    assert res.rms_after < res.rms_before
+
+
+def test_temperature_coupling_with_lag(sim):
+    d = sim(5, temp_coupling=3e-9, temp_lag=600.0, **DAY)
+    res = _run(d)
+    assert _names(res)[0] == "auxiliary"
+    e = res.effects[0]
+    assert e.channel == "temp"
+    assert abs(e.lag - 600.0) <= 240.0  # lag grid step 90 s; day-scale temperature is smooth
+    assert abs(e.coefficient - 3e-9) < 3 * e.sigma + 0.02 * 3e-9
+    err = _err(res, d)
+    # the coupling's mean (20 K × 3e-9) is a real offset and stays in the bias; the drift
+    # error it caused goes away (measured 7e-14 -> 1e-16)
+    assert abs(err["drift"]["after"]) < 0.05 * abs(err["drift"]["before"])
+
+
+def test_two_effects_temperature_and_step(sim):
+    d = sim(6, temp_coupling=1e-8, step=(0.7, 3e-9), **DAY)
+    res = _run(d, orbit_period=None)
+    assert set(_names(res)) >= {"auxiliary", "bias_step"}
+    step = res.effects[_names(res).index("bias_step")]
+    assert abs(step.coefficient - 3e-9) < 3 * step.sigma
+    # measured: drift error 2.8e-13 -> 1.5e-16
+    err = _err(res, d)
+    assert abs(err["drift"]["after"]) < 0.05 * abs(err["drift"]["before"])
+
+
+def test_clean_days_report_nothing(sim):
+    """False alarms: at least 19 of 20 clean days report no effect and nothing unexplained."""
+    found = []
+    for seed in range(100, 120):
+        d = sim(seed, **DAY)
+        res = _run(d)
+        found.append(res.found)
+        if not res.found:
+            assert res.to_dict()["effects"] == []
+            assert res.rms_after == res.rms_before
+    assert sum(found) <= 1, f"false alarms on {sum(found)} of 20 clean days"
+
+
+def test_slow_chirp_is_unexplained(sim):
+    d = sim(7, chirp=3e-9, **DAY)
+    res = _run(d)
+    assert res.effects == ()  # no wrong confident effect
+    assert res.unexplained
+    u = res.unexplained[-1]
+    assert u.name == "unexplained"
+    # the chirp sweeps 1/8 h .. 1/1.5 h
+    assert 1 / 28800 * 0.5 <= u.frequency <= 1 / 5400 * 1.5
+
+
+def test_to_dict_is_json_and_uses_allowed_names(sim):
+    d = sim(3, step=(0.4, 2e-9), **DAY)
+    res = _run(d)
+    out = json.loads(json.dumps(res.to_dict(truth=d["truth"])))
+    assert {"effects", "rms_before", "rms_after", "base", "true_error"} <= set(out)
+    for e in out["effects"] + out["unexplained"]:
+        assert e["name"] in EFFECT_NAMES
+        assert {"channel", "coefficient", "sigma", "significance", "epoch", "frequency"} <= set(e)
+    assert out["effects"][0]["epoch"] is not None
+
+
+def test_custom_base_design_and_builder(sim):
+    """A caller's own design matrix (the demod case) and its own candidate builder."""
+    d = sim(8, step=(0.5, 3e-9), **DAY)
+    tau = d["t"] - d["t"][0]
+    base = np.column_stack([np.ones_like(tau), tau / tau[-1]])
+    res = close_loop(d["t"], d["y"], base=base, valid=d["valid"], candidates=("bias_step",))
+    assert _names(res) == ["bias_step"]
+    assert [b.name for b in res.base] == ["b0", "b1"]
+
+    from accal.closure import Proposal
+
+    def my_effect(ctx):
+        col = (ctx.t_all >= d["t"][0] + 0.5 * tau[-1]).astype(float)[:, None]
+        return [Proposal("angle_offset", "theta", col, ("theta",), 1.0, {})]
+
+    res = close_loop(d["t"], d["y"], valid=d["valid"], candidates=(my_effect,))
+    assert _names(res) == ["angle_offset"]
+
+
+def test_bad_input_messages():
+    t = np.arange(100.0)
+    with pytest.raises(ValidationError, match="equal length"):
+        close_loop(t, np.zeros(99))
+    with pytest.raises(ValidationError, match="Invalid value for the 'candidates'"):
+        close_loop(t, np.zeros(100), candidates=("nope",))
+    with pytest.raises(ValidationError, match="at least 50 usable"):
+        close_loop(t, np.zeros(100), valid=t < 10)
+    with pytest.raises(ValidationError, match="auxiliary channel 'T'"):
+        close_loop(t, np.zeros(100), aux={"T": np.zeros(3)})
+    with pytest.raises(NotImplementedError, match="platform angle"):
+        close_loop(t, np.random.default_rng(0).standard_normal(100), candidates=("angle_offset",))
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="masking: the 1/rev part of the coupling enters as "
+    "'periodic' first, and the step is then not significant (docs/closure.md)",
+)
+def test_two_effects_with_orbit_candidate_known_limitation(sim):
+    d = sim(6, temp_coupling=3e-9, step=(0.7, 1.5e-9), **DAY)
+    res = _run(d)
+    assert set(_names(res)) >= {"auxiliary", "bias_step"}
