@@ -1,6 +1,5 @@
 """Unit tests of accal.estimators.demod: validation, solvers, leakage, options, speed."""
 
-
 import numpy as np
 import pytest
 
