@@ -210,10 +210,16 @@ def test_bad_inputs_fail_one_line_each_and_the_batch_goes_on(tmp_path):
     # the good file is processed; nothing partial or temporary is left behind
     names = sorted(p.name for p in out.iterdir())
     assert names == [
+        ".accal.lock",
         "ACC1B_2003-09-14_A_00.calibrated.parquet",
         "ACC1B_2003-09-14_A_00.report.json",
+        "accal.log",
         "bias_drift.parquet",
+        "manifest.json",
     ]
+    # only the good input is recorded as done; the failures are retried next time
+    manifest = json.loads((out / "manifest.json").read_text())["entries"]
+    assert [Path(k).name for k in manifest] == [GRACE_A.name]
     assert len(table(out)) == 3
 
 

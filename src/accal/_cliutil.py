@@ -69,11 +69,12 @@ def err(msg: str) -> None:
 
 
 def progress(quiet: bool, desc: str) -> Any:
+    """A ``wrap(iterable, total=None)`` progress bar on a terminal, else None."""
     if quiet or not sys.stderr.isatty():
         return None
     from tqdm import tqdm
 
-    return lambda it: tqdm(it, desc=desc, unit="file", file=sys.stderr)
+    return lambda it, total=None: tqdm(it, total=total, desc=desc, unit="file", file=sys.stderr)
 
 
 def fail(msg: str) -> None:

@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 import click
+import numpy as np
 
 from accal import __version__
 from accal._cliutil import config_option
@@ -22,16 +23,23 @@ CONTEXT_SETTINGS = {"help_option_names": ["-h", "--help"], "max_content_width": 
 
 @click.group(context_settings=CONTEXT_SETTINGS)
 @click.version_option(__version__, prog_name="accal")
-def main() -> None:
+@click.option("--debug", is_flag=True, help="Show tracebacks of internal errors (for bug reports).")
+def main(debug: bool) -> None:
     """accal: calibrate spacecraft electrostatic-accelerometer data.
 
     \b
     grace-bias  per-day, per-axis bias and drift of GRACE / GRACE-FO ACC1B/ACT1B
+    table       print or export the cumulative bias/drift table of an output dir
+    diagnose    close the loop on the outputs of an earlier grace-bias run
     demod       unbiased acceleration from a rotating-platform accelerometer
     design      a theta(t) calibration pattern for the rotating platform
     budget      uncertainty budget of the rotating-platform measurement
     simulate    synthetic inputs with a truth file
     """
+    import os
+
+    if debug:
+        os.environ["ACCAL_DEBUG"] = "1"  # inherited by worker processes
 
 
 @main.command("grace-bias")
@@ -92,6 +100,63 @@ def main() -> None:
 )
 @click.option("--keep-flagged", is_flag=True, help="Use samples the quality flags mark invalid.")
 @click.option(
+    "--recursive",
+    "-r",
+    is_flag=True,
+    help="Take the files of directory inputs and their sub-directories.",
+)
+@click.option(
+    "--include",
+    "include",
+    multiple=True,
+    metavar="PATTERN",
+    help="Names taken from directories (repeatable; default: *ACC1B_* and *ACT1B_*).",
+)
+@click.option(
+    "--workers",
+    "-j",
+    type=click.IntRange(min=1),
+    default=None,
+    help="Worker processes on this machine [default: all cores].",
+)
+@click.option(
+    "--scheduler",
+    default=None,
+    metavar="ADDRESS",
+    help="Run on a dask.distributed cluster (e.g. tcp://host:8786); workers must see "
+    "the same file system.",
+)
+@click.option("--force", is_flag=True, help="Redo inputs whose outputs are current.")
+@click.option(
+    "--checksum",
+    is_flag=True,
+    help="Decide 'current' by SHA-256 of the inputs instead of size and mtime.",
+)
+@click.option(
+    "--close-loop",
+    is_flag=True,
+    help="Analyse the residual, add the effects the model lacks, refit (closure.json/md).",
+)
+@click.option(
+    "--aux",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Housekeeping (AHK1B or a table with 'time'): candidate channels for --close-loop.",
+)
+@click.option(
+    "--truth",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Truth JSON of a simulation: --close-loop reports the true error before/after.",
+)
+@click.option(
+    "--alpha",
+    type=click.FloatRange(min=0, max=1, min_open=True, max_open=True),
+    default=0.01,
+    show_default=True,
+    help="False-detection probability per --close-loop selection step.",
+)
+@click.option(
     "--keep-going/--fail-fast",
     default=True,
     show_default=True,
@@ -110,16 +175,31 @@ def grace_bias(
     columns: tuple[str, ...],
     input_format: str | None,
     keep_flagged: bool,
+    recursive: bool,
+    include: tuple[str, ...],
+    workers: int | None,
+    scheduler: str | None,
+    force: bool,
+    checksum: bool,
+    close_loop: bool,
+    aux: Path | None,
+    truth: Path | None,
+    alpha: float,
     keep_going: bool,
     quiet: bool,
 ) -> None:
     """Estimate per-day, per-axis bias and drift of accelerometer files.
 
-    Writes OUT/bias_drift.<fmt> (one row per input, axis and method),
-    OUT/<stem>.calibrated.<fmt> and OUT/<stem>.report.json for each input.
+    INPUTS are files, directories (with --recursive) or glob patterns.  Writes
+    OUT/bias_drift.<fmt> (cumulative: one row per input, axis and method ever
+    processed there), OUT/<stem>.calibrated.<fmt> and OUT/<stem>.report.json per
+    input, OUT/manifest.json (re-runs skip inputs whose outputs are current) and
+    OUT/accal.log.  With --close-loop also OUT/closure.json, OUT/closure.md and
+    plots.
     """
+    from accal.batch import DEFAULT_INCLUDE, LockedError, default_workers, discover
     from accal.errors import AccalError
-    from accal.pipeline import GraceBiasOptions, run
+    from accal.pipeline import GraceBiasOptions, run, write_closure_reports
 
     colmap = {}
     for item in columns:
@@ -139,24 +219,204 @@ def grace_bias(
             reference=reference,
             columns=colmap,
             input_format=input_format,
+            close_loop=close_loop or aux is not None or truth is not None,
+            aux=aux,
+            truth=truth,
+            alpha=alpha,
         )
     except AccalError as exc:
         raise click.UsageError(str(exc)) from None
-    summary = run(
-        inputs, out, opts, fail_fast=not keep_going, progress=_progress(quiet, "grace-bias")
-    )
+    files, problems = discover(inputs, recursive=recursive, include=include or DEFAULT_INCLUDE)
+    for _, msg in problems:
+        _err(msg)
+    try:
+        summary = run(
+            files,
+            out,
+            opts,
+            fail_fast=not keep_going,
+            progress=_progress(quiet, "grace-bias"),
+            workers=workers or default_workers(),
+            scheduler=scheduler,
+            force=force,
+            checksum=checksum,
+        )
+    except (LockedError, AccalError) as exc:
+        _err(str(exc))
+        sys.exit(1)
     for o in summary.outcomes:
         if not o.ok:
             _err(o.message)
+    if opts.close_loop:
+        write_closure_reports(out, summary.outcomes)
     if not quiet:
-        n = sum(o.n_samples for o in summary.outcomes)
-        click.echo(
-            f"accal grace-bias: {summary.n_ok} ok, {summary.n_failed} failed, "
-            f"{len(inputs) - len(summary.outcomes)} not run; {n} samples in "
-            f"{summary.seconds:.2f} s; table: {summary.table_path}",
-            err=True,
-        )
-    if summary.n_failed or len(summary.outcomes) < len(inputs):
+        click.echo(summary.line(), err=True)
+    if summary.n_failed or summary.n_not_run or problems:
+        sys.exit(1)
+
+
+@main.command("table")
+@click.argument("directory", type=click.Path(file_okay=False, exists=True, path_type=Path))
+@click.option(
+    "--satellite", "satellites", multiple=True, help="Keep these satellites (repeatable)."
+)
+@click.option("--start", default=None, metavar="YYYY-MM-DD", help="First date kept.")
+@click.option("--end", default=None, metavar="YYYY-MM-DD", help="Last date kept.")
+@click.option("--method", "methods", multiple=True, help="Keep these methods (repeatable).")
+@click.option("--axis", "axes", multiple=True, help="Keep these axes (repeatable).")
+@click.option(
+    "--columns",
+    default=None,
+    help="Comma-separated columns to show/export (default: all when exporting, a "
+    "readable subset when printing).",
+)
+@click.option(
+    "--export",
+    "export",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Write the rows to FILE (.csv or .parquet, atomic) instead of printing them.",
+)
+def table_cmd(
+    directory: Path,
+    satellites: tuple[str, ...],
+    start: str | None,
+    end: str | None,
+    methods: tuple[str, ...],
+    axes: tuple[str, ...],
+    columns: str | None,
+    export: Path | None,
+) -> None:
+    """Print or export the cumulative bias/drift table of an output DIRECTORY."""
+    from accal.errors import AccalError
+    from accal.pipeline import BIAS_DRIFT_UNITS, find_bias_drift, read_bias_drift
+
+    try:
+        path = find_bias_drift(directory)
+        df = read_bias_drift(path)
+        for d in (start, end):
+            if d is not None and not _is_date(d):
+                raise click.BadParameter(f"expected YYYY-MM-DD, got {d!r}")
+        keep = np.ones(len(df), dtype=bool)
+        if satellites:
+            want = {s.upper().removeprefix("GRACE-FO-").removeprefix("GRACE-") for s in satellites}
+            short = df["satellite"].astype(str).str.upper().str.split("-").str[-1]
+            keep &= short.isin(want).to_numpy() | df["satellite"].isin(satellites).to_numpy()
+        if start:
+            keep &= (df["date"] >= start).to_numpy()
+        if end:
+            keep &= (df["date"] <= end).to_numpy()
+        if methods:
+            keep &= df["method"].isin(methods).to_numpy()
+        if axes:
+            keep &= df["axis"].isin(axes).to_numpy()
+        df = df[keep]
+        if columns:
+            cols = [c.strip() for c in columns.split(",") if c.strip()]
+            unknown = [c for c in cols if c not in df.columns]
+            if unknown:
+                raise click.BadParameter(f"unknown columns {unknown}; known: {list(df.columns)}")
+            df = df[cols]
+        if export is not None:
+            from accal.io.writers import write_table
+
+            fmt = "parquet" if export.suffix.lower() == ".parquet" else "csv"
+            if export.suffix.lower() not in (".csv", ".parquet"):
+                raise click.BadParameter("--export FILE must end in .csv or .parquet")
+            write_table(
+                {c: df[c].to_numpy() for c in df.columns},
+                export,
+                fmt=fmt,
+                units={c: BIAS_DRIFT_UNITS.get(c, "") for c in df.columns},
+                meta={"exported_from": str(path)},
+            )
+            click.echo(f"wrote {len(df)} rows to {export}", err=True)
+            return
+        if not columns:
+            shown = ["source", "satellite", "date", "axis", "method", "bias", "bias_sigma"]
+            shown += ["drift", "drift_sigma", "n", "rms"]
+            shown += [c for c in ("day_status", "model") if c in df.columns]
+            df = df[shown]
+        import pandas as pd
+
+        with pd.option_context("display.width", 250, "display.max_rows", None):
+            text = df.to_string(index=False, float_format=lambda v: f"{v:.6g}")
+            click.echo(text if len(df) else "(no rows)")
+    except AccalError as exc:
+        _err(str(exc))
+        sys.exit(1)
+
+
+def _is_date(s: str) -> bool:
+    import datetime as dt
+
+    try:
+        dt.date.fromisoformat(s)
+    except ValueError:
+        return False
+    return len(s) == 10
+
+
+@main.command("diagnose")
+@click.argument("directory", type=click.Path(file_okay=False, exists=True, path_type=Path))
+@click.option(
+    "--out",
+    "out",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Where closure.json/closure.md/plots go [default: DIRECTORY].",
+)
+@click.option(
+    "--aux",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Housekeeping (AHK1B or a table with 'time'): candidate auxiliary channels.",
+)
+@click.option(
+    "--alpha",
+    type=click.FloatRange(min=0, max=1, min_open=True, max_open=True),
+    default=0.01,
+    show_default=True,
+    help="False-detection probability per selection step.",
+)
+@click.option("--quiet", "-q", is_flag=True, help="No progress bar or summary.")
+def diagnose(
+    directory: Path, out: Path | None, aux: Path | None, alpha: float, quiet: bool
+) -> None:
+    """Close the loop on the calibrated outputs of an earlier grace-bias run.
+
+    Reads every DIRECTORY/*.calibrated.{parquet,csv}, analyses each axis' residual
+    of the model that run fitted (the calibrated series is scale*(raw - trend)),
+    and reports the effects that model lacks in OUT/closure.json and closure.md,
+    with plots.  The calibrated files themselves are not changed: re-run
+    grace-bias with --close-loop to calibrate with the extended model.
+    """
+    from accal.pipeline import diagnose_dir, write_closure_reports
+
+    out = out or directory
+    outcomes = diagnose_dir(
+        directory, out, aux=aux, alpha=alpha, progress=_progress(quiet, "diagnose")
+    )
+    if not outcomes:
+        _err(f"{directory}: no *.calibrated.parquet or *.calibrated.csv file to diagnose")
+        sys.exit(1)
+    for o in outcomes:
+        if not o.ok:
+            _err(o.message)
+    good = [o for o in outcomes if o.ok]
+    if good:
+        jpath, mpath = write_closure_reports(out, good)
+        if not quiet:
+            for o in good:
+                for ax, entry in o.closure.items():
+                    names = [e["name"] for e in entry["effects"]]
+                    names += ["unexplained"] * len(entry["unexplained"])
+                    click.echo(
+                        f"{o.path.name} {ax}: {', '.join(names) or 'nothing found'}; RMS "
+                        f"{entry['rms_before']:.3g} -> {entry['rms_after']:.3g} m/s^2"
+                    )
+            click.echo(f"reports: {jpath}, {mpath}", err=True)
+    if len(good) < len(outcomes):
         sys.exit(1)
 
 

@@ -9,6 +9,7 @@ reported as a :class:`FileOutcome` with a one-line message.
 from __future__ import annotations
 
 import json
+import os
 import time as _time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
@@ -49,6 +50,7 @@ BIAS_DRIFT_UNITS = {
     "n_gaps": "gaps longer than 1.5 nominal steps",
     "gap_seconds": "s (total length of the gaps)",
     "accal_version": "accal version that produced the row",
+    "model": "fitted model: poly<order> plus the effects --close-loop added, '+'-separated",
 }
 
 CALIBRATED_UNITS = {
@@ -85,6 +87,19 @@ class GraceBiasOptions:
         Axis → source column mapping for table inputs (``--column x=a_cal_x``).
     input_format : str or None
         Force an input format instead of sniffing.
+    close_loop : bool
+        Analyse each axis' residual, add the effects the bias + drift model lacks
+        (:func:`accal.closure.close_loop`) and refit with the extended model.
+    aux : Path or None
+        Housekeeping file (AHK1B or a table) whose channels are candidate
+        auxiliary effects of the closure (joined on time).
+    truth : Path or None
+        Truth JSON of a simulation (``accal simulate grace``): the closure report
+        gives the true error of bias and drift before and after.
+    alpha : float
+        Family-wise false-detection probability of the closure per step.
+    orbit_period : float or None
+        Nominal orbit period [s] for the once/twice-per-revolution candidates.
     """
 
     methods: tuple[str, ...] = ("wavelet",)
@@ -95,6 +110,11 @@ class GraceBiasOptions:
     reference: Path | None = None
     columns: dict[str, str] = field(default_factory=dict)
     input_format: str | None = None
+    close_loop: bool = False
+    aux: Path | None = None
+    truth: Path | None = None
+    alpha: float = 0.01
+    orbit_period: float | None = 5600.0
 
     def __post_init__(self) -> None:
         from accal.estimators.trend import METHODS
@@ -123,6 +143,12 @@ class FileOutcome:
         Samples read.
     outputs : tuple of Path
         Files written for this input.
+    skipped : bool
+        True when the manifest says the outputs are current (nothing was done).
+    n_bytes : int
+        Size of the input [bytes].
+    closure : dict
+        ``{axis: closure summary}`` of a ``--close-loop`` run (see ``closure.json``).
     """
 
     path: Path
@@ -131,25 +157,69 @@ class FileOutcome:
     rows: list[dict[str, Any]] = field(default_factory=list)
     n_samples: int = 0
     outputs: tuple[Path, ...] = ()
+    skipped: bool = False
+    n_bytes: int = 0
+    closure: dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
 class RunSummary:
-    """Result of a batch run."""
+    """Result of a batch run.
+
+    ``outcomes`` are in input order; inputs not run (``--fail-fast``) are absent.
+    """
 
     outcomes: list[FileOutcome]
     table_path: Path | None
     seconds: float
+    n_inputs: int = 0
+    log_path: Path | None = None
+    workers: int = 1
 
     @property
     def n_ok(self) -> int:
-        """Inputs processed."""
-        return sum(o.ok for o in self.outcomes)
+        """Inputs processed now."""
+        return sum(o.ok and not o.skipped for o in self.outcomes)
+
+    @property
+    def n_skipped(self) -> int:
+        """Inputs whose outputs were current."""
+        return sum(o.skipped for o in self.outcomes)
 
     @property
     def n_failed(self) -> int:
         """Inputs that failed."""
         return sum(not o.ok for o in self.outcomes)
+
+    @property
+    def n_not_run(self) -> int:
+        """Inputs never started (after a failure with ``fail_fast``)."""
+        return self.n_inputs - len(self.outcomes)
+
+    @property
+    def n_samples(self) -> int:
+        """Samples read."""
+        return sum(o.n_samples for o in self.outcomes)
+
+    @property
+    def n_bytes(self) -> int:
+        """Bytes read (inputs processed now)."""
+        return sum(o.n_bytes for o in self.outcomes if not o.skipped)
+
+    def line(self, command: str = "accal grace-bias") -> str:
+        """The one-line end-of-run summary."""
+        done = self.n_ok + self.n_failed
+        rate = (
+            f"{self.n_bytes / 1e6 / self.seconds:.1f} MB/s, {done / self.seconds:.2f} files/s"
+            if self.seconds > 0
+            else "-"
+        )
+        return (
+            f"{command}: {self.n_ok} ok, {self.n_skipped} skipped (current), {self.n_failed} "
+            f"failed, {self.n_not_run} not run; {self.n_samples:,} samples, "
+            f"{self.n_bytes / 1e6:.1f} MB in {self.seconds:.2f} s ({rate}, {self.workers} "
+            f"worker{'s' if self.workers != 1 else ''}); table: {self.table_path}"
+        )
 
 
 def output_stem(path: Path) -> str:
@@ -303,11 +373,24 @@ def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutco
         ref = read_input(opts.reference, GraceBiasOptions(columns=opts.columns))
         fit_series = subtract_reference(series, ref, opts.reference)
     scale = parse_scale(opts.scale, series.satellite)
-    fits = estimate(fit_series, opts)
-    rows = table_rows(path, series, fits, scale, opts)
-    cal = calibrate(series, fits, opts.methods[0], scale)
     use = np.ones(len(series), bool) if opts.keep_flagged else fit_series.valid
     stem = output_stem(path)
+    closure: dict[str, Any] = {}
+    extra_outputs: list[Path] = []
+    if opts.close_loop:
+        fit_series, closure, extra_outputs = close_the_loop(
+            path, series, fit_series, use, opts, out_dir / stem
+        )
+    fits = estimate(fit_series, opts)
+    rows = table_rows(path, series, fits, scale, opts)
+    for r in rows:
+        r["model"] = closure.get(r["axis"], {}).get("model", f"poly{opts.order}")
+    cal = calibrate(
+        series if not opts.close_loop else _with_effects_removed(series, closure),
+        fits,
+        opts.methods[0],
+        scale,
+    )
     meta = {
         "source": path.name,
         "satellite": series.satellite,
@@ -332,9 +415,214 @@ def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutco
         "fits": rows,
         "history": list(cal.history),
     }
+    if closure:
+        report["closure"] = {ax: c["summary"] for ax, c in closure.items()}
     rep_path = out_dir / f"{stem}.report.json"
     _write_json(rep_path, report)
-    return FileOutcome(path, True, rows=rows, n_samples=len(series), outputs=(cal_path, rep_path))
+    return FileOutcome(
+        path,
+        True,
+        rows=rows,
+        n_samples=len(series),
+        outputs=(cal_path, rep_path, *extra_outputs),
+        n_bytes=_size(path),
+        closure={ax: c["summary"] for ax, c in closure.items()},
+    )
+
+
+def _size(path: Path) -> int:
+    try:
+        return path.stat().st_size
+    except OSError:
+        return 0
+
+
+#: Effects removed from the calibrated series (instrument effects).  Periodic
+#: terms and unexplained structure are reported but kept: at orbit frequencies
+#: they are as likely to be real non-gravitational signal as instrument error.
+INSTRUMENT_EFFECTS = ("quadratic_drift", "cubic_drift", "bias_step", "auxiliary")
+
+
+def effect_models(result: Any) -> list[tuple[Any, np.ndarray]]:
+    """Each effect of a :class:`~accal.closure.ClosureResult` and its model on all samples."""
+    out = []
+    j = result.n_base
+    for e in result.effects:
+        q = len(e.details.get("coefficients", [e.coefficient]))
+        out.append((e, result.design[:, j : j + q] @ result.coef[j : j + q]))
+        j += q
+    return out
+
+
+def _effect_label(e: Any) -> str:
+    from accal.timescale import gps_to_utc
+
+    if e.name == "bias_step" and e.epoch is not None:
+        utc = np.datetime_as_string(gps_to_utc(e.epoch).astype("datetime64[s]"))
+        return f"bias_step@{utc}"
+    if e.name == "auxiliary":
+        return f"auxiliary({e.channel})"
+    if e.name == "periodic" and e.frequency is not None:
+        return f"periodic({e.frequency:.4g} Hz)"
+    return e.name
+
+
+def load_aux(path: Path, t: np.ndarray) -> dict[str, np.ndarray]:
+    """Housekeeping channels of ``path`` interpolated onto ``t`` (NaN where not covered)."""
+    from accal.io.housekeeping import read_housekeeping
+
+    hk = read_housekeeping(path)
+    chans = hk.on(t)
+    return {k: np.asarray(v, dtype=np.float64) for k, v in chans.items()}
+
+
+def load_truth(path: Path, series: AccSeries, reference: bool) -> dict[str, dict[str, float]]:
+    """Per-axis true bias and drift of the fitted series from a simulation truth file.
+
+    The trend a perfect estimator returns is the instrument's (``bias``,
+    ``drift``) plus, without a reference, the trend of the true signal.
+    """
+    try:
+        truth = json.loads(Path(path).read_text())
+        out = {}
+        for i, ax in enumerate("xyz"):
+            if ax not in series.axes:
+                continue
+            b = float(truth["bias"][i])
+            d = float(truth["drift"][i])
+            if not reference and "signal_trend" in truth:
+                b += float(truth["signal_trend"]["bias"][i])
+                d += float(truth["signal_trend"]["drift"][i])
+            # the truth refers to its own t0; move the bias to the series' first used sample
+            out[ax] = {"bias": b, "drift": d, "t0": float(truth["t0"])}
+        return out
+    except (OSError, ValueError, KeyError, IndexError, TypeError) as exc:
+        raise ValidationError(f"{path}: not a readable truth file ({exc})") from None
+
+
+def closure_candidates(opts: GraceBiasOptions) -> tuple[tuple[str, ...], str]:
+    """Candidate effects for a ``grace-bias`` closure, and a note on what is left out.
+
+    Without ``--reference`` the fitted series is the raw acceleration, whose
+    non-gravitational signal (drag, radiation pressure) varies slowly over the
+    day: a polynomial drift beyond the declared order cannot be told from that
+    signal, so the polynomial candidates are only tried on ``raw − reference``.
+    Steps, auxiliary couplings and periodic terms have signatures of their own.
+    """
+    from accal.closure import DEFAULT_CANDIDATES
+
+    if opts.reference is not None:
+        return tuple(DEFAULT_CANDIDATES), ""
+    kept = tuple(c for c in DEFAULT_CANDIDATES if c not in ("quadratic_drift", "cubic_drift"))
+    return kept, (
+        "no --reference: quadratic/cubic drift not tested (not separable from the slow "
+        "variation of the non-gravitational signal); periodic and unexplained structure "
+        "include the real signal"
+    )
+
+
+def close_the_loop(
+    path: Path,
+    series: AccSeries,
+    fit_series: AccSeries,
+    use: np.ndarray,
+    opts: GraceBiasOptions,
+    prefix: Path,
+) -> tuple[AccSeries, dict[str, Any], list[Path]]:
+    """Close the loop on every axis and return the series to refit.
+
+    For each axis, :func:`accal.closure.close_loop` analyses the residual of the
+    declared ``poly<order>`` trend, adds the significant effects and reports
+    unexplained structure.  The instrument effects (:data:`INSTRUMENT_EFFECTS`)
+    are subtracted from the fitted series, so the estimators then fit bias and
+    drift with the extended model.  Writes ``<prefix>.closure.<axis>.png`` and
+    ``<prefix>.closure-psd.<axis>.png`` when matplotlib is installed.
+
+    Returns
+    -------
+    fit_series : AccSeries
+        The series minus the instrument effects (to refit).
+    closure : dict
+        ``{axis: {"summary": closure.json entry, "instrument": model array,
+        "model": model label}}``.
+    outputs : list of Path
+        Plots written.
+    """
+    from accal.closure import close_loop
+    from accal.closure.report import to_markdown
+
+    aux = {
+        k: np.asarray(v, dtype=np.float64)
+        for k, v in series.aux.items()
+        if k.startswith("ang_accl")  # angular accelerations; not the L1B fit residuals
+    }
+    if opts.aux is not None:
+        aux.update(load_aux(opts.aux, series.time))
+    truth = load_truth(opts.truth, series, opts.reference is not None) if opts.truth else {}
+    candidates, note = closure_candidates(opts)
+    out: dict[str, Any] = {}
+    plots: list[Path] = []
+    cols = []
+    for ax in series.axes:
+        y = fit_series.axis(ax)
+        res = close_loop(
+            fit_series.time,
+            y,
+            valid=use,
+            base=f"poly{opts.order}",
+            aux=aux or None,
+            alpha=opts.alpha,
+            orbit_period=opts.orbit_period,
+            candidates=candidates,
+        )
+        inst = np.zeros(len(series))
+        labels = [f"poly{opts.order}"]
+        for e, m in effect_models(res):
+            if e.name in INSTRUMENT_EFFECTS:
+                inst += m
+                labels.append(_effect_label(e))
+        tr = truth.get(ax)
+        tr_base = None
+        if tr is not None:
+            # express the true bias at the closure's t0
+            tr_base = {"bias": tr["bias"] + tr["drift"] * (res.t0 - tr["t0"]), "drift": tr["drift"]}
+        summary = res.to_dict(truth=tr_base)
+        summary["model"] = "+".join(labels)
+        summary["candidates"] = list(candidates)
+        if note:
+            summary["note"] = note
+        summary["removed_from_calibrated"] = labels[1:]
+        summary["markdown"] = to_markdown(res, title=f"{path.name} axis {ax}", truth=tr_base)
+        out[ax] = {"summary": summary, "instrument": inst, "model": "+".join(labels)}
+        cols.append(y - inst)
+        plots += _plot_closure(res, prefix, ax)
+    fit_series = fit_series.replace(acc=np.column_stack(cols)).with_history(
+        f"accal {__version__}: close_loop(alpha={opts.alpha}) removed "
+        + "; ".join(f"{ax}: {out[ax]['model']}" for ax in series.axes)
+    )
+    return fit_series, out, plots
+
+
+def _plot_closure(res: Any, prefix: Path, ax: str) -> list[Path]:
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        return []
+    from accal.closure.report import plot_closure
+    from accal.io.writers import atomic_path
+
+    a = prefix.with_name(f"{prefix.name}.closure.{ax}.png")
+    b = prefix.with_name(f"{prefix.name}.closure-psd.{ax}.png")
+    with atomic_path(a) as ta, atomic_path(b) as tb:
+        plot_closure(res, ta.with_suffix(".png"), tb.with_suffix(".png"))
+        ta.with_suffix(".png").replace(ta)
+        tb.with_suffix(".png").replace(tb)
+    return [a, b]
+
+
+def _with_effects_removed(series: AccSeries, closure: dict[str, Any]) -> AccSeries:
+    cols = [series.axis(ax) - closure[ax]["instrument"] for ax in series.axes]
+    return series.replace(acc=np.column_stack(cols))
 
 
 def _write_json(path: Path, obj: Any) -> None:
@@ -361,7 +649,7 @@ _NP_TYPES = {"string": object, "int64": np.int64, "double": np.float64}
 def _bias_drift_schema():
     import pyarrow as pa
 
-    strings = {"source", "satellite", "date", "axis", "frame", "method", "accal_version"}
+    strings = {"source", "satellite", "date", "axis", "frame", "method", "accal_version", "model"}
     ints = {"order", "n", "n_total", "n_flagged", "n_duplicates", "n_out_of_order", "n_gaps"}
     return pa.schema(
         [
@@ -399,7 +687,11 @@ def _read_bias_drift_arrow(path: Path):
     cols = [
         table.column(f.name).cast(f.type)
         if f.name in table.column_names
-        else pa.nulls(table.num_rows, f.type)
+        else (
+            pa.array([""] * table.num_rows, pa.string())
+            if pa.types.is_string(f.type)
+            else pa.nulls(table.num_rows, f.type)
+        )
         for f in schema
     ]
     return pa.Table.from_arrays(cols, schema=schema)
@@ -472,56 +764,215 @@ def read_bias_drift(path: str | Path) -> Any:
     return _read_bias_drift_arrow(Path(path)).to_pandas()
 
 
+def options_key(opts: GraceBiasOptions) -> dict[str, Any]:
+    """The options as a canonical JSON-able dict (what the manifest compares).
+
+    Files named in the options (reference, aux, truth) enter with their size and
+    mtime, so changing them makes the inputs out of date.
+    """
+    from dataclasses import asdict
+
+    from accal.batch import file_signature
+
+    d = asdict(opts)
+    for k, v in list(d.items()):
+        if isinstance(v, Path):
+            try:
+                d[k] = {"path": os.path.realpath(v), **file_signature(v)}
+            except OSError:
+                d[k] = {"path": str(v)}
+        elif isinstance(v, tuple):
+            d[k] = list(v)
+    return json.loads(json.dumps(d, sort_keys=True))
+
+
+def process_one(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutcome:
+    """:func:`process_file` with every failure turned into a one-line :class:`FileOutcome`.
+
+    Module-level and picklable: this is the task the worker processes and the
+    dask workers run.
+    """
+    path = Path(path)
+    try:
+        if path.is_dir():
+            raise ValidationError("is a directory (use --recursive to process the files in it)")
+        return process_file(path, Path(out_dir), opts)
+    except AccalError as exc:
+        return FileOutcome(path, False, _one_line(path, exc))
+    except MemoryError:
+        return FileOutcome(path, False, f"{path}: out of memory")
+    except Exception as exc:  # a bug, not bad input: still keep the batch going
+        return _internal_error(path, exc)
+
+
+def _internal_error(path: Path, exc: BaseException) -> FileOutcome:
+    msg = (
+        f"{path}: internal error ({type(exc).__name__}: {exc}); "
+        "please report it with the output of 'accal --debug ...'"
+    )
+    if os.environ.get("ACCAL_DEBUG"):
+        import traceback
+
+        msg += "\n" + "".join(traceback.format_exception(exc))
+    return FileOutcome(Path(path), False, msg)
+
+
 def run(
     paths: Iterable[Path],
     out_dir: Path,
     opts: GraceBiasOptions,
     *,
     fail_fast: bool = False,
-    progress: Callable[[Iterable[Path]], Iterable[Path]] | None = None,
+    progress: Callable[..., Iterable[Any]] | None = None,
+    workers: int = 1,
+    scheduler: str | Any | None = None,
+    force: bool = False,
+    checksum: bool = False,
+    commit_seconds: float = 15.0,
+    log: bool = True,
 ) -> RunSummary:
-    """Process every input; failures are recorded, not raised.
+    """Process every input into ``out_dir``; failures are recorded, not raised.
 
     Parameters
     ----------
     paths : iterable of Path
-        Inputs.
+        Inputs (already expanded, see :func:`accal.batch.discover`).
     out_dir : Path
-        Output directory (created).
+        Output directory (created).  It holds the cumulative ``bias_drift``
+        table, a manifest, a log and a lock file.
     opts : GraceBiasOptions
         Options.
     fail_fast : bool
-        Stop at the first failure (the inputs already processed are still written).
+        Stop at the first failure (runs serially; the inputs already processed
+        are still written).
     progress : callable, optional
-        Wraps the iterable of paths (e.g. ``tqdm``).
+        ``progress(iterable, total=N)`` wraps the completions (e.g. ``tqdm``).
+    workers : int
+        Local worker processes; results are identical to a serial run.
+    scheduler : str or distributed.Client, optional
+        A dask.distributed scheduler to run on instead of local workers.
+    force : bool
+        Redo inputs that the manifest says are current.
+    checksum : bool
+        Compare inputs by SHA-256 instead of size and mtime.
+    commit_seconds : float
+        How often the table and manifest are committed during a batch [s]
+        (also at the end): a killed batch loses at most this much work.
+    log : bool
+        Append to ``out_dir/accal.log``.
 
     Returns
     -------
     RunSummary
+
+    Raises
+    ------
+    accal.batch.LockedError
+        If another run holds the output directory.
     """
+    import functools
+
+    from accal.batch import Manifest, OutputLock, RunLog, execute, remove_stale_temporaries
+
     start = _time.perf_counter()
+    out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    paths = list(paths)
-    outcomes: list[FileOutcome] = []
-    for path in progress(paths) if progress else paths:
+    paths = [Path(p) for p in paths]
+    if fail_fast:
+        workers, scheduler = 1, None
+    with OutputLock(out_dir, "accal grace-bias"):
+        remove_stale_temporaries(out_dir)
+        rlog = RunLog(out_dir, enabled=log)
         try:
-            outcomes.append(process_file(Path(path), out_dir, opts))
-        except AccalError as exc:
-            outcomes.append(FileOutcome(Path(path), False, _one_line(path, exc)))
-        except Exception as exc:  # a bug, not bad input: still keep the batch going
-            outcomes.append(
-                FileOutcome(
-                    Path(path),
-                    False,
-                    f"{path}: internal error ({type(exc).__name__}: {exc}); "
-                    "please report it with --debug output",
-                )
+            key = options_key(opts)
+            rlog(
+                f"start accal {__version__} grace-bias: {len(paths)} inputs, workers={workers}, "
+                f"scheduler={scheduler if isinstance(scheduler, str | None) else 'client'}, "
+                f"force={force}, options={json.dumps(key, sort_keys=True)}"
             )
-        if fail_fast and not outcomes[-1].ok:
-            break
+            manifest = Manifest.load(out_dir)
+            results: dict[int, FileOutcome] = {}
+            todo: list[int] = []
+            for i, p in enumerate(paths):
+                if not force and manifest.is_current(p, key, checksum=checksum):
+                    results[i] = FileOutcome(p, True, skipped=True)
+                    rlog(f"skip {p}: outputs current")
+                else:
+                    todo.append(i)
+            task = functools.partial(process_one, out_dir=out_dir, opts=opts)
+            pending: list[FileOutcome] = []
+            table_path = _table_if_exists(out_dir, opts.fmt)
+            last = _time.monotonic()
+            done = execute(
+                task,
+                [paths[i] for i in todo],
+                workers=workers,
+                scheduler=scheduler,
+                on_error=_internal_error,
+            )
+            if progress is not None:
+                done = progress(done, total=len(todo))
+            for j, outcome in done:
+                results[todo[j]] = outcome
+                pending.append(outcome)
+                rlog(
+                    f"ok {outcome.path}: {outcome.n_samples} samples"
+                    if outcome.ok
+                    else f"FAILED {outcome.message}"
+                )
+                if fail_fast and not outcome.ok:
+                    break
+                if _time.monotonic() - last > commit_seconds:
+                    table_path = (
+                        _commit(out_dir, opts, manifest, key, pending, checksum) or table_path
+                    )
+                    pending, last = [], _time.monotonic()
+            table_path = _commit(out_dir, opts, manifest, key, pending, checksum) or table_path
+            outcomes = [results[i] for i in sorted(results)]
+            summary = RunSummary(
+                outcomes,
+                table_path,
+                _time.perf_counter() - start,
+                n_inputs=len(paths),
+                log_path=rlog.path if log else None,
+                workers=1 if scheduler is None and workers <= 1 else workers,
+            )
+            rlog(summary.line())
+            return summary
+        finally:
+            rlog.close()
+
+
+def _table_if_exists(out_dir: Path, fmt: str) -> Path | None:
+    p = out_dir / f"bias_drift.{fmt}"
+    return p if p.exists() else None
+
+
+def _commit(
+    out_dir: Path,
+    opts: GraceBiasOptions,
+    manifest: Any,
+    key: dict[str, Any],
+    outcomes: list[FileOutcome],
+    checksum: bool,
+) -> Path | None:
+    """Merge the rows of ``outcomes`` into the table, then record them in the manifest.
+
+    The order matters for crash safety: an input is recorded only once its rows
+    are in the table; an input with rows but no record is redone (and its rows
+    replaced, never duplicated).
+    """
+    if not outcomes:
+        return None
     rows = [r for o in outcomes if o.ok for r in o.rows]
-    table = merge_bias_drift(out_dir, rows, opts.fmt)
-    return RunSummary(outcomes, table, _time.perf_counter() - start)
+    table = merge_bias_drift(out_dir, rows, opts.fmt) if rows else None
+    for o in outcomes:
+        if o.ok:
+            manifest.record(o.path, key, o.outputs, o.path.name, checksum=checksum)
+        else:
+            manifest.entries.pop(manifest.key(o.path), None)
+    manifest.save()
+    return table
 
 
 def _one_line(path: Path | str, exc: AccalError) -> str:
@@ -530,3 +981,118 @@ def _one_line(path: Path | str, exc: AccalError) -> str:
     if file_path is None:
         msg = f"{path}: {msg}"
     return msg
+
+
+def write_closure_reports(out_dir: Path, outcomes: Sequence[FileOutcome]) -> tuple[Path, Path]:
+    """Merge this run's closure results into ``OUT/closure.json`` and ``OUT/closure.md``.
+
+    Layout of ``closure.json``: ``{"accal_version": ..., "sources": {SOURCE: {AXIS:
+    entry}}}`` where ``entry`` is :meth:`accal.closure.ClosureResult.to_dict` plus
+    ``model`` (the fitted model, e.g. ``poly1+bias_step@2005-01-01T10:00:00``) and
+    ``removed_from_calibrated`` (the effects subtracted from the calibrated series).
+    Sources of earlier runs in the same directory are kept; a re-run replaces its
+    own entries.
+    """
+    out_dir = Path(out_dir)
+    jpath = out_dir / "closure.json"
+    try:
+        old = json.loads(jpath.read_text())
+        sources = old.get("sources", {}) if isinstance(old, dict) else {}
+    except (OSError, ValueError):
+        sources = {}
+    for o in outcomes:
+        if o.ok and o.closure:
+            sources[o.path.name] = o.closure
+    sources = dict(sorted(sources.items()))
+    _write_json(jpath, {"accal_version": __version__, "sources": sources})
+    lines = [
+        "# accal closure report",
+        "",
+        f"{len(sources)} input(s); per input and axis: the effects the bias + drift model "
+        "lacked, their significance, and the coefficients before/after.  Effects listed under "
+        "'removed from calibrated' were subtracted from the calibrated series; periodic terms "
+        "and unexplained structure are reported only.",
+        "",
+    ]
+    for src, axes in sources.items():
+        for ax, entry in axes.items():
+            md = entry.get("markdown") or f"## {src} axis {ax}\n"
+            lines.append(md.rstrip())
+            removed = entry.get("removed_from_calibrated") or []
+            lines += ["", f"Removed from calibrated: {', '.join(removed) or 'nothing'}.", ""]
+    from accal.io.writers import atomic_path
+
+    mpath = out_dir / "closure.md"
+    with atomic_path(mpath) as tmp:
+        tmp.write_text("\n".join(lines) + "\n")
+    return jpath, mpath
+
+
+def find_bias_drift(directory: Path) -> Path:
+    """The ``bias_drift.<fmt>`` table of an output directory.
+
+    Raises
+    ------
+    ValidationError
+        If there is none (or two of different formats that disagree in age: the
+        newer one is taken, which the message of a user's mix-up would not help).
+    """
+    directory = Path(directory)
+    found = [directory / f"bias_drift.{f}" for f in ("parquet", "csv")]
+    found = [p for p in found if p.exists()]
+    if not found:
+        raise ValidationError(f"{directory}: no bias_drift.parquet or bias_drift.csv here")
+    return max(found, key=lambda p: p.stat().st_mtime_ns)
+
+
+def diagnose_dir(
+    directory: Path,
+    out_dir: Path,
+    *,
+    aux: Path | None = None,
+    alpha: float = 0.01,
+    progress: Callable[..., Iterable[Any]] | None = None,
+) -> list[FileOutcome]:
+    """Close the loop on every ``*.calibrated.<fmt>`` of an earlier ``grace-bias`` run.
+
+    The calibrated series is ``scale · (raw − trend)``: its used samples are the
+    residual of the declared model (times the scale), so the closure runs on it
+    with the same polynomial base (order from the file's metadata).  Plots go to
+    ``out_dir``; the caller writes ``closure.json``/``closure.md``
+    (:func:`write_closure_reports`).
+    """
+    from accal.io.tables import read_table_series
+    from accal.io.writers import read_table_metadata
+
+    directory, out_dir = Path(directory), Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    files = sorted(
+        p
+        for p in directory.iterdir()
+        if p.name.endswith((".calibrated.parquet", ".calibrated.csv"))
+    )
+    outcomes = []
+    for p in progress(files, total=len(files)) if progress else files:
+        try:
+            _, meta = read_table_metadata(p)
+            series = read_table_series(p)
+            order = int(meta.get("order", 1))
+            opts = GraceBiasOptions(order=order, close_loop=True, aux=aux, alpha=alpha)
+            name = str(meta.get("source") or p.name.split(".calibrated.")[0])
+            _, closure, plots = close_the_loop(
+                Path(name), series, series, series.valid, opts, out_dir / output_stem(Path(name))
+            )
+            outcomes.append(
+                FileOutcome(
+                    Path(name),
+                    True,
+                    n_samples=len(series),
+                    outputs=tuple(plots),
+                    closure={ax: c["summary"] for ax, c in closure.items()},
+                )
+            )
+        except AccalError as exc:
+            outcomes.append(FileOutcome(p, False, _one_line(p, exc)))
+        except Exception as exc:
+            outcomes.append(_internal_error(p, exc))
+    return outcomes

@@ -1,0 +1,442 @@
+"""Batch machinery shared by the commands: inputs, manifest, lock, executors, log.
+
+A cron job over a mission archive needs more than a loop over files:
+
+* :func:`discover` expands files, directories (``--recursive``) and glob patterns
+  into a sorted, de-duplicated list, grouped by (satellite, day) when the name
+  follows the Level-1B convention ``PROD_YYYY-MM-DD_S_RR.ext``;
+* :class:`OutputLock` makes an output directory single-writer (``flock``: the lock
+  dies with its process, so a ``kill -9`` never leaves a stale lock behind);
+* :class:`Manifest` remembers, per input, its size, mtime (or SHA-256), the accal
+  version, the options and the outputs, so a re-run skips what is current;
+* :func:`execute` runs a picklable ``task(path) -> outcome`` serially, on local
+  worker processes, or on a dask.distributed cluster, yielding outcomes as they
+  complete (the caller commits them in batches);
+* :class:`RunLog` appends a line per event to ``OUT/accal.log``.
+
+Crash safety comes from the order of the commits (see
+:func:`accal.pipeline.run`): every output is written atomically, the cumulative
+table is merged before the manifest records an input as done, and an input that
+the manifest does not record is simply redone.  A batch killed at any instant and
+re-run therefore ends with the same outputs as an uninterrupted one.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fnmatch
+import glob
+import hashlib
+import json
+import os
+import re
+import time as _time
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from accal import __version__
+from accal.errors import AccalError
+
+#: Names taken from a directory scan unless ``--include`` says otherwise.
+DEFAULT_INCLUDE = ("*ACC1B_*", "*ACT1B_*")
+#: Names never taken from a directory scan (accal's own outputs).
+EXCLUDE = (
+    "*.calibrated.*",
+    "bias_drift.*",
+    "*.json",
+    "*.md",
+    "*.png",
+    "*.log",
+    "*.rpt",
+    "*.lock",
+    ".*",
+)
+MANIFEST = "manifest.json"
+LOCK = ".accal.lock"
+LOG = "accal.log"
+
+_L1B_NAME = re.compile(
+    r"(?P<product>[A-Z]{3}1[AB])_(?P<date>\d{4}-\d{2}-\d{2})_(?P<sat>[A-Z])_(?P<rel>\d+)"
+)
+_GLOB_CHARS = re.compile(r"[*?\[]")
+
+
+class LockedError(AccalError):
+    """The output directory is being written by another accal run."""
+
+
+@dataclass(frozen=True)
+class InputGroup:
+    """Inputs of one satellite and day (``key`` is ``("?", "?")`` when unknown)."""
+
+    key: tuple[str, str]
+    paths: tuple[Path, ...]
+
+
+def name_key(path: Path) -> tuple[str, str] | None:
+    """``(satellite, date)`` from a Level-1B file name, else None."""
+    m = _L1B_NAME.search(path.name)
+    return (m["sat"], m["date"]) if m else None
+
+
+def discover(
+    inputs: Iterable[str | Path],
+    *,
+    recursive: bool = False,
+    include: Sequence[str] = DEFAULT_INCLUDE,
+) -> tuple[list[Path], list[tuple[Path, str]]]:
+    """Expand command-line inputs into files.
+
+    Parameters
+    ----------
+    inputs : iterable of str or Path
+        Files (taken as given, even if they do not exist: the reader reports them),
+        directories (their files matching ``include``; the whole tree with
+        ``recursive``) and glob patterns (``*``, ``?``, ``[...]``, ``**``).
+    recursive : bool
+        Descend into sub-directories of directory inputs.
+    include : sequence of str
+        Name patterns taken from directories (not applied to explicit files).
+
+    Returns
+    -------
+    files : list of Path
+        De-duplicated (by resolved path), in the order given; directory and
+        pattern expansions sorted by name.
+    problems : list of (Path, str)
+        Inputs that expand to nothing, with a one-line reason.
+    """
+    files: list[Path] = []
+    problems: list[tuple[Path, str]] = []
+    seen: set[str] = set()
+
+    def add(p: Path) -> None:
+        key = os.path.realpath(p)
+        if key not in seen:
+            seen.add(key)
+            files.append(p)
+
+    for raw in inputs:
+        p = Path(raw)
+        if p.is_dir():
+            if not recursive:
+                add(p)  # the task reports it, in input order, with the hint
+                continue
+            found = sorted(
+                q
+                for q in p.rglob("*")
+                if q.is_file() and _wanted(q.name, include) and not _hidden(q, p)
+            )
+            if not found:
+                problems.append((p, f"{p}: no input file in directory (include: {list(include)})"))
+            for q in found:
+                add(q)
+        elif not p.exists() and _GLOB_CHARS.search(str(raw)):
+            found = sorted(Path(q) for q in glob.glob(str(raw), recursive=True))
+            found = [q for q in found if q.is_file()]
+            if not found:
+                problems.append((p, f"{raw}: no file matches this pattern"))
+            for q in found:
+                add(q)
+        else:
+            add(p)
+    return files, problems
+
+
+def _wanted(name: str, include: Sequence[str]) -> bool:
+    if any(fnmatch.fnmatch(name, x) for x in EXCLUDE):
+        return False
+    return any(fnmatch.fnmatch(name, x) for x in include)
+
+
+def _hidden(q: Path, root: Path) -> bool:
+    return any(part.startswith(".") for part in q.relative_to(root).parts)
+
+
+def group_inputs(paths: Sequence[Path]) -> list[InputGroup]:
+    """Group inputs by (satellite, day) from their names, sorted by day then satellite.
+
+    Inputs whose names do not follow the Level-1B convention form one group with
+    key ``("?", "?")`` at the end, in their given order.
+    """
+    groups: dict[tuple[str, str], list[Path]] = {}
+    for p in paths:
+        groups.setdefault(name_key(p) or ("?", "?"), []).append(p)
+    keys = sorted((k for k in groups if k != ("?", "?")), key=lambda k: (k[1], k[0]))
+    if ("?", "?") in groups:
+        keys.append(("?", "?"))
+    return [InputGroup(k, tuple(groups[k])) for k in keys]
+
+
+class OutputLock:
+    """Exclusive lock on an output directory (``OUT/.accal.lock``, ``fcntl.flock``).
+
+    The lock is held by the open file description, so it is released by the
+    kernel when the process ends in any way (including ``kill -9``); the file
+    itself stays and records the holder's pid and start time for the message.
+    """
+
+    def __init__(self, out_dir: Path, what: str = "accal") -> None:
+        self.path = Path(out_dir) / LOCK
+        self.what = what
+        self._fh: Any = None
+
+    def acquire(self) -> None:
+        """Take the lock or raise :class:`LockedError` at once (never waits)."""
+        import fcntl
+
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        fh = open(self.path, "a+")  # noqa: SIM115 - kept open while locked
+        try:
+            fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            fh.seek(0)
+            holder = fh.read().strip() or "unknown process"
+            fh.close()
+            raise LockedError(
+                f"{self.path.parent}: output directory is in use by another accal run "
+                f"({holder}); wait for it to finish or use another --out"
+            ) from None
+        fh.seek(0)
+        fh.truncate()
+        fh.write(f"pid {os.getpid()}, {self.what}, started {_time.strftime('%Y-%m-%d %H:%M:%S')}")
+        fh.flush()
+        self._fh = fh
+
+    def release(self) -> None:
+        """Release the lock (the file stays)."""
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None
+
+    def __enter__(self) -> OutputLock:
+        self.acquire()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+
+def remove_stale_temporaries(out_dir: Path) -> int:
+    """Delete temporary files left by a killed run (``.NAME.XXXX.tmp``); call under the lock."""
+    n = 0
+    for q in Path(out_dir).glob(".*.tmp"):
+        with contextlib.suppress(OSError):
+            q.unlink()
+            n += 1
+    return n
+
+
+def file_signature(path: Path, checksum: bool = False) -> dict[str, Any]:
+    """Size and mtime (ns) of ``path``, plus its SHA-256 with ``checksum``."""
+    st = path.stat()
+    sig: dict[str, Any] = {"size": st.st_size, "mtime_ns": st.st_mtime_ns}
+    if checksum:
+        h = hashlib.sha256()
+        with open(path, "rb") as fh:
+            for chunk in iter(lambda: fh.read(1 << 20), b""):
+                h.update(chunk)
+        sig["sha256"] = h.hexdigest()
+    return sig
+
+
+@dataclass
+class Manifest:
+    """What an output directory holds: one entry per input processed there.
+
+    ``entries[key]`` (``key``: the input's resolved path) holds ``size``,
+    ``mtime_ns`` (and ``sha256`` with checksums), ``accal_version``, ``options``
+    (the canonical options dict), ``outputs`` (file names in the directory),
+    ``source`` (the table's key) and ``processed`` (UTC time).
+    """
+
+    path: Path
+    entries: dict[str, dict[str, Any]] = field(default_factory=dict)
+
+    @classmethod
+    def load(cls, out_dir: Path) -> Manifest:
+        """Read ``OUT/manifest.json`` (an unreadable manifest means: redo everything)."""
+        path = Path(out_dir) / MANIFEST
+        try:
+            data = json.loads(path.read_text())
+            entries = data["entries"] if isinstance(data, dict) else {}
+            if not isinstance(entries, dict):
+                entries = {}
+        except (OSError, ValueError, KeyError):
+            entries = {}
+        return cls(path, entries)
+
+    @staticmethod
+    def key(path: Path) -> str:
+        """Manifest key of an input: its resolved absolute path."""
+        return os.path.realpath(path)
+
+    def is_current(self, path: Path, options: dict[str, Any], *, checksum: bool = False) -> bool:
+        """True if ``path`` was processed with these options by this accal version,
+        has not changed since, and all its outputs still exist."""
+        e = self.entries.get(self.key(path))
+        if not e or e.get("accal_version") != __version__ or e.get("options") != options:
+            return False
+        use_hash = checksum and "sha256" in e
+        try:
+            sig = file_signature(path, checksum=use_hash)
+        except OSError:
+            return False
+        # with checksums, a touched but unchanged file is still current
+        keys = ("size", "sha256") if use_hash else ("size", "mtime_ns")
+        if any(e.get(k) != sig[k] for k in keys):
+            return False
+        out = self.path.parent
+        return all((out / name).exists() for name in e.get("outputs", ()))
+
+    def record(
+        self,
+        path: Path,
+        options: dict[str, Any],
+        outputs: Sequence[Path],
+        source: str,
+        *,
+        checksum: bool = False,
+    ) -> None:
+        """Record ``path`` as processed (call only after its table rows are merged)."""
+        try:
+            sig = file_signature(path, checksum=checksum)
+        except OSError:
+            return
+        self.entries[self.key(path)] = {
+            **sig,
+            "accal_version": __version__,
+            "options": options,
+            "outputs": sorted(Path(o).name for o in outputs),
+            "source": source,
+            "processed": _time.strftime("%Y-%m-%dT%H:%M:%SZ", _time.gmtime()),
+        }
+
+    def save(self) -> None:
+        """Write the manifest atomically."""
+        from accal.io.writers import atomic_path
+
+        with atomic_path(self.path) as tmp:
+            tmp.write_text(
+                json.dumps(
+                    {"accal_version": __version__, "entries": self.entries},
+                    indent=1,
+                    sort_keys=True,
+                )
+                + "\n"
+            )
+
+
+class RunLog:
+    """Append-only text log ``OUT/accal.log`` (one timestamped line per event)."""
+
+    def __init__(self, out_dir: Path, enabled: bool = True) -> None:
+        self.path = Path(out_dir) / LOG
+        self._fh = open(self.path, "a", encoding="utf-8") if enabled else None  # noqa: SIM115
+
+    def __call__(self, msg: str) -> None:
+        if self._fh is not None:
+            stamp = _time.strftime("%Y-%m-%dT%H:%M:%S", _time.gmtime())
+            self._fh.write(f"{stamp}Z [{os.getpid()}] {msg}\n")
+            self._fh.flush()
+
+    def close(self) -> None:
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None
+
+
+def default_workers() -> int:
+    """Cores available to this process."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def execute(
+    task: Callable[[Path], Any],
+    paths: Sequence[Path],
+    *,
+    workers: int = 1,
+    scheduler: str | Any | None = None,
+    on_error: Callable[[Path, BaseException], Any],
+) -> Iterator[tuple[int, Any]]:
+    """Run ``task`` on every path; yield ``(index, outcome)`` as each completes.
+
+    Parameters
+    ----------
+    task : callable
+        A picklable module-level function of one path (the work of one input).
+        It should catch input errors itself and return an outcome.
+    paths : sequence of Path
+        Inputs.
+    workers : int
+        Local worker processes (1: in this process, in order).
+    scheduler : str or distributed.Client, optional
+        Address of a dask.distributed scheduler (or a client): the tasks run on
+        its workers, which must see the same file system as this process.
+    on_error : callable
+        ``on_error(path, exc)`` turns an exception that escaped ``task`` (a crashed
+        worker, a bug) into an outcome, so the batch goes on.
+
+    Yields
+    ------
+    (int, outcome)
+        Index into ``paths`` and the task's outcome, in completion order.
+    """
+    if scheduler is not None:
+        yield from _execute_dask(task, paths, scheduler, on_error)
+        return
+    if workers <= 1 or len(paths) <= 1:
+        for i, p in enumerate(paths):
+            try:
+                yield i, task(p)
+            except Exception as exc:  # task bugs: keep the batch going
+                yield i, on_error(p, exc)
+        return
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    # forkserver: no fork of a process that may hold threads (tqdm, BLAS)
+    ctx = mp.get_context("forkserver")
+    with ProcessPoolExecutor(max_workers=min(workers, len(paths)), mp_context=ctx) as pool:
+        futures = {pool.submit(task, p): i for i, p in enumerate(paths)}
+        for fut in as_completed(futures):
+            i = futures[fut]
+            try:
+                yield i, fut.result()
+            except Exception as exc:  # BrokenProcessPool, pickling errors, bugs
+                yield i, on_error(paths[i], exc)
+
+
+def _execute_dask(
+    task: Callable[[Path], Any],
+    paths: Sequence[Path],
+    scheduler: str | Any,
+    on_error: Callable[[Path, BaseException], Any],
+) -> Iterator[tuple[int, Any]]:
+    try:
+        from distributed import Client, as_completed
+    except ImportError:  # pragma: no cover - depends on the install
+        raise AccalError("--scheduler needs dask.distributed: pip install 'accal[dask]'") from None
+    own = not isinstance(scheduler, Client)
+    try:
+        client = Client(scheduler) if own else scheduler
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise AccalError(f"cannot connect to the dask scheduler {scheduler!r}: {exc}") from None
+    try:
+        futures = client.map(task, list(paths), pure=False)
+        index = {f.key: i for i, f in enumerate(futures)}
+        for fut in as_completed(futures):
+            i = index[fut.key]
+            try:
+                yield i, fut.result()
+            except Exception as exc:  # a worker died or the task raised
+                yield i, on_error(paths[i], exc)
+            fut.release()
+    finally:
+        if own:
+            client.close()

@@ -1,0 +1,336 @@
+"""Archive runs: discovery, workers, Dask, manifest/incremental, lock, kill -9, `accal table`."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from click.testing import CliRunner
+
+from accal.batch import OutputLock, discover, group_inputs
+from accal.cli import main
+
+SAMPLES = Path(__file__).resolve().parents[1] / "data" / "samples"
+
+
+def invoke(*args: object) -> tuple[int, str, str]:
+    res = CliRunner().invoke(main, [str(a) for a in args], catch_exceptions=False)
+    return res.exit_code, res.stdout, res.stderr
+
+
+@pytest.fixture(scope="module")
+def archive(tmp_path_factory) -> Path:
+    """Six short simulated days (two satellites, three dates) in a year/month tree."""
+    from accal.simulate.grace import write_simulated_grace
+
+    root = tmp_path_factory.mktemp("archive")
+    for k, day in enumerate(("2005-01-01", "2005-01-02", "2005-02-01")):
+        for sat in "AB":
+            sub = root / day[:4] / day[5:7]
+            write_simulated_grace(
+                sub / f"ACC1B_{day}_{sat}_02.asc",
+                date=day,
+                satellite=sat,
+                seed=10 * k + ord(sat),
+                duration=3600.0,
+                n_gaps=1,
+            )
+    (root / "README.txt").write_text("not an accelerometer file\n")
+    return root
+
+
+def read_outputs(out: Path) -> dict[str, object]:
+    """Everything a user reads from an output directory (no timestamps)."""
+    from accal.pipeline import read_bias_drift
+
+    got: dict[str, object] = {"table": read_bias_drift(out / "bias_drift.parquet")}
+    for p in sorted(out.glob("*.calibrated.parquet")):
+        got[p.name] = pd.read_parquet(p)
+    return got
+
+
+def assert_same_outputs(a: Path, b: Path) -> None:
+    ra, rb = read_outputs(a), read_outputs(b)
+    assert ra.keys() == rb.keys()
+    for k in ra:
+        pd.testing.assert_frame_equal(ra[k], rb[k], check_exact=True)
+
+
+# ---------------------------------------------------------------- discovery
+
+
+def test_discover_directories_patterns_and_files(archive, tmp_path):
+    files, problems = discover([archive], recursive=True)
+    assert [p.name for p in files] == sorted(p.name for p in archive.rglob("ACC1B_*.asc"))
+    assert problems == []  # truth JSON files and README are not inputs
+    # a pattern, an explicit file given twice, and a pattern that matches nothing
+    one = next(archive.rglob("ACC1B_2005-02-01_A_02.asc"))
+    files, problems = discover([str(archive / "2005" / "01" / "*_A_*.asc"), one, one, "nope*.asc"])
+    assert [p.name for p in files] == [
+        "ACC1B_2005-01-01_A_02.asc",
+        "ACC1B_2005-01-02_A_02.asc",
+        "ACC1B_2005-02-01_A_02.asc",
+    ]
+    assert problems == [(Path("nope*.asc"), "nope*.asc: no file matches this pattern")]
+    # ** patterns recurse
+    files, _ = discover([str(archive / "**" / "*_B_02.asc")])
+    assert len(files) == 3
+    # an empty directory is reported, not silently ignored
+    (tmp_path / "empty").mkdir()
+    _, problems = discover([tmp_path / "empty"], recursive=True)
+    assert problems and "no input file" in problems[0][1]
+
+
+def test_groups_by_satellite_and_day(archive):
+    files, _ = discover([archive], recursive=True)
+    groups = group_inputs([*files, Path("odd_name.parquet")])
+    assert [g.key for g in groups] == [
+        ("A", "2005-01-01"),
+        ("B", "2005-01-01"),
+        ("A", "2005-01-02"),
+        ("B", "2005-01-02"),
+        ("A", "2005-02-01"),
+        ("B", "2005-02-01"),
+        ("?", "?"),
+    ]
+
+
+def test_directory_without_recursive_is_a_one_line_error(archive, tmp_path):
+    code, _, err = invoke("grace-bias", archive, "--out", tmp_path, "-q")
+    assert code == 1
+    assert (
+        err.strip()
+        == f"accal: {archive}: is a directory (use --recursive to process the files in it)"
+    )
+
+
+# ---------------------------------------------------------------- parallel runs
+
+
+def test_workers_and_dask_give_the_serial_outputs(archive, tmp_path):
+    distributed = pytest.importorskip("distributed")
+    code, _, err = invoke(
+        "grace-bias", archive, "-r", "--out", tmp_path / "serial", "-j", "1", "-q"
+    )
+    assert code == 0, err
+    code, _, err = invoke("grace-bias", archive, "-r", "--out", tmp_path / "pool", "-j", "2", "-q")
+    assert code == 0, err
+    assert_same_outputs(tmp_path / "serial", tmp_path / "pool")
+    with distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None
+    ) as cluster:
+        code, _, err = invoke(
+            "grace-bias", archive, "-r", "--out", tmp_path / "dask", "--scheduler",
+            cluster.scheduler_address, "-q",
+        )  # fmt: skip
+    assert code == 0, err
+    assert_same_outputs(tmp_path / "serial", tmp_path / "dask")
+    assert len(read_outputs(tmp_path / "dask")["table"]) == 6 * 3
+
+
+def test_unreachable_scheduler_is_a_clear_error(archive, tmp_path):
+    pytest.importorskip("distributed")
+    import dask
+
+    with dask.config.set({"distributed.comm.timeouts.connect": "1s"}):
+        code, _, err = invoke(
+        "grace-bias", next(archive.rglob("*.asc")), "--out", tmp_path, "--scheduler",
+            "tcp://127.0.0.1:1", "-q",
+        )  # fmt: skip
+    assert code == 1
+    assert err.startswith("accal: cannot connect to the dask scheduler 'tcp://127.0.0.1:1'")
+    assert len(err.strip().splitlines()) == 1
+
+
+# ---------------------------------------------------------------- incremental
+
+
+def test_rerun_skips_current_inputs_and_redoes_changed_ones(archive, tmp_path):
+    src = tmp_path / "in"
+    src.mkdir()
+    files = sorted(archive.rglob("ACC1B_*.asc"))
+    for p in files[:4]:
+        (src / p.name).write_bytes(p.read_bytes())
+    out = tmp_path / "out"
+    assert invoke("grace-bias", src, "-r", "--out", out, "-q")[0] == 0
+    cal = {p.name: p.stat().st_mtime_ns for p in out.glob("*.calibrated.parquet")}
+    assert len(cal) == 4
+
+    # nothing changed: everything skipped, nothing rewritten
+    code, _, err = invoke("grace-bias", src, "-r", "--out", out)
+    assert code == 0
+    assert "0 ok, 4 skipped (current), 0 failed" in err
+    assert {p.name: p.stat().st_mtime_ns for p in out.glob("*.calibrated.parquet")} == cal
+
+    # one input changed, one new input: only those two are processed
+    changed = src / files[0].name
+    changed.write_bytes(changed.read_bytes())  # same bytes, new mtime
+    os.utime(changed, ns=(time.time_ns(), time.time_ns() + 10**9))
+    (src / files[4].name).write_bytes(files[4].read_bytes())
+    code, _, err = invoke("grace-bias", src, "-r", "--out", out)
+    assert "2 ok, 3 skipped (current)" in err, err
+    table = read_outputs(out)["table"]
+    assert len(table) == 5 * 3
+    assert not table.duplicated(["source", "axis", "method"]).any()
+
+    # --checksum: a touched but identical file is current
+    assert invoke("grace-bias", src, "-r", "--out", out, "--checksum", "--force", "-q")[0] == 0
+    os.utime(changed, ns=(time.time_ns(), time.time_ns() + 2 * 10**9))
+    code, _, err = invoke("grace-bias", src, "-r", "--out", out, "--checksum")
+    assert "0 ok, 5 skipped" in err, err
+
+    # other options make the outputs out of date; --force redoes all
+    code, _, err = invoke("grace-bias", src, "-r", "--out", out, "--order", "2")
+    assert "5 ok, 0 skipped" in err, err
+    code, _, err = invoke("grace-bias", src, "-r", "--out", out, "--order", "2", "--force")
+    assert "5 ok, 0 skipped" in err, err
+
+    # a deleted output makes its input out of date
+    next(out.glob("*.calibrated.parquet")).unlink()
+    code, _, err = invoke("grace-bias", src, "-r", "--out", out, "--order", "2")
+    assert "1 ok, 4 skipped" in err, err
+
+    log = (out / "accal.log").read_text()
+    assert log.count(" start accal ") == 8
+    assert "skip " in log and "accal grace-bias: 1 ok, 4 skipped" in log
+
+
+def test_summary_reports_counts_samples_and_throughput(archive, tmp_path):
+    bad = tmp_path / "ACC1B_2005-03-01_A_02.asc"
+    bad.write_text("garbage\n")
+    code, _, err = invoke(
+        "grace-bias", *sorted(archive.rglob("ACC1B_2005-01*.asc")), bad, "--out", tmp_path / "o"
+    )
+    assert code == 1
+    summary = err.strip().splitlines()[-1]
+    n = sum(
+        json.loads(p.read_text())["n_samples"]
+        for p in archive.rglob("ACC1B_2005-01*.asc.truth.json")
+    )
+    assert summary.startswith(
+        f"accal grace-bias: 4 ok, 0 skipped (current), 1 failed, 0 not run; {n:,} samples"
+    )
+    assert "MB/s" in summary and "files/s" in summary
+
+
+# ---------------------------------------------------------------- lock and crash safety
+
+
+def test_second_run_on_the_same_directory_refuses(archive, tmp_path):
+    with OutputLock(tmp_path, "a test holding the lock"):
+        code, _, err = invoke("grace-bias", next(archive.rglob("*.asc")), "--out", tmp_path)
+    assert code == 1
+    assert "output directory is in use by another accal run" in err
+    assert f"pid {os.getpid()}" in err
+    assert not list(tmp_path.glob("*.calibrated.*"))
+    # released: the next run works
+    assert invoke("grace-bias", next(archive.rglob("*.asc")), "--out", tmp_path, "-q")[0] == 0
+
+
+def test_kill_minus_nine_then_rerun_gives_the_uninterrupted_outputs(tmp_path):
+    """A batch killed with SIGKILL mid-way and re-run ends exactly like a clean run."""
+    from accal.simulate.grace import write_simulated_grace
+
+    src = tmp_path / "in"
+    for k in range(10):
+        write_simulated_grace(
+            src / f"ACC1B_2005-01-{k + 1:02d}_A_02.asc",
+            date=f"2005-01-{k + 1:02d}",
+            satellite="A",
+            seed=k,
+            duration=43200.0,
+        )
+    cmd = [sys.executable, "-m", "accal", "grace-bias", str(src), "-r", "-j", "1", "-q"]
+    subprocess.run([*cmd, "--out", str(tmp_path / "clean")], check=True, capture_output=True)
+
+    out = tmp_path / "killed"
+    proc = subprocess.Popen(
+        [*cmd, "--out", str(out)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+    )
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and len(list(out.glob("*.report.json"))) < 3:
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    assert proc.returncode == -signal.SIGKILL
+    n_done = len(list(out.glob("*.report.json")))
+    assert 3 <= n_done < 10, "the batch was not killed mid-way; make the inputs longer"
+
+    res = subprocess.run([*cmd, "--out", str(out)], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    assert_same_outputs(tmp_path / "clean", out)
+    assert not list(out.glob(".*.tmp")), "temporary files left behind"
+    manifest = json.loads((out / "manifest.json").read_text())["entries"]
+    assert len(manifest) == 10
+
+
+# ---------------------------------------------------------------- accal table
+
+
+def test_table_prints_filters_and_exports(archive, tmp_path):
+    out = tmp_path / "o"
+    assert invoke("grace-bias", archive, "-r", "--out", out, "--method", "both", "-q")[0] == 0
+    code, text, _ = invoke("table", out)
+    assert code == 0
+    assert len(text.strip().splitlines()) == 1 + 6 * 3 * 2
+    code, text, _ = invoke(
+        "table", out, "--satellite", "B", "--start", "2005-01-02", "--method", "lsq"
+    )
+    lines = text.strip().splitlines()
+    assert len(lines) == 1 + 2 * 3
+    assert all("GRACE-B" in line for line in lines[1:])
+    code, _, err = invoke(
+        "table", out, "--end", "2005-01-01", "--axis", "x", "--export", tmp_path / "x.csv"
+    )
+    assert code == 0, err
+    df = pd.read_csv(tmp_path / "x.csv", comment="#")
+    assert len(df) == 2 * 2 and set(df["axis"]) == {"x"} and set(df["date"]) == {"2005-01-01"}
+    assert np.isfinite(df["bias"]).all()
+    code, _, err = invoke("table", out, "--start", "2005-13-01")
+    assert code != 0 and "YYYY-MM-DD" in err
+    code, _, err = invoke("table", tmp_path)
+    assert code == 1 and "no bias_drift" in err
+
+
+def test_table_merge_stays_fast_enough_at_mission_scale(tmp_path):
+    """66,000 rows (11,000 days x 3 axes x 2 methods): merging a day in keeps every row
+    once (the timing itself is in `make bench-archive`, not asserted here)."""
+    from accal.pipeline import BIAS_DRIFT_UNITS, merge_bias_drift, read_bias_drift
+
+    n_days = 11000
+    rows = []
+    base = np.datetime64("2002-04-01")
+    for d in range(n_days):
+        date = str(base + np.timedelta64(d, "D"))
+        for ax in "xyz":
+            for m in ("wavelet", "lsq"):
+                rows.append(_row(f"ACC1B_{date}_A_02.dat", date, ax, m))
+    merge_bias_drift(tmp_path, rows, "parquet")
+    new = [_row("ACC1B_2002-04-01_A_02.dat", "2002-04-01", "x", "lsq", bias=1.0)]
+    new.append(_row("ACC1B_2040-01-01_A_02.dat", "2040-01-01", "x", "lsq"))
+    merge_bias_drift(tmp_path, new, "parquet")
+    df = read_bias_drift(tmp_path / "bias_drift.parquet")
+    assert len(df) == n_days * 6 + 1
+    assert set(df.columns) == set(BIAS_DRIFT_UNITS)
+    hit = df[(df.source == "ACC1B_2002-04-01_A_02.dat") & (df.axis == "x") & (df.method == "lsq")]
+    assert hit["bias"].tolist() == [1.0]
+
+
+def _row(source: str, date: str, ax: str, m: str, bias: float = 1e-6) -> dict:
+    from accal.pipeline import BIAS_DRIFT_UNITS
+
+    row = {k: float("nan") for k in BIAS_DRIFT_UNITS}
+    row.update(
+        source=source, satellite="GRACE-A", date=date, axis=ax, frame="SRF", method=m,
+        order=1, bias=bias, n=86400, n_total=86400, n_flagged=0, n_duplicates=0,
+        n_out_of_order=0, n_gaps=0, accal_version="0", model="poly1",
+    )  # fmt: skip
+    return row
