@@ -360,3 +360,134 @@ def test_writer_rejects(tmp_path):
         write_grace_acc1b(s.replace(aux={"temp": np.zeros(3)}), tmp_path / "x.asc")
     assert "1 auxiliary channels" in str(w[0].message)
     assert not list(tmp_path.glob(".*.tmp"))
+
+
+# ---------------------------------------------------------------- fuzzing regressions
+# Each case below escaped the reader as something other than FormatError (or gave a
+# misleading message) before the hardening of issue 5; found by properties/test_fuzz_readers.py.
+
+
+def _fo_header_edit(samples, old: bytes, new: bytes) -> bytes:
+    raw = samples["gracefo_c"].read_bytes()
+    assert old in raw
+    return raw.replace(old, new, 1)
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "match", "line"),
+    [
+        # was AttributeError
+        (b"  global_attributes:\n", b"  global_attributes: [x]\n  ga:\n", "not a mapping", None),
+        # was OverflowError (int(float('inf')))
+        (b"num_records: 86400", b"num_records: !!float .inf", "constructor for the tag", 3),
+        # were accepted and put datetime / bytes / set objects into meta (not "str as written")
+        (b"creator_type: group", b"creator_type: !!timestamp 2023-06-09", "tag", 10),
+        (b"creator_type: group", b"creator_type: !!binary aGVsbG8=", "tag", 10),
+        # was accepted: an alias can make a 1 MB header expand to an enormous meta
+        (b"creator_type: group", b"creator_type: &a [x]\n    more: *a", "aliases", 11),
+        # was accepted, the last value silently winning
+        (
+            b"    platform: GRACE C",
+            b"    platform: GRACE C\n    platform: GRACE D",
+            "duplicated key",
+            30,
+        ),
+        (b"  variables:\n", b"  variables: abc\n  v:\n", "not a list of mappings", None),
+    ],
+    ids=["attrs-list", "inf-count", "timestamp", "binary", "alias", "dup-key", "variables-str"],
+)
+def test_yaml_header_refused(samples, tmp_path, old, new, match, line):
+    p = _write(tmp_path, _fo_header_edit(samples, old, new))
+    with pytest.raises(FormatError, match=match) as e:
+        read_grace_acc1b(p)
+    assert e.value.line == line
+
+
+def test_yaml_header_deep_nesting(samples, tmp_path):
+    # was RecursionError from PyYAML's recursive composer
+    raw = samples["gracefo_c"].read_bytes()
+    body = raw[raw.index(b"# End of YAML header") :]
+    deep = b"header:\n  x: " + b"[" * 50_000 + b"]" * 50_000 + b"\n" + body
+    with pytest.raises(FormatError, match="nested deeper than 32 levels") as e:
+        read_grace_acc1b(_write(tmp_path, deep))
+    assert e.value.line == 2
+
+
+def test_empty_satellite_id(samples, tmp_path):
+    # was IndexError when the empty id was on the last record
+    head, data = _data_lines(samples["grace_a"])
+    data[-1] = data[-1].replace(" A ", "  ", 1)
+    with pytest.raises(FormatError, match="satellite id '' is not one of") as e:
+        read_grace_acc1b(_write(tmp_path, "".join(head + data).encode()))
+    assert e.value.line == 90
+    raw = bytearray(samples["grace_a_bin"].read_bytes())
+    raw[-78 + 4] = 0  # GRACE_id byte of the last binary record
+    with pytest.raises(FormatError, match="record 60: satellite id ''") as e:
+        read_grace_acc1b(_write(tmp_path, bytes(raw), "bad.dat"))
+    assert e.value.line is None  # binary records have no line
+
+
+def test_time_outside_gps_era(samples, tmp_path):
+    # was accepted: t = 1e300 made a "valid" series whose dates cannot be computed
+    head, data = _data_lines(samples["grace_a"])
+    data[2] = data[2].replace("116769602 ", "1e300 ", 1)
+    with pytest.raises(FormatError, match="gps_time 1e\\+300 s is outside 1980-01-06") as e:
+        read_grace_acc1b(_write(tmp_path, "".join(head + data).encode()))
+    assert e.value.line == 33
+    raw = bytearray(samples["grace_a_bin"].read_bytes())
+    raw[-78:-74] = (4_000_000_000).to_bytes(4, "big")  # u4 gps_time of the last record
+    with pytest.raises(FormatError, match="record 60: gps_time 4e\\+09 s"):
+        read_grace_acc1b(_write(tmp_path, bytes(raw), "bad.dat"))
+
+
+def test_blank_lines_keep_line_numbers(samples, tmp_path):
+    head, data = _data_lines(samples["grace_a"])
+    data.insert(1, "\n")  # an empty line is skipped...
+    data[4] = data[4].replace("  00100000", "  00120000")
+    with pytest.raises(FormatError, match="quality flag '00120000'") as e:
+        read_grace_acc1b(_write(tmp_path, "".join(head + data).encode()))
+    assert e.value.line == 35  # ...but counted in the line number
+    data[1] = "   \n"  # a line of blanks is an error of its own
+    with pytest.raises(FormatError, match="blank line of spaces") as e:
+        read_grace_acc1b(_write(tmp_path, "".join(head + data).encode()))
+    assert e.value.line == 32
+
+
+def test_irregular_spacing_message(samples, tmp_path):
+    head, data = _data_lines(samples["grace_a"])
+    data[3] = data[3].replace("  00100000", " 00100000")
+    with pytest.raises(FormatError, match="irregular spacing: .* two before qualflg") as e:
+        read_grace_acc1b(_write(tmp_path, "".join(head + data).encode()))
+    assert e.value.line == 34
+
+
+def test_long_header_value_cut_in_message(samples, tmp_path):
+    text = samples["grace_a"].read_bytes().replace(b": 60 ", b": " + b"9" * 5000 + b" ", 1)
+    with pytest.raises(FormatError, match="is not an integer") as e:
+        read_grace_acc1b(_write(tmp_path, text))
+    assert len(str(e.value)) < 200 + len(str(tmp_path))
+
+
+def test_gzip_members_padding_and_garbage(samples, tmp_path):
+    raw = samples["grace_a"].read_bytes()
+    cut = len(raw) // 2
+    two = gzip.compress(raw[:cut]) + gzip.compress(raw[cut:]) + b"\0" * 7
+    assert_same_series(
+        read_grace_acc1b(_write(tmp_path, two, "two.gz")), read_grace_acc1b(samples["grace_a"])
+    )
+    with pytest.raises(FormatError, match="garbage after the compressed data"):
+        read_grace_acc1b(_write(tmp_path, gzip.compress(raw) + b"junk", "junk.gz"))
+    with pytest.raises(FormatError, match="truncated"):
+        read_grace_acc1b(_write(tmp_path, gzip.compress(raw)[:10], "head.gz"))
+
+
+def test_gzip_bomb_and_huge_file_refused(samples, tmp_path, monkeypatch):
+    from accal.io import _common
+
+    monkeypatch.setattr(_common, "MAX_INPUT_BYTES", 10_000)
+    with pytest.raises(FormatError, match="file larger than 10,000 bytes"):
+        read_grace_acc1b(samples["grace_a"])  # 15,856 bytes on disk
+    bomb = gzip.compress(b"0" * 50_000)  # ~100 bytes that expand 500 times
+    with pytest.raises(FormatError, match="decompresses to more than 10,000 bytes"):
+        _common.gunzip(bomb, "bomb.gz", limit=10_000)
+    assert _common.gunzip(bomb, "bomb.gz", limit=50_000) == b"0" * 50_000

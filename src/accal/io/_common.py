@@ -9,7 +9,9 @@ handled and counted the same way for every format).
 from __future__ import annotations
 
 import gzip
+import os
 import zlib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -25,6 +27,13 @@ PARQUET_MAGIC = b"PAR1"
 #: A time step larger than this many nominal steps is a gap.
 GAP_FACTOR = 1.5
 
+#: Largest input accepted, on disk and after gunzip [bytes].  A 1 Hz L1B day is
+#: ~17 MB of ASCII; this refuses a gzip bomb or a wrong multi-GB file with a
+#: FormatError instead of exhausting memory.
+MAX_INPUT_BYTES = 1 << 31
+
+_GUNZIP_STEP = 64 << 20
+
 
 def read_bytes(path: str | Path) -> bytes:
     """Return the (decompressed) content of ``path``.
@@ -34,13 +43,19 @@ def read_bytes(path: str | Path) -> bytes:
     Raises
     ------
     FormatError
-        Missing file, directory, unreadable file, corrupt gzip stream or empty file.
+        Missing file, directory, unreadable file, corrupt gzip stream, empty file,
+        or more than :data:`MAX_INPUT_BYTES` on disk or after decompression.
     """
     p = Path(path)
     if p.is_dir():
         raise FormatError("is a directory, not a file", p)
     try:
-        raw = p.read_bytes()
+        with open(p, "rb") as fh:
+            if os.fstat(fh.fileno()).st_size > MAX_INPUT_BYTES:
+                raise FormatError(
+                    f"file larger than {MAX_INPUT_BYTES:,} bytes (not an input file?)", p
+                )
+            raw = fh.read()
     except FileNotFoundError:
         raise FormatError("no such file", p) from None
     except PermissionError:
@@ -48,13 +63,57 @@ def read_bytes(path: str | Path) -> bytes:
     except OSError as exc:
         raise FormatError(f"cannot read file: {exc.strerror or exc}", p) from None
     if raw[:2] == GZIP_MAGIC:
-        try:
-            raw = gzip.decompress(raw)
-        except (OSError, EOFError, zlib.error) as exc:
-            raise FormatError(f"corrupt gzip stream ({exc})", p) from None
+        raw = gunzip(raw, p)
     if not raw.strip():
         raise FormatError("empty file", p)
     return raw
+
+
+def gunzip(raw: bytes, path: str | Path, limit: int = MAX_INPUT_BYTES) -> bytes:
+    """Decompress a (multi-member) gzip stream, refusing more than ``limit`` bytes of output.
+
+    Same semantics as :func:`gzip.decompress` (members are concatenated, NUL
+    padding after the last member is ignored, CRC and length are checked), but the
+    output is capped, so a gzip bomb is a FormatError and not an exhausted memory.
+
+    Raises
+    ------
+    FormatError
+        Corrupt or truncated stream, data after the last member, output over ``limit``.
+    """
+    out: list[bytes] = []
+    total = 0
+    rest = raw
+    while rest:
+        if rest[:2] != GZIP_MAGIC:
+            raise FormatError("corrupt gzip stream (garbage after the compressed data)", path)
+        d = zlib.decompressobj(wbits=31)  # one gzip member: header, deflate, CRC32 + ISIZE
+        data = rest
+        while True:
+            try:
+                # Bounded steps: a small max_length is ~3x slower, an unbounded one uncapped.
+                chunk = d.decompress(data, min(_GUNZIP_STEP, limit - total + 1))
+            except zlib.error as exc:
+                raise FormatError(f"corrupt gzip stream ({exc})", path) from None
+            total += len(chunk)
+            if total > limit:
+                raise FormatError(
+                    f"gzip stream decompresses to more than {limit:,} bytes (not an input file?)",
+                    path,
+                )
+            out.append(chunk)
+            data = d.unconsumed_tail
+            if not data:
+                break
+        if not d.eof:
+            raise FormatError("corrupt gzip stream (truncated: no end-of-stream marker)", path)
+        rest = d.unused_data.lstrip(b"\x00")
+    return b"".join(out)
+
+
+def _short(value: Any, n: int = 20) -> str:
+    """``repr`` of a value cut to ``n`` characters, for error messages."""
+    return repr(value[:n] if isinstance(value, str | bytes) else value)
 
 
 def peek(path: str | Path, n: int = 8192) -> bytes:
@@ -104,10 +163,19 @@ def arrow_to_numpy(col: Any) -> NDArray:
     return np.asarray(col.to_numpy(zero_copy_only=False))
 
 
-def bits_from_strings(arr: Any, path: str | Path, first_line: int, width: int = 8) -> NDArray:
+def bits_from_strings(
+    arr: Any,
+    path: str | Path,
+    first_line: int,
+    width: int = 8,
+    *,
+    line_of: Callable[[int], int | None] | None = None,
+) -> NDArray:
     """Convert an Arrow string array of ``width`` '0'/'1' characters to uint32 bitmasks.
 
-    Bit 0 is the rightmost character.  Vectorised on the Arrow buffers.
+    Bit 0 is the rightmost character.  Vectorised on the Arrow buffers.  The line
+    of a bad value is ``line_of(row)`` when given (for files with blank lines),
+    else ``first_line + row``.
 
     Raises
     ------
@@ -115,6 +183,9 @@ def bits_from_strings(arr: Any, path: str | Path, first_line: int, width: int = 
         A value of the wrong length or with characters other than 0 and 1.
     """
     import pyarrow as pa
+
+    def where(i: int) -> int | None:
+        return first_line + i if line_of is None else line_of(i)
 
     if isinstance(arr, pa.ChunkedArray):
         arr = arr.combine_chunks()
@@ -130,9 +201,9 @@ def bits_from_strings(arr: Any, path: str | Path, first_line: int, width: int = 
     if bad.size:
         i = int(bad[0])
         raise FormatError(
-            f"quality flag {arr[i].as_py()!r} is not {width} characters of 0/1",
+            f"quality flag {_short(arr[i].as_py())} is not {width} characters of 0/1",
             path,
-            first_line + i,
+            where(i),
         )
     chars = np.frombuffer(data_buf, dtype=np.uint8, count=n * width, offset=int(offsets[0]))
     digits = chars.reshape(n, width) - ord("0")
@@ -140,9 +211,9 @@ def bits_from_strings(arr: Any, path: str | Path, first_line: int, width: int = 
     if bad.size:
         i = int(bad[0])
         raise FormatError(
-            f"quality flag {arr[i].as_py()!r} is not {width} characters of 0/1",
+            f"quality flag {_short(arr[i].as_py())} is not {width} characters of 0/1",
             path,
-            first_line + i,
+            where(i),
         )
     weights = (1 << np.arange(width - 1, -1, -1)).astype(np.uint32)
     return digits.astype(np.uint32) @ weights

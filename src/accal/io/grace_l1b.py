@@ -24,16 +24,26 @@ References
 
 from __future__ import annotations
 
+import functools
 import gzip
 import re
 import warnings
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from accal.errors import FormatError, UnsupportedFormatError, ValidationError, check_option
-from accal.io._common import arrow_to_numpy, bits_from_strings, check_binary, peek, read_bytes, tidy
+from accal.io._common import (
+    _short,
+    arrow_to_numpy,
+    bits_from_strings,
+    check_binary,
+    peek,
+    read_bytes,
+    tidy,
+)
 from accal.io.writers import atomic_path
 from accal.series import UNITS, AccSeries, ReadReport
 from accal.timescale import gps_to_gps_calendar
@@ -116,6 +126,14 @@ BINARY_DTYPE = np.dtype(
 #: Key width of the GRACE fixed-width header (``KEY`` padded to 30, then ``: value``).
 GRACE_KEY_WIDTH = 30
 
+#: Accepted ``gps_time`` range [s since 2000-01-01 12:00:00 GPS]: from the GPS epoch
+#: (1980-01-06 00:00:00) to 2100-01-01 00:00:00.  Anything outside is a corrupt time
+#: (a flipped exponent, a binary field read as time), not an L1B epoch.
+TIME_RANGE = (-630_763_200.0, 3_155_716_800.0)
+
+#: Deepest nesting accepted in a GRACE-FO YAML header (the real headers nest 5 deep).
+YAML_MAX_DEPTH = 32
+
 _GRACE_END_RE = re.compile(rb"^(?:# )?END OF HEADER[ \t]*\r?$", re.M)
 _GRACEFO_END_RE = re.compile(rb"^# End of YAML header[ \t]*\r?$", re.M)
 _GRACE_KEY_RE = re.compile(rb"^(?:# )?[A-Z][A-Za-z0-9 ()=/.\-]{3,}:")
@@ -123,21 +141,61 @@ _HEADER_SEARCH = 1 << 20
 _SNIFF_BYTES = 8192
 
 
+@functools.cache
 def _yaml() -> tuple[Any, Any, Any]:
     """Import pyyaml lazily (only GRACE-FO files need it) and build our loader/dumper.
 
-    The loader keeps every plain scalar as the string written in the file; the
-    dumper writes strings plain where YAML allows it (like the real files).
+    The loader keeps every plain scalar as the string written in the file and
+    builds nothing but ``str``, ``list`` and ``dict``: explicit tags (``!!float``,
+    ``!!timestamp``, ``!!binary``, ...), aliases (``*a``, which can expand a small
+    header into an enormous ``meta``), duplicated keys and nesting deeper than
+    :data:`YAML_MAX_DEPTH` are YAML errors.  The dumper writes strings plain where
+    YAML allows it (like the real files).
     """
     import yaml
+    from yaml.composer import ComposerError
+    from yaml.constructor import ConstructorError, SafeConstructor
+    from yaml.events import AliasEvent
 
     class _StrLoader(yaml.SafeLoader):
-        pass
+        _depth = 0
+
+        def compose_node(self, parent: Any, index: Any) -> Any:
+            event = self.peek_event()
+            if isinstance(event, AliasEvent):
+                raise ComposerError(None, None, "aliases (*name) are not allowed", event.start_mark)
+            if self._depth >= YAML_MAX_DEPTH:
+                raise ComposerError(
+                    None, None, f"nested deeper than {YAML_MAX_DEPTH} levels", event.start_mark
+                )
+            self._depth += 1
+            try:
+                return super().compose_node(parent, index)
+            finally:
+                self._depth -= 1
+
+        def construct_mapping(self, node: Any, deep: bool = False) -> Any:
+            seen = set()
+            for key_node, _ in node.value:
+                key = getattr(key_node, "value", None)
+                if isinstance(key, str):
+                    if key in seen:
+                        raise ConstructorError(
+                            None, None, f"duplicated key {key[:40]!r}", key_node.start_mark
+                        )
+                    seen.add(key)
+            return super().construct_mapping(node, deep=deep)
 
     class _StrDumper(yaml.SafeDumper):
         pass
 
     _StrLoader.yaml_implicit_resolvers = {}
+    _StrLoader.yaml_constructors = {
+        "tag:yaml.org,2002:str": SafeConstructor.construct_yaml_str,
+        "tag:yaml.org,2002:seq": SafeConstructor.construct_yaml_seq,
+        "tag:yaml.org,2002:map": SafeConstructor.construct_yaml_map,
+        None: SafeConstructor.construct_undefined,
+    }
     _StrDumper.yaml_implicit_resolvers = {}
     return yaml, _StrLoader, _StrDumper
 
@@ -185,7 +243,7 @@ def _split_header(raw: bytes, path: Path) -> tuple[str, bytes, int, int]:
 def _parse_grace_header(header: bytes, path: Path) -> tuple[dict[str, Any], dict[str, int]]:
     meta: dict[str, Any] = {}
     lines: dict[str, int] = {}
-    for i, raw_line in enumerate(header.decode("utf-8").splitlines(), start=1):
+    for i, raw_line in enumerate(header.decode("utf-8").split("\n"), start=1):
         line = raw_line.rstrip()
         if line.startswith("#"):
             line = line[1:].lstrip()
@@ -193,7 +251,7 @@ def _parse_grace_header(header: bytes, path: Path) -> tuple[dict[str, Any], dict
             continue
         key, sep, value = line.partition(":")
         if not sep:
-            raise FormatError(f"header line is not 'KEY : value': {line[:40]!r}", path, i)
+            raise FormatError(f"header line is not 'KEY : value': {_short(line, 40)}", path, i)
         key, value = key.strip(), value.strip()
         if key in meta:
             prev = meta[key]
@@ -212,7 +270,7 @@ def _grace_int(meta: dict, lines: dict, key: str, path: Path) -> int | None:
         return int(str(value).split()[0])
     except (ValueError, IndexError):
         raise FormatError(
-            f"header {key!r} is not an integer: {value!r}", path, lines.get(key)
+            f"header {key!r} is not an integer: {_short(str(value), 40)}", path, lines.get(key)
         ) from None
 
 
@@ -232,7 +290,7 @@ def _interpret_grace(header: bytes, path: Path) -> dict[str, Any]:
     letter = sat.split()[-1] if sat.split() else ""
     if letter not in SATELLITES:
         raise FormatError(
-            f"header 'SATELLITE NAME' is {sat!r}, expected 'GRACE A' ... 'GRACE D'",
+            f"header 'SATELLITE NAME' is {_short(sat, 40)}, expected 'GRACE A' ... 'GRACE D'",
             path,
             lines.get("SATELLITE NAME"),
         )
@@ -248,7 +306,15 @@ def _interpret_grace(header: bytes, path: Path) -> dict[str, Any]:
     }
 
 
-def _interpret_gracefo(header: bytes, path: Path) -> dict[str, Any]:
+def load_yaml_header(header: bytes, path: Path) -> dict[str, Any]:
+    """Parse a GRACE-FO YAML header into its ``header:`` mapping (scalars kept as str).
+
+    Raises
+    ------
+    FormatError
+        Invalid YAML (with its line), a construct refused by the loader of
+        :func:`_yaml`, or no ``header:`` mapping.
+    """
     yaml, str_loader, _ = _yaml()
     try:
         doc = yaml.load(header.decode("utf-8"), Loader=str_loader)  # noqa: S506 (safe loader)
@@ -257,31 +323,41 @@ def _interpret_gracefo(header: bytes, path: Path) -> dict[str, Any]:
         line = None if mark is None else mark.line + 1
         problem = getattr(exc, "problem", None) or "invalid YAML"
         raise FormatError(f"YAML header: {problem}", path, line) from None
+    except RecursionError:  # the loader caps nesting; belt and braces
+        raise FormatError("YAML header: nested too deeply", path) from None
     if not isinstance(doc, dict) or not isinstance(doc.get("header"), dict):
         raise FormatError("YAML header has no 'header:' mapping", path, 1)
-    hdr = doc["header"]
+    return doc["header"]
+
+
+def _interpret_gracefo(header: bytes, path: Path) -> dict[str, Any]:
+    hdr = load_yaml_header(header, path)
+    dims = hdr.get("dimensions")
     try:
-        n_header = int(hdr["dimensions"]["num_records"])
+        n_header = int(dims["num_records"]) if isinstance(dims, dict) else None
     except (KeyError, TypeError, ValueError):
-        raise FormatError(
-            "YAML header: 'dimensions: num_records' missing or not an integer", path
-        ) from None
+        n_header = None
+    if n_header is None:
+        raise FormatError("YAML header: 'dimensions: num_records' missing or not an integer", path)
     variables = hdr.get("variables") or []
-    try:
-        names = tuple(next(iter(v)) for v in variables)
-    except (TypeError, StopIteration):
-        raise FormatError("YAML header: 'variables' is not a list of mappings", path) from None
+    if not isinstance(variables, list) or not all(isinstance(v, dict) and v for v in variables):
+        raise FormatError("YAML header: 'variables' is not a list of mappings", path)
+    names = tuple(next(iter(v)) for v in variables)
     if names and names != GRACEFO_COLUMNS:
         raise UnsupportedFormatError(
-            f"columns {' '.join(names[:6])} ... are not ACC1B/ACT1B columns "
+            f"columns {_short(' '.join(names[:6]), 80)} ... are not ACC1B/ACT1B columns "
             "(only accelerometer data are supported)",
             path,
         )
-    platform = str((hdr.get("global_attributes") or {}).get("platform", ""))
-    letter = platform.split()[-1] if platform.split() else ""
+    attrs = hdr.get("global_attributes") or {}
+    if not isinstance(attrs, dict):
+        raise FormatError("YAML header: 'global_attributes' is not a mapping", path)
+    platform = attrs.get("platform", "")
+    letter = platform.split()[-1] if isinstance(platform, str) and platform.split() else ""
     if letter not in ("C", "D"):
         raise FormatError(
-            f"YAML header: platform is {platform!r}, expected 'GRACE C' or 'GRACE D'", path
+            f"YAML header: platform is {_short(platform, 40)}, expected 'GRACE C' or 'GRACE D'",
+            path,
         )
     return {
         "meta": {"gracefo": hdr},
@@ -293,6 +369,27 @@ def _interpret_gracefo(header: bytes, path: Path) -> dict[str, Any]:
 
 
 # --------------------------------------------------------------------------- data
+
+
+def _row_to_line(data: bytes, first_line: int) -> Callable[[int], int]:
+    """Map a 0-based data row (as pyarrow counts them) to its 1-based file line.
+
+    pyarrow skips empty lines, so with blank lines in the data the row index is not
+    ``line - first_line``; the scan only runs on the error path.
+    """
+
+    def line_of(row: int) -> int:
+        if b"\n\n" not in data and b"\n\r\n" not in data and data[:1] not in (b"\n", b"\r"):
+            return first_line + row
+        k = -1
+        for j, bline in enumerate(data.split(b"\n")):
+            if bline.rstrip(b"\r"):
+                k += 1
+                if k == row:
+                    return first_line + j
+        return first_line + row
+
+    return line_of
 
 
 def _locate_bad_line(data: bytes, first_line: int, n_fields: int, path: Path) -> FormatError:
@@ -307,16 +404,22 @@ def _locate_bad_line(data: bytes, first_line: int, n_fields: int, path: Path) ->
         except UnicodeDecodeError:
             return FormatError("binary data where a text record was expected", path, lineno)
         line = line.rstrip("\r")
-        if not line.strip():
+        if not line:
             continue
+        if not line.strip():
+            return FormatError("blank line of spaces or tabs among the data records", path, lineno)
         if any(ord(c) < 32 and c != "\t" for c in line):
             return FormatError("binary data where a text record was expected", path, lineno)
         tokens = line.split(" ")
         if len(tokens) != n_fields:
             ntok = len(line.split())
+            if ntok != len(COLUMNS):
+                return FormatError(
+                    f"wrong number of columns: expected {len(COLUMNS)}, got {ntok}", path, lineno
+                )
             return FormatError(
-                f"wrong number of columns: expected {len(COLUMNS)}, got {ntok}"
-                + ("" if ntok != len(COLUMNS) else " (irregular spacing)"),
+                "irregular spacing: expected one space between fields"
+                + (" and two before qualflg, as on the first record" if n_fields > 12 else ""),
                 path,
                 lineno,
             )
@@ -331,13 +434,27 @@ def _locate_bad_line(data: bytes, first_line: int, n_fields: int, path: Path) ->
             try:
                 v = float(tok)
             except ValueError:
-                return FormatError(f"{name}: not a number: {tok[:20]!r}", path, lineno)
+                return FormatError(f"{name}: not a number: {_short(tok)}", path, lineno)
             if not np.isfinite(v):
-                return FormatError(f"{name}: non-finite value {tok!r}", path, lineno)
+                return FormatError(f"{name}: non-finite value {_short(tok)}", path, lineno)
     return FormatError("cannot parse data records", path)
 
 
-def _parse_ascii(data: bytes, first_line: int, path: Path) -> dict[str, np.ndarray]:
+def _check_time(time: np.ndarray, path: Path, line_of: Callable[[int], int] | None) -> None:
+    """Raise FormatError if an epoch lies outside :data:`TIME_RANGE` (records or lines)."""
+    lo, hi = TIME_RANGE
+    if time.size and (time.min() < lo or time.max() > hi):
+        i = int(np.flatnonzero((time < lo) | (time > hi))[0])
+        where = f"record {i + 1}: " if line_of is None else ""
+        raise FormatError(
+            f"{where}gps_time {time[i]:.9g} s is outside 1980-01-06 ... 2100-01-01 "
+            "(GPS seconds since 2000-01-01 12:00:00)",
+            path,
+            None if line_of is None else line_of(i),
+        )
+
+
+def _parse_ascii(data: bytes, first_line: int, path: Path) -> dict[str, Any]:
     import pyarrow as pa
     import pyarrow.csv as pacsv
 
@@ -372,7 +489,7 @@ def _parse_ascii(data: bytes, first_line: int, path: Path) -> dict[str, np.ndarr
         )
     except (pa.ArrowException, ValueError):
         raise _locate_bad_line(data, first_line, len(names), path) from None
-    out: dict[str, np.ndarray] = {}
+    out: dict[str, Any] = {}
     for name in COLUMNS[:11]:
         if name == "GRACE_id":
             continue
@@ -383,12 +500,15 @@ def _parse_ascii(data: bytes, first_line: int, path: Path) -> dict[str, np.ndarr
         if not np.isfinite(arr).all():
             raise _locate_bad_line(data, first_line, len(names), path)
         out[name] = arr
+    line_of = _row_to_line(data, first_line)
+    _check_time(out["gps_time"], path, line_of)
     out["GRACE_id"] = table.column("GRACE_id")
-    out["qualflg"] = bits_from_strings(table.column("qualflg"), path, first_line)
+    out["qualflg"] = bits_from_strings(table.column("qualflg"), path, first_line, line_of=line_of)
+    out["line_of"] = line_of
     return out
 
 
-def _parse_binary(data: bytes, path: Path) -> dict[str, np.ndarray]:
+def _parse_binary(data: bytes, path: Path) -> dict[str, Any]:
     if not data:
         raise FormatError("header but no data records", path)
     rest = len(data) % BINARY_DTYPE.itemsize
@@ -399,7 +519,8 @@ def _parse_binary(data: bytes, path: Path) -> dict[str, np.ndarray]:
             path,
         )
     rec = np.frombuffer(data, dtype=BINARY_DTYPE)
-    out: dict[str, np.ndarray] = {"gps_time": rec["gps_time"].astype(np.float64)}
+    out: dict[str, Any] = {"gps_time": rec["gps_time"].astype(np.float64)}
+    _check_time(out["gps_time"], path, None)
     for name in COLUMNS[2:11]:
         arr = rec[name].astype(np.float64)
         bad = np.flatnonzero(~np.isfinite(arr))
@@ -408,11 +529,21 @@ def _parse_binary(data: bytes, path: Path) -> dict[str, np.ndarray]:
         out[name] = arr
     out["GRACE_id"] = np.char.decode(rec["GRACE_id"], "latin-1")
     out["qualflg"] = rec["qualflg"].astype(np.uint32)
+    out["line_of"] = None
     return out
 
 
-def _check_ids(ids: Any, letter: str, path: Path, first_line: int) -> list[str]:
-    """Check the satellite-id column (one character per record) without pyarrow.compute."""
+_ID_LOOKUP = np.zeros(256, dtype=bool)
+_ID_LOOKUP[np.frombuffer("".join(SATELLITES).encode(), np.uint8)] = True
+
+
+def _check_ids(
+    ids: Any, letter: str, path: Path, line_of: Callable[[int], int] | None
+) -> list[str]:
+    """Check the satellite-id column (one character per record) without pyarrow.compute.
+
+    ``line_of`` maps a row to its file line (ASCII); None numbers binary records.
+    """
     import pyarrow as pa
 
     if not isinstance(ids, pa.ChunkedArray | pa.Array):
@@ -420,20 +551,31 @@ def _check_ids(ids: Any, letter: str, path: Path, first_line: int) -> list[str]:
     if isinstance(ids, pa.ChunkedArray):
         ids = ids.combine_chunks()
     n = len(ids)
+    if n == 0:
+        return []
     if pa.types.is_large_string(ids.type):
         ids = ids.cast(pa.string())
     _, off_buf, data_buf = ids.buffers()
     offsets = np.frombuffer(off_buf, dtype=np.int32, count=n + 1, offset=4 * ids.offset)
     lengths = np.diff(offsets)
-    chars = np.frombuffer(data_buf, dtype=np.uint8, count=int(offsets[-1]))[offsets[:-1]]
-    ok = (lengths == 1) & np.isin(chars, np.frombuffer("".join(SATELLITES).encode(), np.uint8))
+    total = int(offsets[-1])
+    if total == 0:  # every id empty: no data buffer to index
+        chars = np.zeros(n, dtype=np.uint8)
+    else:
+        starts = offsets[:-1]
+        if starts[-1] >= total:  # empty ids at the end start at ``total``: clip (unused)
+            starts = np.minimum(starts, total - 1)
+        chars = np.frombuffer(data_buf, dtype=np.uint8, count=total)[starts]
+    ok = (lengths == 1) & _ID_LOOKUP[chars]
     if not ok.all():
         i = int(np.flatnonzero(~ok)[0])
-        bad = ids[i].as_py()
+        where = f"record {i + 1}: " if line_of is None else ""
         raise FormatError(
-            f"satellite id {bad[:10]!r} is not one of A, B, C, D", path, first_line + i
+            f"{where}satellite id {_short(ids[i].as_py(), 10)} is not one of A, B, C, D",
+            path,
+            None if line_of is None else line_of(i),
         )
-    uniq = sorted({chr(c) for c in np.unique(chars)})
+    uniq = [chr(c) for c in np.flatnonzero(np.bincount(chars, minlength=256))]
     if len(uniq) > 1:
         raise FormatError(f"mixed satellite ids {uniq} in one file", path)
     if uniq and uniq[0] != letter:
@@ -483,7 +625,7 @@ def read_grace_acc1b(path: str | Path, *, invalid_bits: int = DEFAULT_INVALID_BI
     info = (_interpret_gracefo if flavour == "gracefo" else _interpret_grace)(header, path)
     data = raw[data_start:]
     cols = _parse_binary(data, path) if info["binary"] else _parse_ascii(data, first_line, path)
-    warn = _check_ids(cols["GRACE_id"], info["letter"], path, first_line)
+    warn = _check_ids(cols["GRACE_id"], info["letter"], path, cols["line_of"])
     time = cols["gps_time"]
     acc = np.column_stack([cols["lin_accl_x"], cols["lin_accl_y"], cols["lin_accl_z"]])
     arrays = {"acc": acc, "quality": cols["qualflg"], **{c: cols[c] for c in AUX_COLUMNS}}
