@@ -270,16 +270,18 @@ def subtract_reference(series: AccSeries, reference: AccSeries, ref_path: Path) 
 
 def estimate(series: AccSeries, opts: GraceBiasOptions) -> dict[tuple[str, str], Any]:
     """Fit every (axis, method) of ``series``; returns ``{(axis, method): TrendFit}``."""
-    from accal.estimators.trend import fit_trend
+    from accal.estimators.trend import fit_trends
 
     use = np.ones(len(series), bool) if opts.keep_flagged else series.valid
     fits = {}
-    for ax in series.axes:
-        for m in opts.methods:
-            fits[(ax, m)] = fit_trend(
-                series.time, series.axis(ax), method=m, order=opts.order, valid=use
-            )
-    return fits
+    for m in opts.methods:
+        for ax, fit in zip(
+            series.axes,
+            fit_trends(series.time, series.acc, method=m, order=opts.order, valid=use),
+            strict=True,
+        ):
+            fits[(ax, m)] = fit
+    return {(ax, m): fits[(ax, m)] for ax in series.axes for m in opts.methods}
 
 
 def calibrate(

@@ -212,3 +212,41 @@ def test_monte_carlo_sigma_is_honest_for_one_over_f_noise(method):
     rd = np.std(ed) / np.sqrt(np.mean(np.square(sd)))
     assert 0.7 <= rb <= 1.4, rb
     assert 0.7 <= rd <= 1.4, rd
+
+
+@pytest.mark.parametrize("method", ["wavelet", "lsq"])
+@pytest.mark.parametrize("order", [1, 2])
+def test_fit_trends_matches_fit_trend_per_column(method, order):
+    """The shared-work multi-axis fit gives each column's fit_trend result."""
+    from accal.estimators.trend import fit_trend, fit_trends
+
+    rng = np.random.default_rng(order)
+    n = 5000
+    t = 1.2e8 + np.cumsum(rng.uniform(0.9, 1.1, n))
+    valid = rng.random(n) > 0.05
+    a = 1e-6 * np.array([1.0, -28.0, 0.5]) + 1e-12 * np.outer(t - t[0], [1, 2, 3])
+    a = a + 1e-9 * rng.standard_normal((n, 3))
+    multi = fit_trends(t, a, method=method, order=order, valid=valid)
+    for j in range(3):
+        one = fit_trend(t, a[:, j], method=method, order=order, valid=valid)
+        np.testing.assert_allclose(multi[j].coef, one.coef, rtol=1e-9, atol=1e-22)
+        np.testing.assert_allclose(multi[j].cov, one.cov, rtol=1e-9, atol=0)
+        assert multi[j].n_used == one.n_used and multi[j].t0 == one.t0
+        assert multi[j].rms == pytest.approx(one.rms, rel=1e-12)
+
+
+def test_fit_trends_exact_on_pure_linear_trends_and_falls_back_on_nan():
+    from accal.estimators.trend import fit_trends
+
+    t = 2.0e8 + np.arange(3001.0)
+    b = np.array([1.2e-6, -2.9e-5, 5e-7])
+    d = np.array([3e-13, -1e-12, 2e-14])
+    a = b + np.outer(t - t[0], d)
+    for method in ("wavelet", "lsq"):
+        fits = fit_trends(t, a, method=method)
+        for j, f in enumerate(fits):
+            assert abs(f.bias - b[j]) <= 4 * np.finfo(float).eps * abs(b[j])
+            assert abs(f.drift - d[j]) <= 1e-10 * abs(d[j])
+    a[10, 1] = np.nan  # one column with a NaN: per-column masks
+    fits = fit_trends(t, a)
+    assert fits[1].n_used == t.size - 1 and fits[0].n_used == t.size

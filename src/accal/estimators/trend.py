@@ -325,46 +325,68 @@ def linear_estimator_covariance(
     / sigma within 0.9–1.35 for white, AR(1) and 1/f-below-1-mHz noise over a day.
     No N×N matrix is formed; the cost is a handful of length-N FFTs.
     """
-    t = np.asarray(t, dtype=np.float64)
-    r = np.asarray(residual, dtype=np.float64)
     g = np.atleast_2d(np.asarray(weights, dtype=np.float64))
-    n = t.size
-    p = g.shape[0]
-    if n <= order + 2:
-        return np.full((p, p), np.nan)
-    idx, ngrid = _grid_index(t)
-    u, _, _ = _scaled_time(t)
-    q, _ = np.linalg.qr(np.vander(u, order + 1, increasing=True))
-    grid = np.zeros((order + 2 + p, ngrid))
-    grid[0, idx] = r
-    grid[1 : order + 2, idx] = q.T
-    grid[order + 2 :, idx] = g
-    spec = np.fft.rfft(grid, axis=1)
-    nf = spec.shape[1]
-    pgram = np.abs(spec[0]) ** 2 / n
-    suppress = 1.0 - np.sum(np.abs(spec[1 : order + 2]) ** 2, axis=0) / n
-    pgram = pgram / np.clip(suppress, 0.2, None)
-    # log-spaced bins over f_k, k = 1 .. nf-1
-    edges = [1]
-    while edges[-1] < nf:
-        edges.append(edges[-1] + max(min_bin, int(0.25 * edges[-1])))
-    edges[-1] = nf
-    edges_arr = np.asarray(edges)
-    k = np.arange(1, nf)
-    which = np.searchsorted(edges_arr, k, side="right") - 1
-    counts = np.bincount(which, minlength=edges_arr.size - 1)
-    sums = np.bincount(which, weights=pgram[1:], minlength=edges_arr.size - 1)
-    sbin = sums / np.maximum(counts, 1)
-    psd = np.empty(nf)
-    psd[1:] = sbin[which]
-    psd[0] = sbin[0]
-    two_sided = np.full(nf, 2.0)
-    two_sided[0] = 1.0
-    if ngrid % 2 == 0:
-        two_sided[-1] = 1.0
-    gs = spec[order + 2 :]
-    cov = ((gs * (two_sided * psd)) @ np.conj(gs).T).real / ngrid
-    return cov
+    if np.asarray(t).size <= order + 2:
+        return np.full((g.shape[0], g.shape[0]), np.nan)
+    return _CovarianceKernel(t, g, order, min_bin).covariances(
+        np.asarray(residual, dtype=np.float64)[None, :]
+    )[0]
+
+
+class _CovarianceKernel:
+    """The residual-independent part of :func:`linear_estimator_covariance`.
+
+    The DFTs of the estimator weights and of the polynomial basis depend only on
+    the sample times, so several residuals (the axes of one file) share them and
+    cost one FFT each.
+    """
+
+    def __init__(self, t: ArrayLike, g: NDArray[np.float64], order: int, min_bin: int = 3) -> None:
+        t = np.asarray(t, dtype=np.float64)
+        self.n = t.size
+        self.order = order
+        self.idx, self.ngrid = _grid_index(t)
+        u, _, _ = _scaled_time(t)
+        q, _ = np.linalg.qr(np.vander(u, order + 1, increasing=True))
+        grid = np.zeros((order + 1 + g.shape[0], self.ngrid))
+        grid[: order + 1, self.idx] = q.T
+        grid[order + 1 :, self.idx] = g
+        spec = np.fft.rfft(grid, axis=1)
+        nf = spec.shape[1]
+        suppress = 1.0 - np.sum(np.abs(spec[: order + 1]) ** 2, axis=0) / self.n
+        self.inv_suppress = 1.0 / np.clip(suppress, 0.2, None)
+        self.gs = spec[order + 1 :]
+        # log-spaced bins over f_k, k = 1 .. nf-1
+        edges = [1]
+        while edges[-1] < nf:
+            edges.append(edges[-1] + max(min_bin, int(0.25 * edges[-1])))
+        edges[-1] = nf
+        edges_arr = np.asarray(edges)
+        self.which = np.searchsorted(edges_arr, np.arange(1, nf), side="right") - 1
+        self.nbins = edges_arr.size - 1
+        self.counts = np.maximum(np.bincount(self.which, minlength=self.nbins), 1)
+        two_sided = np.full(nf, 2.0)
+        two_sided[0] = 1.0
+        if self.ngrid % 2 == 0:
+            two_sided[-1] = 1.0
+        self.two_sided = two_sided
+
+    def covariances(self, residuals: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``G C Gᵀ`` for each row of ``residuals`` (shape (k, n)) -> (k, p, p)."""
+        grid = np.zeros((residuals.shape[0], self.ngrid))
+        grid[:, self.idx] = residuals
+        rspec = np.fft.rfft(grid, axis=1)
+        out = []
+        for row in rspec:
+            pgram = np.abs(row) ** 2 / self.n * self.inv_suppress
+            sums = np.bincount(self.which, weights=pgram[1:], minlength=self.nbins)
+            sbin = sums / self.counts
+            psd = np.empty(pgram.size)
+            psd[1:] = sbin[self.which]
+            psd[0] = sbin[0]
+            w = self.two_sided * psd
+            out.append(((self.gs * w) @ np.conj(self.gs).T).real / self.ngrid)
+        return np.array(out)
 
 
 # --------------------------------------------------------------------------------------
@@ -442,3 +464,60 @@ def fit_trend(
         n_used=int(tu.size),
         rms=float(np.sqrt(np.mean(resid**2))),
     )
+
+
+def fit_trends(
+    t: ArrayLike,
+    a: ArrayLike,
+    *,
+    method: str = "wavelet",
+    order: int = 1,
+    valid: ArrayLike | None = None,
+) -> list[TrendFit]:
+    """:func:`fit_trend` of every column of ``a`` (shape (n, k)), sharing the work.
+
+    Columns with the same usable samples share the estimator weights and the
+    DFTs of :func:`linear_estimator_covariance`; the results are those of
+    :func:`fit_trend` column by column (to rounding).
+    """
+    check_option("method", method, tuple(METHODS))
+    t = np.asarray(t, dtype=np.float64)
+    a = np.asarray(a, dtype=np.float64)
+    if a.ndim != 2 or a.shape[0] != t.size or t.ndim != 1:
+        raise ValidationError(f"a must have shape ({t.size}, k), got {a.shape}")
+    use = np.isfinite(t)
+    if valid is not None:
+        valid = np.asarray(valid, dtype=bool)
+        if valid.shape != t.shape:
+            raise ValidationError(f"valid must have shape {t.shape}, got {valid.shape}")
+        use &= valid
+    finite = np.isfinite(a)
+    if not finite[use].all():
+        return [
+            fit_trend(t, a[:, j], method=method, order=order, valid=use) for j in range(a.shape[1])
+        ]
+    tu = t[use]
+    au = a[use]
+    if tu.size < order + 2:
+        raise ValidationError(
+            f"only {tu.size} usable samples; an order-{order} trend needs at least {order + 2}"
+        )
+    if np.any(np.diff(tu) <= 0):
+        raise ValidationError("sample times must be strictly increasing")
+    g = METHODS[method](tu, order)
+    coef = g @ au  # (p, k)
+    vander = np.vander(tu - tu[0], order + 1, increasing=True)
+    resid = au - vander @ coef
+    covs = _CovarianceKernel(tu, g, order).covariances(np.ascontiguousarray(resid.T))
+    return [
+        TrendFit(
+            method=method,
+            order=order,
+            t0=float(tu[0]),
+            coef=coef[:, j].copy(),
+            cov=covs[j],
+            n_used=int(tu.size),
+            rms=float(np.sqrt(np.mean(resid[:, j] ** 2))),
+        )
+        for j in range(a.shape[1])
+    ]
