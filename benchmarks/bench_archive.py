@@ -1,0 +1,162 @@
+"""Archive-scale benchmark of ``accal grace-bias`` (``make bench-archive``).
+
+Generates N synthetic 1 Hz ACC1B day files (default 200; 10 distinct simulated
+days, each copied under 20 dates), then measures, in this run:
+
+* the baseline: pyarrow's raw CSV parse of the same bytes (one process, files in
+  sequence, pyarrow's own threads on) — MB/s;
+* ``accal grace-bias DIR -r -j W`` end to end (a fresh process: import, read,
+  wavelet fit with sigmas on 3 axes, calibrated Parquet + report + cumulative
+  table + manifest) with W = 1 and 2 workers — MB/s, files/s, the ratio to the
+  baseline (target ≥ 0.7), peak RSS of the largest process (getrusage of the
+  children), and the projected time for the GRACE mission (11,000 daily files) on
+  this machine (target < 30 min);
+* peak RSS with N/4 and N files (does memory grow with the number of files?);
+* a re-run on the same directory (everything current: manifest check only).
+
+Prints a table and asserts nothing.  ``--files`` and ``--keep`` for experiments.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import resource
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+MISSION_FILES = 11_000
+
+
+def make_archive(root: Path, n_files: int, distinct: int = 10) -> list[Path]:
+    from accal.simulate.grace import write_simulated_grace
+
+    seeds = root / "seeds"
+    days = []
+    for k in range(distinct):
+        p = seeds / f"seed_{k}.asc"
+        write_simulated_grace(p, date="2005-01-01", satellite="AB"[k % 2], seed=k)
+        days.append(p)
+    out = []
+    import datetime as dt
+
+    for i in range(n_files):
+        date = dt.date(2005, 1, 1) + dt.timedelta(days=i // 2)
+        sat = "AB"[i % 2]
+        dst = root / "archive" / f"{date:%Y}" / f"ACC1B_{date}_{sat}_02.asc"
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(days[i % distinct], dst)
+        out.append(dst)
+    shutil.rmtree(seeds)
+    return out
+
+
+def raw_parse(files: list[Path]) -> float:
+    """Seconds for pyarrow.csv to parse every file's records (as in bench_readers.py)."""
+    import pyarrow as pa
+    import pyarrow.csv as pacsv
+
+    t0 = time.perf_counter()
+    for p in files:
+        data = p.read_bytes()
+        start = data.index(b"\n", data.index(b"END OF HEADER")) + 1
+        pacsv.read_csv(
+            pa.py_buffer(data[start:]),
+            read_options=pacsv.ReadOptions(autogenerate_column_names=True),
+            parse_options=pacsv.ParseOptions(delimiter=" "),
+        )
+    return time.perf_counter() - t0
+
+
+def run_accal(src: Path, out: Path, workers: int) -> tuple[float, float]:
+    """(wall seconds, peak RSS of the largest descendant in MB) of one accal run."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    t0 = time.perf_counter()
+    cmd = [sys.executable, "-m", "accal", "grace-bias", str(src), "-r", "-j", str(workers)]
+    subprocess.run([*cmd, "--out", str(out), "-q"], check=True)
+    wall = time.perf_counter() - t0
+    peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    return wall, max(peak, before) / 1024.0
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--files", type=int, default=200)
+    ap.add_argument("--keep", type=Path, default=None, help="Keep the archive here.")
+    args = ap.parse_args()
+    tmp = Path(tempfile.mkdtemp(prefix="accal-bench-archive-"))
+    root = args.keep or tmp
+    try:
+        t0 = time.perf_counter()
+        files = make_archive(root, args.files)
+        mb = sum(p.stat().st_size for p in files) / 1e6
+        print(
+            f"archive: {len(files)} files, {mb:.0f} MB (generated in {time.perf_counter() - t0:.0f} s)"
+        )
+        base = min(raw_parse(files) for _ in range(2))
+        base_rate = mb / base
+        print(f"baseline pyarrow.csv raw parse: {base:.2f} s = {base_rate:.1f} MB/s")
+        print()
+        print(
+            "| workers | wall [s] | MB/s | files/s | ratio to raw parse | peak RSS [MB] | GRACE mission (11,000 files) |"
+        )
+        print("|---|---|---|---|---|---|---|")
+        rss_note = []
+        for w in (1, 2):
+            out = root / f"out{w}"
+            wall, rss = run_accal(root / "archive", out, w)
+            rate = mb / wall
+            proj = MISSION_FILES * wall / len(files) / 60.0
+            print(
+                f"| {w} | {wall:.1f} | {rate:.1f} | {len(files) / wall:.2f} | {rate / base_rate:.2f} "
+                f"| {rss:.0f} | {proj:.1f} min |"
+            )
+            rss_note.append(rss)
+        # re-run: all current
+        t1 = time.perf_counter()
+        subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "accal",
+                "grace-bias",
+                str(root / "archive"),
+                "-r",
+                "--out",
+                str(root / "out2"),
+                "-q",
+            ],
+            check=True,
+        )
+        print(f"\nre-run with everything current: {time.perf_counter() - t1:.2f} s")
+        # memory vs number of files, in fresh processes
+        quarter = root / "quarter"
+        for p in files[: len(files) // 4]:
+            dst = quarter / p.relative_to(root / "archive")
+            dst.parent.mkdir(parents=True, exist_ok=True)
+            os.link(p, dst)
+        code = (
+            "import resource,subprocess,sys;"
+            "subprocess.run([sys.executable,'-m','accal','grace-bias',sys.argv[1],'-r','-j','2',"
+            "'--out',sys.argv[2],'-q'],check=True);"
+            "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss/1024)"
+        )
+        for src, label in ((quarter, len(files) // 4), (root / "archive", len(files))):
+            r = subprocess.run(
+                [sys.executable, "-c", code, str(src), str(root / f"mem{label}")],
+                check=True,
+                capture_output=True,
+                text=True,
+            )
+            print(f"peak RSS with {label} files, 2 workers: {float(r.stdout):.0f} MB")
+    finally:
+        if args.keep is None:
+            shutil.rmtree(tmp, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()
