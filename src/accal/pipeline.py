@@ -749,12 +749,36 @@ def _take(table: Any, index: np.ndarray) -> Any:
     cols = []
     for f, col in zip(table.schema, table.columns, strict=True):
         if pa.types.is_string(f.type):
+            arr = col.combine_chunks() if isinstance(col, pa.ChunkedArray) else col
+            if arr.null_count == 0:
+                cols.append(_take_strings(arr, index))
+                continue
             vals = np.array(col.to_pylist(), dtype=object)[index]
         else:
             vals = arrow_to_numpy(col)[index]
         arr = arrow_column(vals)
         cols.append(arr if arr.type == f.type else arr.cast(f.type))
     return pa.Table.from_arrays(cols, schema=table.schema)
+
+
+def _take_strings(arr: Any, index: np.ndarray) -> Any:
+    """Rows ``index`` of a null-free Arrow string array, gathered on its buffers with numpy."""
+    import pyarrow as pa
+
+    index = np.asarray(index, dtype=np.int64)
+    _, obuf, dbuf = arr.buffers()
+    off = np.frombuffer(obuf, dtype=np.int32)[arr.offset : arr.offset + len(arr) + 1]
+    data = np.frombuffer(dbuf, dtype=np.uint8) if dbuf is not None else np.zeros(0, np.uint8)
+    starts = off[index].astype(np.int64)
+    lens = off[index + 1].astype(np.int64) - starts
+    new_off = np.zeros(index.size + 1, dtype=np.int64)
+    np.cumsum(lens, out=new_off[1:])
+    pos = np.repeat(starts - new_off[:-1], lens) + np.arange(new_off[-1])
+    return pa.Array.from_buffers(
+        pa.string(),
+        index.size,
+        [None, pa.py_buffer(new_off.astype(np.int32)), pa.py_buffer(data[pos].copy())],
+    )
 
 
 def _keys(table: Any) -> list[tuple[str, ...]]:
