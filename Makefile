@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 OUT    ?= out
 
-.PHONY: install run test test-all lint bench bench-readers mc-sigma clean
+.PHONY: install run test test-all lint bench bench-readers bench-archive mc-sigma clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -50,6 +50,10 @@ mc-sigma: $(STAMP)
 
 bench-readers: $(STAMP)
 	$(BIN)/python benchmarks/bench_readers.py
+
+## bench-archive: 200 synthetic 1 Hz days, 1 and 2 workers, vs raw pyarrow parse (~2 GB in /tmp)
+bench-archive: $(STAMP)
+	$(BIN)/python benchmarks/bench_archive.py
 
 clean:
 	rm -rf $(OUT) .pytest_cache .hypothesis .benchmarks build dist
