@@ -173,7 +173,7 @@ def test_bad_input_messages():
         close_loop(t, np.zeros(100), valid=t < 10)
     with pytest.raises(ValidationError, match="auxiliary channel 'T'"):
         close_loop(t, np.zeros(100), aux={"T": np.zeros(3)})
-    with pytest.raises(NotImplementedError, match="platform angle"):
+    with pytest.raises(ValidationError, match="platform angle"):
         close_loop(t, np.random.default_rng(0).standard_normal(100), candidates=("angle_offset",))
 
 

@@ -8,7 +8,8 @@ Layer 2 (see ``shared/STYLE.md`` §4): arrays in, findings out; only
 >>> res.to_dict()["effects"]
 """
 
-from accal.closure.candidates import BUILDERS, EFFECT_NAMES, Context, Proposal
+from accal.closure.basis import BlockBase
+from accal.closure.candidates import BUILDERS, EFFECT_NAMES, Context, PlatformInfo, Proposal
 from accal.closure.residual import ResidualStats, characterise
 from accal.closure.select import (
     DEFAULT_CANDIDATES,
@@ -23,9 +24,11 @@ __all__ = [
     "DEFAULT_CANDIDATES",
     "EFFECT_NAMES",
     "BaseCoefficient",
+    "BlockBase",
     "ClosureResult",
     "Context",
     "Effect",
+    "PlatformInfo",
     "Proposal",
     "ResidualStats",
     "characterise",

@@ -7,27 +7,37 @@ selection uses as a Bonferroni factor so that searching many epochs or frequenci
 does not buy false detections.
 
 Builders are plain functions; :data:`BUILDERS` maps the names accepted by
-:func:`accal.closure.close_loop` to them.  A caller with its own effect (the
-rotating-platform demodulation: ``angle_offset``, intra-period bias shape) passes
-its builder function in ``candidates`` instead of a name; :func:`angle_offset` and
-:func:`intra_period_shape` are the documented hooks, not implemented yet.
+:func:`accal.closure.close_loop` to them.  A caller with its own effect passes its
+builder function in ``candidates`` instead of a name.  The rotating-platform
+effects (:func:`angle_offset`, :func:`intra_period_shape`) need the platform angle
+and the fitted demodulated signal (:class:`PlatformInfo` in
+``options["platform"]``); :func:`accal.closure.demod.close_loop_demod` supplies them.
+
+With several data channels (the y and z axes of the rotating platform, interleaved
+in time), every generic effect gets one coefficient per channel (the columns are
+split with :meth:`Context.split`) and is tested jointly.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from accal.closure.residual import Grid, estimate_psd
+from accal.errors import ValidationError
+
+if TYPE_CHECKING:
+    from accal.closure.basis import Basis
+    from accal.closure.residual import Grid
 
 __all__ = [
     "BUILDERS",
     "EFFECT_NAMES",
     "Context",
+    "PlatformInfo",
     "Proposal",
     "angle_offset",
     "auxiliary",
@@ -46,6 +56,7 @@ EFFECT_NAMES = (
     "periodic",
     "auxiliary",
     "angle_offset",
+    "intra_period_shape",
     "unexplained",
 )
 
@@ -68,12 +79,14 @@ class Context:
         Used samples on their nominal grid.
     residual : ndarray, shape (n,)
         Residual of the current model on the used samples [m/s²].
-    qx : ndarray, shape (n, p)
-        Orthonormal basis of the current design on the used samples.
-    qx_fft : ndarray, shape (p, nf)
-        Its rfft on the grid.
+    basis : Basis
+        Orthonormal basis of the current design on the used samples (block base +
+        the effects added so far; :class:`accal.closure.basis.Basis`).
+    leverage : ndarray, shape (C, nf)
+        Its leverage spectrum ``Σ_j |Q_j(f)|²`` (for PSD estimates).
     labels : frozenset of str
-        Labels of the columns already in the design (``"t^2"``, ``"step@<t>"``, ...).
+        Labels of the columns already in the design (``"t^2"``, ``"step@<t>"``, ...;
+        with several channels suffixed ``":<channel>"``).
     aux : dict of str to ndarray, shape (N,)
         Auxiliary channels on all samples.
     orbit_period : float or None
@@ -82,7 +95,13 @@ class Context:
         Frequencies not to propose again [Hz] (already modelled or rejected).
     options : dict
         Search settings (``step_tests``, ``min_segment``, ``max_lag``, ``n_lags``,
-        ``aux_taus``, ``fmax``).
+        ``aux_taus``, ``fmax``, ``settle_taus``) and ``platform``
+        (:class:`PlatformInfo`, for ``angle_offset`` and ``intra_period_shape``).
+    channel_all : ndarray of int, shape (N,), optional
+        Data channel of every sample (several channels: e.g. the y and z axes of
+        the rotating platform, interleaved in time).
+    channel_names : tuple of str
+        Names of the channels (empty for a single channel).
     """
 
     t_all: NDArray[np.float64]
@@ -91,18 +110,62 @@ class Context:
     span: float
     grid: Grid
     residual: NDArray[np.float64]
-    qx: NDArray[np.float64]
-    qx_fft: NDArray[np.complex128]
+    basis: Basis
+    leverage: NDArray[np.float64]
     labels: frozenset[str]
     aux: dict[str, NDArray[np.float64]]
     orbit_period: float | None
     excluded_freqs: tuple[float, ...] = ()
     options: dict[str, Any] = field(default_factory=dict)
+    channel_all: NDArray[np.int64] | None = None
+    channel_names: tuple[str, ...] = ()
 
     @property
     def t(self) -> NDArray[np.float64]:
         """Times of the used samples [s]."""
         return self.t_all[self.use]
+
+    @property
+    def qx(self) -> NDArray[np.float64]:
+        """The orthonormal basis as a dense (n, p) array (small designs only)."""
+        return self.basis.dense_q()
+
+    @property
+    def n_chan(self) -> int:
+        """Number of data channels."""
+        return max(len(self.channel_names), 1)
+
+    def has_label(self, label: str) -> bool:
+        """Whether a column labelled ``label`` (any channel) is in the design."""
+        return any(lab == label or lab.startswith(label + ":") for lab in self.labels)
+
+    def split(
+        self, cols: NDArray[np.float64], labels: tuple[str, ...]
+    ) -> tuple[NDArray[np.float64], tuple[str, ...], tuple[str, ...] | None]:
+        """One copy of ``cols`` (N, q) per data channel (zero on the others).
+
+        Returns ``(columns (N, q·C), labels, axis of each column)``; with one
+        channel, the input unchanged and ``None``.
+        """
+        cols = np.asarray(cols, dtype=np.float64)
+        if cols.ndim == 1:
+            cols = cols[:, None]
+        if self.n_chan == 1 or self.channel_all is None:
+            return cols, labels, None
+        out, labs, axes = [], [], []
+        for c, name in enumerate(self.channel_names):
+            m = (self.channel_all == c)[:, None]
+            out.append(cols * m)
+            labs += [f"{lab}:{name}" for lab in labels]
+            axes += [name] * cols.shape[1]
+        return np.column_stack(out), tuple(labs), tuple(axes)
+
+    def channel_masks(self) -> list[NDArray[np.bool_]]:
+        """Used-sample mask of every channel (one all-true mask for a single channel)."""
+        if self.n_chan == 1 or self.channel_all is None:
+            return [np.ones(int(self.use.sum()), dtype=bool)]
+        ch = self.channel_all[self.use]
+        return [ch == c for c in range(self.n_chan)]
 
     def power(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
         """OLS explained power ``(z̃ᵀr)²/z̃ᵀz̃`` of each column of ``z`` (used rows).
@@ -113,10 +176,21 @@ class Context:
         z = np.asarray(z, dtype=np.float64)
         if z.ndim == 1:
             z = z[:, None]
-        zt = z - self.qx @ (self.qx.T @ z)
-        nrm = np.sum(zt**2, axis=0)
-        num = (zt.T @ self.residual) ** 2
-        return np.where(nrm > 1e-12 * np.maximum(np.sum(z**2, axis=0), 1e-300), num / nrm, 0.0)
+        # the residual is orthogonal to the design: z̃ᵀr = zᵀr, ‖z̃‖² = ‖z‖² − ‖Qᵀz‖²
+        z2 = np.sum(z**2, axis=0)
+        nrm = z2 - self.basis.captured(z)
+        num = (z.T @ self.residual) ** 2
+        return np.where(nrm > 1e-9 * np.maximum(z2, 1e-300), num / np.maximum(nrm, 1e-300), 0.0)
+
+    def joint_power(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
+        """:meth:`power` summed over the data channels (columns split per channel)."""
+        z = np.asarray(z, dtype=np.float64)
+        if z.ndim == 1:
+            z = z[:, None]
+        masks = self.channel_masks()
+        if len(masks) == 1:
+            return self.power(z)
+        return sum(self.power(z * m[:, None]) for m in masks)
 
 
 @dataclass(frozen=True)
@@ -140,6 +214,12 @@ class Proposal:
     check_consistency : bool
         Whether the selection must check that the coefficient is the same in
         every third of the record (periodic and auxiliary effects).
+    axes : tuple of str, optional
+        Data channel of each column when the data have several channels.
+    note : str, optional
+        Set (with no columns) when the effect cannot be estimated from these data
+        (e.g. not identifiable): the selection records it in
+        :attr:`ClosureResult.notes` instead of testing it.
     """
 
     name: str
@@ -149,42 +229,47 @@ class Proposal:
     multiplicity: float = 1.0
     params: dict[str, Any] = field(default_factory=dict)
     check_consistency: bool = False
+    axes: tuple[str, ...] | None = None
+    note: str | None = None
 
 
 Builder = Callable[[Context], list[Proposal]]
 
 
 def _poly_proposal(ctx: Context, name: str, powers: tuple[int, ...]) -> list[Proposal]:
-    if f"t^{max(powers)}" in ctx.labels:
+    if ctx.has_label(f"t^{max(powers)}"):
         return []
-    missing = tuple(k for k in powers if f"t^{k}" not in ctx.labels)
+    missing = tuple(k for k in powers if not ctx.has_label(f"t^{k}"))
     u = (ctx.t_all - ctx.t0) / ctx.span
-    cols = np.column_stack([u**k for k in missing])
+    cols, labs, axes = ctx.split(
+        np.column_stack([u**k for k in missing]), tuple(f"t^{k}" for k in missing)
+    )
     return [
         Proposal(
             name,
             None,
             cols,
-            tuple(f"t^{k}" for k in missing),
+            labs,
             1.0,
             {"powers": missing, "scale": ctx.span},
+            axes=axes,
         )
     ]
 
 
 def quadratic_drift(ctx: Context) -> list[Proposal]:
-    """A ``(t − t0)²`` term beyond the declared order (one regressor)."""
+    """A ``(t − t0)²`` term beyond the declared order (one regressor per channel)."""
     return _poly_proposal(ctx, "quadratic_drift", (2,))
 
 
 def cubic_drift(ctx: Context) -> list[Proposal]:
-    """A ``(t − t0)³`` term (one regressor).
+    """A ``(t − t0)³`` term (one regressor per channel).
 
     If the model lacks ``(t − t0)²`` and ``quadratic_drift`` is not enabled, the
     square is added too; otherwise the quadratic must enter first (parsimony: the
     nested one-regressor family is preferred).
     """
-    if "t^2" not in ctx.labels and "quadratic_drift" in ctx.options.get("enabled", ()):
+    if not ctx.has_label("t^2") and "quadratic_drift" in ctx.options.get("enabled", ()):
         return []
     return _poly_proposal(ctx, "cubic_drift", (2, 3))
 
@@ -194,39 +279,47 @@ def bias_step(ctx: Context) -> list[Proposal]:
 
     The scan evaluates the OLS power of ``1[t ≥ τ]`` (design projected out) for every
     used sample ``τ`` at least ``min_segment`` from either end, with cumulative sums
-    (O(n p)).  Repeated over iterations, this is binary segmentation with a
-    multiplicity-corrected threshold as penalty.  The multiplicity is
-    ``step_tests`` (default 200: epochs closer than 0.5 % of the span are not
-    independent tests).
+    (O(n p), block by block for a block base).  Repeated over iterations, this is
+    binary segmentation with a multiplicity-corrected threshold as penalty.  The
+    multiplicity is ``step_tests`` (default 200: epochs closer than 0.5 % of the span
+    are not independent tests).  With several data channels the step has one size
+    per channel and the scan sums the channels' powers.
     """
     t = ctx.t
     n = t.size
-    min_seg = int(ctx.options.get("min_segment", max(10, n // 50)))
+    masks = ctx.channel_masks()
+    n_time = n // len(masks)
+    min_seg = int(ctx.options.get("min_segment", max(10, n_time // 50))) * len(masks)
     if n < 2 * min_seg + 2:
         return []
     r = ctx.residual
-    # reverse cumulative sums: S[i] = Σ_{j ≥ i}
-    s_r = np.cumsum(r[::-1])[::-1]
-    s_q = np.cumsum(ctx.qx[::-1], axis=0)[::-1]
-    cnt = n - np.arange(n)
-    nrm = cnt - np.sum(s_q**2, axis=1)
-    lo, hi = min_seg, n - min_seg
     ok = np.zeros(n, dtype=bool)
-    ok[lo:hi] = True
-    ok &= nrm > 1e-6 * cnt
+    ok[min_seg : n - min_seg] = True
+    ok &= np.r_[True, np.diff(t) > 0]  # epochs at the first sample of a time
     for lab in ctx.labels:  # no second step at an existing epoch
         if lab.startswith("step@"):
-            e = float(lab[5:])
+            e = float(lab[5:].split(":")[0])
             i = int(np.searchsorted(t, e))
             ok[max(0, i - min_seg) : i + min_seg] = False
+    stat = np.zeros(n)
+    for m in masks:
+        rm = r * m
+        s_r = np.cumsum(rm[::-1])[::-1]
+        cnt = np.cumsum(m[::-1].astype(float))[::-1]
+        nrm = cnt - ctx.basis.step_norms(m)
+        good = nrm > 1e-6 * np.maximum(cnt, 1.0)
+        ok &= good
+        stat += np.where(good, s_r**2 / np.where(good, nrm, 1.0), 0.0)
     if not ok.any():
         return []
-    stat = np.where(ok, s_r**2 / np.where(ok, nrm, 1.0), -1.0)
+    stat = np.where(ok, stat, -1.0)
     i = int(np.argmax(stat))
     epoch = float(t[i])
-    col = (ctx.t_all >= epoch).astype(np.float64)[:, None]
-    m = float(min(ctx.options.get("step_tests", 200), ok.sum()))
-    return [Proposal("bias_step", None, col, (f"step@{epoch!r}",), m, {"epoch": epoch})]
+    cols, labs, axes = ctx.split(
+        (ctx.t_all >= epoch).astype(np.float64)[:, None], (f"step@{epoch!r}",)
+    )
+    m_tests = float(min(ctx.options.get("step_tests", 200), ok.sum()))
+    return [Proposal("bias_step", None, cols, labs, m_tests, {"epoch": epoch}, axes=axes)]
 
 
 def _harmonic_cols(tau: NDArray[np.float64], freqs: list[float]) -> NDArray[np.float64]:
@@ -238,16 +331,31 @@ def _harmonic_cols(tau: NDArray[np.float64], freqs: list[float]) -> NDArray[np.f
 
 
 def _line_power(
-    tau: NDArray[np.float64], r: NDArray[np.float64], freqs: NDArray[np.float64]
+    tau: NDArray[np.float64],
+    r: NDArray[np.float64],
+    freqs: NDArray[np.float64],
+    masks: list[NDArray[np.bool_]] | None = None,
 ) -> NDArray[np.float64]:
-    """Periodogram ``|Σ r e^{−2πifτ}|²`` of the residual at arbitrary frequencies.
+    """Periodogram ``Σ_c |Σ r e^{−2πifτ}|²`` of the residual at evenly spaced frequencies.
 
     A ranking for the frequency searches (the residual is already orthogonal to
-    the design, and sinusoids well inside the band are nearly orthogonal to it).
+    the design, and sinusoids well inside the band are nearly orthogonal to it);
+    with several channels the channels' periodograms are summed.  The phasors are
+    advanced by one complex multiplication per frequency (``freqs`` must be evenly
+    spaced).
     """
-    out = np.empty(freqs.size)
-    for j, f in enumerate(freqs):
-        out[j] = np.abs(np.dot(r, np.exp(-2j * np.pi * f * tau))) ** 2
+    masks = masks or [np.ones(r.size, dtype=bool)]
+    out = np.zeros(freqs.size)
+    if freqs.size == 0:
+        return out
+    step = float(freqs[1] - freqs[0]) if freqs.size > 1 else 0.0
+    for m in masks:
+        tm, rm = tau[m], r[m]
+        ph = rm * np.exp(-2j * np.pi * freqs[0] * tm)
+        rot = np.exp(-2j * np.pi * step * tm)
+        for j in range(freqs.size):
+            out[j] += np.abs(np.sum(ph)) ** 2
+            ph *= rot
     return out
 
 
@@ -264,13 +372,19 @@ def periodic(ctx: Context) -> list[Proposal]:
     * ``channel="orbit"`` (only with ``orbit_period``): cos/sin at ``f`` and ``2f``,
       with ``f`` estimated from the data within ±3 % of ``1/orbit_period``
       (multiplicity: resolvable frequencies in that band).
+
+    With several data channels the search uses their summed periodograms and the
+    amplitudes are per channel.
     """
+    from accal.closure.residual import estimate_psd
+
     t = ctx.t
     tau_all = ctx.t_all - ctx.t0
     tau = t - ctx.t0
+    masks = ctx.channel_masks()
     out: list[Proposal] = []
     df = 1.0 / (ctx.grid.size * ctx.grid.step)
-    noise = estimate_psd(ctx.grid, ctx.residual, ctx.qx_fft)
+    noise = estimate_psd(ctx.grid, ctx.residual, ctx.leverage)
     freqs = ctx.grid.freqs
     fmax = float(ctx.options.get("fmax", freqs[-1]))
     ratio = noise.pgram / np.maximum(noise.psd, 1e-300)
@@ -281,16 +395,18 @@ def periodic(ctx: Context) -> list[Proposal]:
         k = int(np.argmax(np.where(band, ratio, -1.0)))
         trial = freqs[k] + df * np.linspace(-1, 1, 21)
         trial = trial[trial > 0]
-        f = float(trial[int(np.argmax(_line_power(tau, ctx.residual, trial)))])
+        f = float(trial[int(np.argmax(_line_power(tau, ctx.residual, trial, masks)))])
+        cols, labs, axes = ctx.split(_harmonic_cols(tau_all, [f]), (f"cos@{f!r}", f"sin@{f!r}"))
         out.append(
             Proposal(
                 "periodic",
                 "line",
-                _harmonic_cols(tau_all, [f]),
-                (f"cos@{f!r}", f"sin@{f!r}"),
+                cols,
+                labs,
                 float(band.sum()),
                 {"frequency": f, "harmonics": (1,)},
                 True,
+                axes,
             )
         )
     if ctx.orbit_period and ctx.orbit_period > 0:
@@ -298,18 +414,23 @@ def periodic(ctx: Context) -> list[Proposal]:
         if not _excluded(f0, ctx, 0.05 * f0) and 2 * f0 < freqs[-1]:
             trial = f0 * (1 + np.linspace(-0.03, 0.03, 41))
             r = ctx.residual
-            pw = _line_power(tau, r, trial) + _line_power(tau, r, 2 * trial)
+            pw = _line_power(tau, r, trial, masks) + _line_power(tau, r, 2 * trial, masks)
             f = float(trial[int(np.argmax(pw))])
             m = max(1.0, 0.06 * f0 * ctx.span)
+            cols, labs, axes = ctx.split(
+                _harmonic_cols(tau_all, [f, 2 * f]),
+                (f"cos@{f!r}", f"sin@{f!r}", f"cos@{2 * f!r}", f"sin@{2 * f!r}"),
+            )
             out.append(
                 Proposal(
                     "periodic",
                     "orbit",
-                    _harmonic_cols(tau_all, [f, 2 * f]),
-                    (f"cos@{f!r}", f"sin@{f!r}", f"cos@{2 * f!r}", f"sin@{2 * f!r}"),
+                    cols,
+                    labs,
                     m,
                     {"frequency": f, "harmonics": (1, 2)},
                     True,
+                    axes,
                 )
             )
     return out
@@ -334,27 +455,30 @@ def auxiliary(ctx: Context) -> list[Proposal]:
     first-order low-pass with time constant ``τ``; ``τ = 0``: no filter), searched
     over ``n_lags`` lags in ``[0, max_lag]`` (default 31 lags up to min(span/20,
     3600 s)) and ``aux_taus`` (default 0, 300, 1000, 3000 s); the multiplicity is
-    the number of (lag, τ) pairs.  The coefficient is in [m/s² per channel unit].
+    the number of (lag, τ) pairs.  The coefficient is in [m/s² per channel unit]
+    (one per data channel when there are several).
     """
     out: list[Proposal] = []
     t_all = ctx.t_all
+    # filter and shift on the distinct sample times (channels share them)
+    tu, first, inverse = np.unique(t_all, return_index=True, return_inverse=True)
     max_lag = float(ctx.options.get("max_lag", min(ctx.span / 20.0, 3600.0)))
     lags = np.linspace(0.0, max_lag, int(ctx.options.get("n_lags", 31)))
     taus = tuple(ctx.options.get("aux_taus", (0.0, 300.0, 1000.0, 3000.0)))
     for name, x in ctx.aux.items():
-        if f"aux:{name}" in ctx.labels:
+        if ctx.has_label(f"aux:{name}"):
             continue
-        x = np.asarray(x, dtype=np.float64)
+        x = np.asarray(x, dtype=np.float64)[first]
         good = np.isfinite(x)
         if good.sum() < 10 or np.ptp(x[good]) == 0:
             continue
-        xf = np.interp(t_all, t_all[good], x[good])
+        xf = np.interp(tu, tu[good], x[good])
         best = (-1.0, 0.0, 0.0)
         cols = {}
         for tc in taus:
-            h = _first_order(xf, t_all, tc)
-            zs = np.column_stack([np.interp(t_all - lag, t_all, h) for lag in lags])
-            pw = ctx.power(zs[ctx.use])
+            h = _first_order(xf, tu, tc)
+            zs = np.column_stack([np.interp(tu - lag, tu, h) for lag in lags])[inverse]
+            pw = ctx.joint_power(zs[ctx.use])
             j = int(np.argmax(pw))
             if pw[j] > best[0]:
                 best = (float(pw[j]), float(lags[j]), float(tc))
@@ -362,37 +486,212 @@ def auxiliary(ctx: Context) -> list[Proposal]:
         _, lag, tc = best
         col = cols[(lag, tc)]
         col = col - col[ctx.use].mean()
+        cc, labs, axes = ctx.split(col[:, None], (f"aux:{name}",))
         out.append(
             Proposal(
                 "auxiliary",
                 name,
-                col[:, None],
-                (f"aux:{name}",),
+                cc,
+                labs,
                 float(lags.size * len(taus)),
                 {"lag": lag, "tau": tc},
                 True,
+                axes,
             )
         )
     return out
 
 
-def angle_offset(ctx: Context) -> list[Proposal]:
-    """Hook for the rotating platform: an offset of the turntable angle θ.
+# --------------------------------------------------------------------------------------
+# rotating platform
 
-    Not implemented: the demodulation caller will build it from its θ series
-    (the regressor is ∂model/∂θ, i.e. the quadrature of the demodulated signal)
-    and pass the builder in ``candidates``.
+
+@dataclass(frozen=True)
+class PlatformInfo:
+    """What the rotating-platform candidates need, on every (stacked) sample.
+
+    Built by :func:`accal.closure.demod.close_loop_demod`; passed to
+    :func:`close_loop` as ``options["platform"]``.
+
+    Attributes
+    ----------
+    theta : ndarray, shape (N,)
+        Platform angle θ at each sample [rad].
+    signal_y, signal_z : ndarray, shape (N,)
+        Fitted demodulated signal ``a_Y(t)``, ``a_Z(t)`` at each sample (base
+        model, eqs. 14/17) [m/s²].
+    axis_index : ndarray of int, shape (N,)
+        0 for an ``m_y`` sample, 1 for an ``m_z`` sample.
+    since_rest : ndarray, shape (N,)
+        Time since the platform came to rest (end of the last rotation) [s]; NaN
+        while rotating.
+    direction : ndarray, shape (N,)
+        Sign of the last rotation (+1: θ increased, −1: decreased, 0: none yet).
+    rest_angle : ndarray, shape (N,)
+        Rest angle, rounded to 1e-3 rad (NaN while rotating) [rad].
     """
-    raise NotImplementedError(
-        "angle_offset needs the platform angle; pass a builder function from the demod caller"
-    )
+
+    theta: NDArray[np.float64]
+    signal_y: NDArray[np.float64]
+    signal_z: NDArray[np.float64]
+    axis_index: NDArray[np.int64]
+    since_rest: NDArray[np.float64]
+    direction: NDArray[np.float64]
+    rest_angle: NDArray[np.float64]
+
+    def dm_dtheta(self) -> NDArray[np.float64]:
+        """``∂m/∂θ`` on every sample [m/s² per rad] (eq. 4 with k₂ = 0, δk₁ = 0).
+
+        ``m_y = cos θ a_Y + sin θ a_Z`` → ``−sin θ a_Y + cos θ a_Z``;
+        ``m_z = −sin θ a_Y + cos θ a_Z`` → ``−cos θ a_Y − sin θ a_Z``.
+        """
+        c, s = np.cos(self.theta), np.sin(self.theta)
+        ay, az = self.signal_y, self.signal_z
+        return np.where(self.axis_index == 0, -s * ay + c * az, -c * ay - s * az)
+
+
+def _platform(ctx: Context, what: str) -> PlatformInfo:
+    info = ctx.options.get("platform")
+    if not isinstance(info, PlatformInfo):
+        raise ValidationError(
+            f"{what} needs the platform angle θ and the fitted demodulated signal: call it "
+            "through accal.closure.demod.close_loop_demod (options['platform'])"
+        )
+    return info
+
+
+_IDENT_TOL = 1e-6
+
+
+def _identifiable(ctx: Context, col: NDArray[np.float64]) -> float:
+    """Relative norm of the part of ``col`` (used rows) outside the current design."""
+    z = col[ctx.use]
+    nz = float(np.linalg.norm(z))
+    if nz == 0:
+        return 0.0
+    return float(np.linalg.norm(z - ctx.basis.project(z)) / nz)
+
+
+def angle_offset(ctx: Context) -> list[Proposal]:
+    """An error of the platform angle: ``m = P(θ + δ) a`` ≈ ``P(θ) a + δ ∂m/∂θ``.
+
+    Regressor: ``∂m/∂θ`` from the fitted demodulated signal (eq. 4; the quadrature
+    of the demodulated signal), coefficient ``δ`` [rad].  Variants:
+
+    * ``channel="common"``: one offset for every sample (an encoder zero error).
+      Since ``P(θ + δ) = P(θ) P(δ)``, it is a rotation of ``(a_Y, a_Z)`` by ``δ``:
+      with the signal free in every period (eqs. 18-19) it is *never* identifiable
+      from the data, whatever the pattern.  It is not proposed; a note says so.
+    * ``channel="rest@<θ_g>"``: the rest angle ``θ_g`` is off by ``δ_g`` relative to
+      the others (rests not exactly where the log says, e.g. not exactly π apart).
+      With rests at 0 and π only, per period the data hold four numbers (the mean
+      of each axis at each angle, as many as ``a_Y, a_Z, b_y, b_z``), so ``δ_g``
+      is absorbed into the signal and bias: not identifiable (note).  It becomes
+      identifiable when the pattern rests at three or more angles (e.g. 0, π/2, π,
+      3π/2) and ``a`` is non-zero.
+
+    Identifiability is decided numerically: the regressor must keep more than
+    ``1e-6`` of its norm after projecting out the current design.  Each
+    identifiable variant is one proposal; the multiplicity is their number.
+    """
+    info = _platform(ctx, "angle_offset")
+    g = info.dm_dtheta()
+    out: list[Proposal] = []
+    notes: list[Proposal] = []
+    variants = [("common", np.isfinite(g), None)]
+    angles = np.unique(info.rest_angle[ctx.use & np.isfinite(info.rest_angle)])
+    if angles.size > 1:
+        ref = angles[int(np.argmin(np.abs(np.angle(np.exp(1j * angles)))))]
+        for a in angles:
+            if a != ref:
+                variants.append((f"rest@{a:.4g}", info.rest_angle == a, float(a)))
+    for channel, sel, ang in variants:
+        if ctx.has_label(f"angle:{channel}"):
+            continue
+        col = np.where(sel, g, 0.0)
+        rel = _identifiable(ctx, col)
+        if rel <= _IDENT_TOL:
+            why = (
+                "a common angle offset is a rotation of (a_Y, a_Z): P(θ+δ)a = P(θ)P(δ)a"
+                if channel == "common"
+                else "absorbed by the per-period signal and bias (rests at two angles only, "
+                "or the rest angle's samples carry no independent information)"
+            )
+            notes.append(
+                Proposal(
+                    "angle_offset",
+                    channel,
+                    np.zeros((col.size, 0)),
+                    (),
+                    params={"relative_norm_outside_base": rel},
+                    note=f"not identifiable: {why}",
+                )
+            )
+            continue
+        out.append(
+            Proposal(
+                "angle_offset",
+                channel,
+                col[:, None],
+                (f"angle:{channel}",),
+                1.0,
+                {"rest_angle": ang, "relative_norm_outside_base": rel, "units": "rad"},
+            )
+        )
+    out = [Proposal(p.name, p.channel, p.columns, p.labels, float(len(out)), p.params) for p in out]
+    return out + notes
 
 
 def intra_period_shape(ctx: Context) -> list[Proposal]:
-    """Hook for the rotating platform: bias shape within a rotation period (not implemented)."""
-    raise NotImplementedError(
-        "intra_period_shape needs the platform angle; pass a builder from the demod caller"
-    )
+    """A bias shape repeating after every rotation: a settling transient.
+
+    Family: ``A_axis · exp(−φ/τ_s)`` with ``φ`` the time since the platform came to
+    rest, either the same after every rotation (``channel="common"``) or with the
+    sign of the rotation (``channel="direction"``: e.g. a proof-mass tilt in the
+    sense of rotation), one amplitude ``A`` per axis [m/s²], ``τ_s`` searched over
+    ``settle_taus`` (default 5, 10, 20, 50, 100, 200 s); multiplicity: the number
+    of (τ_s, sign) pairs.
+
+    Why a parametric shape and not a free basis in phase-within-period: the part of
+    any periodic shape that lies in the span of the per-period columns (signal
+    ``cos θ`` and bias) cannot be told apart from a constant signal offset, so a
+    free basis could not correct ``a_Y``/``a_Z``.  With a fixed shape, the part
+    outside that span fixes ``A``, and subtracting ``A·shape`` removes its leak into
+    the demodulated signal as well (e.g. a direction-dependent transient, whose
+    ``cos θ`` component does not cancel over the symmetric pattern).
+    """
+    info = _platform(ctx, "intra_period_shape")
+    taus = tuple(ctx.options.get("settle_taus", (5.0, 10.0, 20.0, 50.0, 100.0, 200.0)))
+    phi = info.since_rest
+    rest = np.isfinite(phi)
+    best = None
+    n_var = 0
+    for kind, sign in (("common", np.ones_like(phi)), ("direction", info.direction)):
+        if ctx.has_label(f"shape:{kind}"):
+            continue
+        for ts in taus:
+            base = np.where(rest, np.exp(-np.where(rest, phi, 0.0) / ts), 0.0) * sign
+            cols, labs, axes = ctx.split(base[:, None], (f"shape:{kind}",))
+            if _identifiable(ctx, base) <= _IDENT_TOL:
+                continue
+            n_var += 1
+            pw = float(np.sum(ctx.power(cols[ctx.use])))
+            if best is None or pw > best[0]:
+                best = (pw, kind, ts, cols, labs, axes)
+    if best is None:
+        return []
+    _, kind, ts, cols, labs, axes = best
+    return [
+        Proposal(
+            "intra_period_shape",
+            kind,
+            cols,
+            labs,
+            float(n_var),
+            {"tau": ts},
+            axes=axes,
+        )
+    ]
 
 
 #: Names accepted in ``close_loop(candidates=...)``.

@@ -50,28 +50,51 @@ __all__ = [
 class Grid:
     """The used samples placed on their nominal uniform sampling grid.
 
+    Several channels (e.g. the y and z axes of the rotating platform) share one time
+    grid; their noises are taken as independent with a common PSD.
+
     Attributes
     ----------
     idx : ndarray of int, shape (n,)
-        Grid index of each used sample.
+        Grid index of each used sample (within its channel).
     size : int
-        Number of grid points ``N`` (gaps included).
+        Number of grid points ``N`` per channel (gaps included).
     step : float
         Nominal sampling interval [s].
+    chan : ndarray of int, shape (n,), optional
+        Channel of each used sample (default: all 0).
+    n_chan : int
+        Number of channels ``C``.
     """
 
     idx: NDArray[np.int64]
     size: int
     step: float
+    chan: NDArray[np.int64] | None = None
+    n_chan: int = 1
+
+    @property
+    def channel(self) -> NDArray[np.int64]:
+        """Channel of each used sample (zeros for a single channel)."""
+        return np.zeros(self.idx.size, dtype=np.int64) if self.chan is None else self.chan
+
+    @property
+    def counts(self) -> NDArray[np.float64]:
+        """Used samples per channel, shape (C,)."""
+        return np.bincount(self.channel, minlength=self.n_chan).astype(np.float64)
 
     def place(self, cols: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Put columns (n, k) or a vector (n,) on the grid, zeros in gaps -> (k, N)."""
+        """Put columns (n, k) or a vector (n,) on the grid, zeros in gaps -> (k, C, N)."""
         cols = np.asarray(cols, dtype=np.float64)
         if cols.ndim == 1:
             cols = cols[:, None]
-        out = np.zeros((cols.shape[1], self.size))
-        out[:, self.idx] = cols.T
+        out = np.zeros((cols.shape[1], self.n_chan, self.size))
+        out[:, self.channel, self.idx] = cols.T
         return out
+
+    def fft(self, cols: NDArray[np.float64]) -> NDArray[np.complex128]:
+        """rfft of :meth:`place` per channel -> (k, C, nf)."""
+        return np.fft.rfft(self.place(cols), axis=-1)
 
     @property
     def freqs(self) -> NDArray[np.float64]:
@@ -79,15 +102,36 @@ class Grid:
         return np.fft.rfftfreq(self.size, self.step)
 
 
-def make_grid(t: NDArray[np.float64]) -> Grid:
-    """Nominal-grid indices of increasing sample times ``t`` [s]."""
+def make_grid(t: NDArray[np.float64], chan: NDArray[np.int64] | None = None) -> Grid:
+    """Nominal-grid indices of sample times ``t`` [s], increasing within each channel.
+
+    Parameters
+    ----------
+    t : ndarray, shape (n,)
+        Sample times, non-decreasing (strictly increasing within a channel) [s].
+    chan : ndarray of int, shape (n,), optional
+        Channel index ``0 .. C-1`` of each sample.
+    """
     t = np.asarray(t, dtype=np.float64)
-    if t.size < 2:
-        return Grid(np.zeros(t.size, dtype=np.int64), max(t.size, 1), 1.0)
-    step = float(np.median(np.diff(t)))
-    idx = np.rint((t - t[0]) / step).astype(np.int64)
-    idx = np.maximum.accumulate(np.maximum(idx, np.arange(idx.size)))
-    return Grid(idx, int(idx[-1]) + 1, step)
+    if chan is None or t.size == 0:
+        if t.size < 2:
+            return Grid(np.zeros(t.size, dtype=np.int64), max(t.size, 1), 1.0)
+        step = float(np.median(np.diff(t)))
+        idx = np.rint((t - t[0]) / step).astype(np.int64)
+        idx = np.maximum.accumulate(np.maximum(idx, np.arange(idx.size)))
+        return Grid(idx, int(idx[-1]) + 1, step)
+    chan = np.asarray(chan, dtype=np.int64)
+    n_chan = int(chan.max()) + 1
+    diffs = [np.diff(t[chan == c]) for c in range(n_chan)]
+    d = np.concatenate(diffs) if diffs else np.zeros(0)
+    step = float(np.median(d)) if d.size else 1.0
+    idx = np.zeros(t.size, dtype=np.int64)
+    for c in range(n_chan):
+        m = chan == c
+        ic = np.rint((t[m] - t[0]) / step).astype(np.int64)
+        ic = np.maximum.accumulate(np.maximum(ic, np.arange(ic.size) + (ic[0] if ic.size else 0)))
+        idx[m] = ic
+    return Grid(idx, int(idx.max()) + 1, step, chan, n_chan)
 
 
 @dataclass(frozen=True)
@@ -102,9 +146,10 @@ class NoisePSD:
         Bin of each DFT frequency (frequency 0 belongs to bin 0).
     counts : ndarray, shape (nbins,)
         Effective number of periodogram ordinates in each bin (ordinates weighted by
-        the share of their power the fitted design left in the residual).
+        the share of their power the fitted design left in the residual), summed
+        over the channels.
     pgram : ndarray, shape (nf,)
-        The corrected periodogram itself.
+        The corrected periodogram itself (mean over the channels).
     """
 
     level: NDArray[np.float64]
@@ -126,10 +171,19 @@ def _two_sided(size: int, nf: int) -> NDArray[np.float64]:
     return w
 
 
+def _as_leverage(basis: NDArray, n_chan: int) -> NDArray[np.float64]:
+    """Leverage spectrum (C, nf) from either itself or a complex basis rfft (k, [C,] nf)."""
+    b = np.asarray(basis)
+    if np.iscomplexobj(b):
+        lev = np.sum(np.abs(b) ** 2, axis=0)
+        return lev[None, :] if lev.ndim == 1 else lev
+    return b[None, :] if b.ndim == 1 else b
+
+
 def estimate_psd(
     grid: Grid,
     residual: NDArray[np.float64],
-    basis_fft: NDArray[np.complex128],
+    basis_leverage: NDArray,
     *,
     min_bin: int = 3,
     growth: float = 0.25,
@@ -142,11 +196,13 @@ def estimate_psd(
         Sample placement.
     residual : ndarray, shape (n,)
         Residual of a least-squares fit [m/s²].
-    basis_fft : ndarray, shape (k, nf)
-        rfft of an orthonormal basis of the fitted design on the grid; removing it
-        removed the share ``Σ_j |Q_j(f)|²/n`` of the white-noise power at ``f``.
-        Each bin's level is then ``Σ P_f / Σ (1 − share_f)`` (unbiased for noise
-        that is white within the bin), and bins are widened until they hold
+    basis_leverage : ndarray, shape (C, nf)
+        Leverage spectrum ``Σ_j |Q_j(f)|²`` of an orthonormal basis ``Q`` of the
+        fitted design, per channel (:meth:`accal.closure.basis.Basis.leverage`); a
+        complex array ``rfft(Q)`` of shape (k, nf) is accepted too.  Removing the
+        design removed the share ``Σ_j |Q_j(f)|²/n_c`` of the white-noise power at
+        ``f``.  Each bin's level is then ``Σ P_f / Σ (1 − share_f)`` (unbiased for
+        noise that is white within the bin), and bins are widened until they hold
         ``min_bin/2`` effective ordinates.
     min_bin, growth : int, float
         Bins of ``min_bin`` ordinates at the low end, each growing by ``growth``.
@@ -155,14 +211,13 @@ def estimate_psd(
     -------
     NoisePSD
     """
-    n = residual.size
-    spec = np.fft.rfft(grid.place(residual)[0])
-    nf = spec.size
-    raw = np.abs(spec) ** 2 / n
-    if basis_fft.size:
-        supp = np.clip(1.0 - np.sum(np.abs(basis_fft) ** 2, axis=0) / n, 0.0, 1.0)
-    else:
-        supp = np.ones(nf)
+    nc = np.maximum(grid.counts, 1.0)[:, None]
+    spec = grid.fft(residual)[0]  # (C, nf)
+    nf = spec.shape[-1]
+    raw = np.abs(spec) ** 2 / nc
+    lev = _as_leverage(basis_leverage, grid.n_chan)
+    supp_c = np.clip(1.0 - lev / nc, 0.0, 1.0) if lev.size else np.ones((grid.n_chan, nf))
+    supp = np.mean(supp_c, axis=0)  # bin layout from the mean suppression
     # bins: at least `min_bin` ordinates and `min_bin/2` effective (unsuppressed) ones
     csum = np.concatenate([[0.0], np.cumsum(supp)])
     edges = [1]
@@ -181,11 +236,11 @@ def estimate_psd(
     which[1:] = np.searchsorted(edges_arr, np.arange(1, nf), side="right") - 1
     nb = max(edges_arr.size - 1, 1)
     # ratio estimator: E[Σ raw] = S · Σ supp within a bin (white within the bin)
-    sums = np.bincount(which[1:], weights=raw[1:], minlength=nb)
-    effective = np.bincount(which[1:], weights=supp[1:], minlength=nb)
+    sums = np.bincount(which[1:], weights=raw[:, 1:].sum(axis=0), minlength=nb)
+    effective = np.bincount(which[1:], weights=supp_c[:, 1:].sum(axis=0), minlength=nb)
     level = sums / np.maximum(effective, 1e-12)
     counts = np.maximum(effective, 0.5)
-    pgram = raw / np.maximum(supp, 0.2)
+    pgram = np.mean(raw / np.maximum(supp_c, 0.2), axis=0)
     return NoisePSD(level, which, counts, pgram)
 
 
@@ -221,13 +276,14 @@ class WaldResult:
         return int(self.gamma.size)
 
 
-def orthonormal_complement(
-    z: NDArray[np.float64], qx: NDArray[np.float64], tol: float = 1e-8
-) -> NDArray[np.float64]:
+def orthonormal_complement(z: NDArray[np.float64], qx, tol: float = 1e-8) -> NDArray[np.float64]:
     """Orthonormal basis of the part of the columns ``z`` orthogonal to ``qx``.
 
+    ``qx`` is a dense orthonormal basis (n, p) or a :class:`~accal.closure.basis.Basis`.
     Columns that are (numerically) in the span of ``qx`` or of each other are dropped.
     """
+    if hasattr(qx, "complement"):
+        return qx.complement(z, tol)
     z = np.asarray(z, dtype=np.float64)
     if z.ndim == 1:
         z = z[:, None]
@@ -240,11 +296,20 @@ def orthonormal_complement(
     return u[:, keep]
 
 
+def _quad(fa: NDArray[np.complex128], wt: NDArray[np.float64], size: int, fb=None):
+    """``Σ_{c,f} A_i(f) w(f) B_j(f)* / N`` for spectra (k, C, nf) -> (ka, kb), real."""
+    fb = fa if fb is None else fb
+    a = fa.reshape(fa.shape[0], -1)
+    b = fb.reshape(fb.shape[0], -1)
+    w = np.broadcast_to(wt, fa.shape[1:]).reshape(-1)
+    return ((a * w) @ np.conj(b).T).real / size
+
+
 def wald_test(
     grid: Grid,
     residual: NDArray[np.float64],
     zt: NDArray[np.float64],
-    qx_fft: NDArray[np.complex128],
+    basis_leverage: NDArray,
     *,
     min_bin: int = 3,
     psd: NDArray[np.float64] | None = None,
@@ -260,8 +325,8 @@ def wald_test(
     zt : ndarray, shape (n, q)
         Orthonormal extra regressors, orthogonal to the current design
         (:func:`orthonormal_complement`).
-    qx_fft : ndarray, shape (p, nf)
-        rfft of the orthonormal basis of the current design on the grid.
+    basis_leverage : ndarray, shape (C, nf)
+        Leverage spectrum of the current design (see :func:`estimate_psd`).
     min_bin : int
         Lowest PSD bin width, in DFT ordinates.
     psd : ndarray, shape (nf,), optional
@@ -281,10 +346,12 @@ def wald_test(
         return WaldResult(np.zeros(0), np.zeros((0, 0)), 0.0, np.inf, 1.0, residual)
     gamma = zt.T @ residual  # OLS coefficients of orthonormal columns: weights G = ztᵀ
     r1 = residual - zt @ gamma
-    z_fft = np.fft.rfft(grid.place(zt), axis=1)
-    noise = estimate_psd(grid, r1, np.vstack([qx_fft, z_fft]), min_bin=min_bin)
-    w = _two_sided(grid.size, z_fft.shape[1]) * (noise.psd if psd is None else psd)
-    cov = ((z_fft * w) @ np.conj(z_fft).T).real / grid.size
+    z_fft = grid.fft(zt)  # (q, C, nf)
+    lev = _as_leverage(basis_leverage, grid.n_chan) + np.sum(np.abs(z_fft) ** 2, axis=0)
+    noise = estimate_psd(grid, r1, lev, min_bin=min_bin)
+    nf = z_fft.shape[-1]
+    w = _two_sided(grid.size, nf) * (noise.psd if psd is None else psd)
+    cov = _quad(z_fft, w, grid.size)
     cov = 0.5 * (cov + cov.T)
     try:
         cinv = np.linalg.pinv(cov, rcond=1e-12)
@@ -294,7 +361,9 @@ def wald_test(
     if psd is not None:
         return WaldResult(gamma, cov, stat, np.inf, float(stats.chi2.sf(stat * q, q)), r1)
     # Satterthwaite: contribution of each PSD bin to tr(Σ⁻¹Σ) = q
-    h = np.einsum("if,ij,jf->f", np.conj(z_fft), cinv, z_fft).real * w / grid.size
+    zf = z_fft.reshape(q, -1)
+    h = np.sum(np.conj(zf) * (cinv @ zf), axis=0).real.reshape(grid.n_chan, nf).sum(axis=0)
+    h = h * w / grid.size
     c = np.bincount(noise.which, weights=h, minlength=noise.level.size)
     m = noise.counts.astype(float)
     denom = float(np.sum(c**2 / (2.0 * m)))
@@ -309,21 +378,32 @@ def sandwich_cov(
     grid: Grid,
     residual: NDArray[np.float64],
     weights: NDArray[np.float64],
-    design_q: NDArray[np.float64],
+    basis_leverage,
     *,
     min_bin: int = 3,
 ) -> NDArray[np.float64]:
-    """Covariance ``G C Gᵀ`` of linear estimators ``weights @ y`` (shape (p, n)).
+    """Covariance ``G C Gᵀ`` of dense linear estimators ``weights @ y`` (shape (p, n)).
 
-    ``design_q`` is an orthonormal basis of the fitted design (for the projection
-    correction of the PSD estimate).
+    ``basis_leverage`` is the leverage spectrum of the fitted design (for the
+    projection correction of the PSD estimate); a dense orthonormal basis (n, p)
+    or a :class:`~accal.closure.basis.Basis` is accepted too.  Block-local
+    estimators use :meth:`accal.closure.basis.Basis.block_cov` instead.
     """
-    q_fft = np.fft.rfft(grid.place(design_q), axis=1)
-    noise = estimate_psd(grid, residual, q_fft, min_bin=min_bin)
-    g_fft = np.fft.rfft(grid.place(np.atleast_2d(weights).T), axis=1)
-    w = _two_sided(grid.size, g_fft.shape[1]) * noise.psd
-    cov = ((g_fft * w) @ np.conj(g_fft).T).real / grid.size
+    noise = estimate_psd(grid, residual, leverage_of(grid, basis_leverage), min_bin=min_bin)
+    g_fft = grid.fft(np.atleast_2d(weights).T)
+    w = _two_sided(grid.size, g_fft.shape[-1]) * noise.psd
+    cov = _quad(g_fft, w, grid.size)
     return 0.5 * (cov + cov.T)
+
+
+def leverage_of(grid: Grid, basis) -> NDArray[np.float64]:
+    """Leverage spectrum (C, nf) of a basis object, a dense orthonormal basis, or itself."""
+    if hasattr(basis, "leverage"):
+        return basis.leverage(grid)
+    b = np.asarray(basis)
+    if not np.iscomplexobj(b) and b.ndim == 2 and b.shape[0] == grid.idx.size:
+        return np.sum(np.abs(grid.fft(b)) ** 2, axis=0)
+    return _as_leverage(b, grid.n_chan)
 
 
 def white_plus_flicker(
@@ -438,6 +518,7 @@ def characterise(
     *,
     segment: float | None = None,
     nperseg: int | None = None,
+    chan: NDArray[np.int64] | None = None,
 ) -> ResidualStats:
     """Characterise a residual (used samples only).
 
@@ -453,18 +534,34 @@ def characterise(
     nperseg : int, optional
         Welch window length [samples]; default the largest power of two ≤ span/8
         (at least 64).
+    chan : ndarray of int, shape (n,), optional
+        Channel of each sample: the Welch PSD is averaged over the channels;
+        segment means, RMS and kurtosis pool them.
     """
     from scipy.stats import kurtosis
 
     t = np.asarray(t, dtype=np.float64)
     r = np.asarray(r, dtype=np.float64)
     span = float(t[-1] - t[0]) if t.size > 1 else 1.0
-    step = float(np.median(np.diff(t))) if t.size > 1 else 1.0
+    t1 = t if chan is None else t[np.asarray(chan) == chan[0]]
+    step = float(np.median(np.diff(t1))) if t1.size > 1 else 1.0
     if segment is None or not segment > 0:
         segment = span / 16.0
     if nperseg is None:
         nperseg = int(2 ** np.floor(np.log2(max(span / step / 8.0, 64))))
-    freq, psd = welch_segments(t, r, nperseg)
+    if chan is None or int(np.max(chan, initial=0)) == 0:
+        freq, psd = welch_segments(t, r, nperseg)
+    else:
+        freq, psd, tot = np.zeros(0), np.zeros(0), 0
+        for c in np.unique(chan):
+            m = chan == c
+            f_c, p_c = welch_segments(t[m], r[m], nperseg)
+            if f_c.size:
+                freq = f_c
+                psd = p_c if tot == 0 else psd + p_c
+                tot += 1
+        if tot:
+            psd = psd / tot
     edges = np.arange(t[0], t[-1] + segment, segment)
     which = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, edges.size - 1)
     counts = np.bincount(which, minlength=edges.size)

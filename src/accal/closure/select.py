@@ -16,12 +16,22 @@
    the three thirds of the record may not differ significantly (p < 1e-3) and by more
    than 30 %, otherwise the structure is reported as ``unexplained`` (a chirp is not
    a sinusoid) and the next proposal is tried;
-4. add the best significant proposal and go back to 1, at most ``max_effects`` times;
+4. add the best significant proposal; then re-test every effect added before it
+   given all the others (backward elimination): one that is no longer significant
+   was standing in for the new one (e.g. the once-per-orbit part of a temperature
+   coupling taken as ``periodic``) and is removed, and its search family may propose
+   again; go back to 1, at most ``max_effects`` additions;
 5. finally test a generic smooth basis (piecewise-linear, ``catchall_knots`` knots) on
    top of the final model against the white + 1/f noise model fitted above twice the
    basis' frequencies and extrapolated down (the residual itself cannot tell slow
    structure from slow noise): if it is significant, whatever it captures is
    reported as ``unexplained`` with its dominant frequency, never as a named effect.
+
+The base may be block-diagonal (:class:`~accal.closure.basis.BlockBase`, e.g. the
+per-period demodulation model); every projection and covariance is then computed
+block by block (:class:`~accal.closure.basis.Basis`).  Several data channels sharing
+a time grid (``channel``) are fitted jointly, with independent noises of a common
+PSD.
 """
 
 from __future__ import annotations
@@ -33,15 +43,16 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from accal.closure.basis import Basis, BlockBase, FitResult
 from accal.closure.candidates import BUILDERS, Context, Proposal
 from accal.closure.residual import (
     Grid,
     ResidualStats,
+    _quad,
+    _two_sided,
     characterise,
     estimate_psd,
     make_grid,
-    orthonormal_complement,
-    sandwich_cov,
     wald_test,
     white_plus_flicker,
 )
@@ -64,14 +75,17 @@ class Effect:
     ----------
     name : str
         ``quadratic_drift``, ``cubic_drift``, ``bias_step``, ``periodic``,
-        ``auxiliary``, ``angle_offset`` or ``unexplained``.
+        ``auxiliary``, ``angle_offset``, ``intra_period_shape`` or ``unexplained``.
     channel : str or None
         Auxiliary channel name; ``"orbit"``/``"line"`` for periodic effects;
-        for ``unexplained``: ``"smooth"`` (catch-all) or the rejected kind.
+        ``"common"``/``"rest@<θ>"`` for angle offsets; ``"common"``/``"direction"``
+        for intra-period shapes; for ``unexplained``: ``"smooth"`` (catch-all) or
+        the rejected kind.
     coefficient : float
         Step size [m/s²]; coefficient of the highest power of ``(t − t0)``
         [m/s⁴ or m/s⁵]; coupling [m/s² per channel unit]; amplitude of the
-        fundamental [m/s²]; RMS of the unexplained component [m/s²].
+        fundamental [m/s²]; angle offset [rad]; settling amplitude [m/s²]; RMS of
+        the unexplained component [m/s²].
     sigma : float
         1σ uncertainty of ``coefficient`` under the coloured-noise model.
     significance : float
@@ -83,9 +97,15 @@ class Effect:
     lag : float or None
         Lag of the auxiliary response [s].
     tau : float or None
-        Time constant of the first-order auxiliary response [s] (0: none).
+        Time constant of the first-order auxiliary response, or of the settling
+        transient [s] (0: none).
     details : dict
-        Everything else (all coefficients of the family, phases, shape, ...).
+        Everything else (all coefficients of the family, phases, shape, ...); with
+        several data channels ``details["axes"]`` holds the coefficient and sigma
+        of every channel.
+    axis : str or None
+        With several data channels: the channel whose coefficient is reported in
+        ``coefficient`` (the most significant one).
     """
 
     name: str
@@ -98,6 +118,7 @@ class Effect:
     lag: float | None = None
     tau: float | None = None
     details: dict[str, Any] = field(default_factory=dict)
+    axis: str | None = None
 
 
 @dataclass(frozen=True)
@@ -105,7 +126,8 @@ class BaseCoefficient:
     """A base-model coefficient before and after closing the loop.
 
     ``sigma_change`` is the uncertainty of the difference of the two (correlated)
-    linear estimators, evaluated under the final residual's noise.
+    linear estimators, evaluated under the final residual's noise.  NaN for a
+    coefficient the data do not determine (a block without used samples).
     """
 
     name: str
@@ -134,7 +156,8 @@ class ClosureResult:
         Structure that no candidate explains (name ``"unexplained"``).
     base : tuple of BaseCoefficient
         Base coefficients before/after; for polynomial bases ``bias`` [m/s²] at
-        ``t0``, ``drift`` [m/s³], ... in powers of ``t − t0``.
+        ``t0``, ``drift`` [m/s³], ... in powers of ``t − t0``; for a block base
+        ``f"{name}[{block}]"``.
     t0 : float
         Reference epoch, the first used sample [s].
     rms_before, rms_after : float
@@ -144,19 +167,36 @@ class ClosureResult:
     use : ndarray of bool, shape (N,)
         Samples used.
     residual_before, residual_after : ndarray, shape (N,)
-        ``y − model`` on all samples [m/s²].
-    design : ndarray, shape (N, k)
-        Final design (base columns first); ``labels`` names its columns.
+        ``y − model`` on all samples [m/s²] (NaN where the base is undetermined).
+    base_design : BlockBase
+        The base design on all samples.
+    effect_columns : ndarray, shape (N, e)
+        Regressors of the effects found, on all samples.
+    labels : tuple of str
+        Labels of the design's columns (base first).
     coef : ndarray, shape (k,)
-        Coefficients of ``design`` (internal scaling: powers of ``(t−t0)/span``).
-    cov : ndarray, shape (k, k)
-        Their coloured-noise covariance.
+        Coefficients of the design (internal scaling: powers of ``(t−t0)/span``).
+    base_cov : ndarray, shape (n_blocks, p, p)
+        Coloured-noise covariance of each block's base coefficients (internal scaling).
+    cross_cov : ndarray, shape (n_base, e)
+        Covariance of base and effect coefficients.
+    effects_cov : ndarray, shape (e, e)
+        Covariance of the effect coefficients.
     n_base : int
         Number of base columns.
     stats_before, stats_after : ResidualStats
         Residual characterisation before/after.
     iterations : int
         Selection iterations run.
+    notes : tuple of dict
+        Candidates that could not be tested on these data (``name``, ``channel``,
+        ``note``), e.g. an angle offset that is not identifiable.
+    channel : ndarray of int, shape (N,), optional
+        Data channel of every sample (several channels).
+    channel_names : tuple of str
+        Their names (empty for one channel).
+    removed : tuple of Effect
+        Effects added and later removed by backward elimination.
     """
 
     effects: tuple[Effect, ...]
@@ -169,34 +209,69 @@ class ClosureResult:
     use: NDArray[np.bool_]
     residual_before: NDArray[np.float64]
     residual_after: NDArray[np.float64]
-    design: NDArray[np.float64]
+    base_design: BlockBase
+    effect_columns: NDArray[np.float64]
     labels: tuple[str, ...]
     coef: NDArray[np.float64]
-    cov: NDArray[np.float64]
+    base_cov: NDArray[np.float64]
+    cross_cov: NDArray[np.float64]
+    effects_cov: NDArray[np.float64]
     n_base: int
     stats_before: ResidualStats
     stats_after: ResidualStats
     iterations: int
+    notes: tuple[dict[str, Any], ...] = ()
+    channel: NDArray[np.int64] | None = None
+    channel_names: tuple[str, ...] = ()
+    removed: tuple[Effect, ...] = ()
 
     @property
     def found(self) -> bool:
         """True when any effect or unexplained structure was reported."""
         return bool(self.effects or self.unexplained)
 
+    @property
+    def design(self) -> NDArray[np.float64]:
+        """The final design as a dense (N, k) matrix (base columns first).
+
+        Formed on demand: for a block base with many blocks prefer
+        :meth:`model` and :meth:`effects_model`.
+        """
+        return np.column_stack([self.base_design.dense(), self.effect_columns])
+
+    @property
+    def cov(self) -> NDArray[np.float64]:
+        """Coloured-noise covariance (k, k) of :attr:`coef`.
+
+        For a base with several blocks the covariances between base coefficients
+        of *different* blocks are not computed (NaN).
+        """
+        nb, p = self.base_design.n_blocks, self.base_design.p
+        k = self.n_base + self.effects_cov.shape[0]
+        out = np.full((k, k), np.nan)
+        for b in range(nb):
+            out[b * p : (b + 1) * p, b * p : (b + 1) * p] = self.base_cov[b]
+        out[: self.n_base, self.n_base :] = self.cross_cov
+        out[self.n_base :, : self.n_base] = self.cross_cov.T
+        out[self.n_base :, self.n_base :] = self.effects_cov
+        return out
+
     def model(self) -> NDArray[np.float64]:
         """The final model (base + effects) on all samples [m/s²]."""
-        return self.design @ self.coef
+        return self.base_design.matvec(self.coef[: self.n_base]) + self.effects_model()
 
     def effects_model(self) -> NDArray[np.float64]:
         """The effects alone (what to subtract to correct the data) on all samples [m/s²]."""
-        return self.design[:, self.n_base :] @ self.coef[self.n_base :]
+        return self.effect_columns @ self.coef[self.n_base :]
 
     def base_coefficient(self, name: str) -> BaseCoefficient:
         """The :class:`BaseCoefficient` called ``name``."""
         for b in self.base:
             if b.name == name:
                 return b
-        raise KeyError(f"no base coefficient {name!r} (have {[b.name for b in self.base]})")
+        names = [b.name for b in self.base]
+        shown = names if len(names) <= 12 else names[:12] + ["..."]
+        raise KeyError(f"no base coefficient {name!r} (have {shown})")
 
     def true_error(self, truth: dict[str, float]) -> dict[str, dict[str, float]]:
         """Errors of the base coefficients against known true values (simulations).
@@ -221,42 +296,55 @@ class ClosureResult:
 
 
 # --------------------------------------------------------------------------------------
+# base designs
 
 
-@dataclass
-class _Fit:
-    coef: NDArray[np.float64]
-    resid: NDArray[np.float64]
-    qx: NDArray[np.float64]
-    weights: NDArray[np.float64]  # (k, n): coef = weights @ y
-
-
-def _lsq(x: NDArray[np.float64], y: NDArray[np.float64]) -> _Fit:
-    q, r = np.linalg.qr(x)
-    w = np.linalg.solve(r, q.T)
-    coef = w @ y
-    return _Fit(coef, y - x @ coef, q, w)
+def _poly_base(order: int, t: NDArray[np.float64], t0: float, span: float, chan, names):
+    u = (t - t0) / span
+    cols = np.column_stack([u**k for k in range(order + 1)])
+    scale = np.array([span**-k for k in range(order + 1)])
+    nm = _POLY_NAMES[: order + 1]
+    lb = tuple(f"t^{k}" for k in range(order + 1))
+    if not names:
+        return BlockBase.from_dense(cols, nm, lb, scale)
+    split = np.column_stack([cols * (chan == c)[:, None] for c in range(len(names))])
+    return BlockBase.from_dense(
+        split,
+        tuple(f"{x}:{c}" for c in names for x in nm),
+        tuple(f"{x}:{c}" for c in names for x in lb),
+        np.tile(scale, len(names)),
+    )
 
 
 def _base_design(
-    base: str | ArrayLike, t: NDArray[np.float64], t0: float, span: float
-) -> tuple[NDArray[np.float64], tuple[str, ...], tuple[str, ...], NDArray[np.float64]]:
-    """Columns, names, labels and SI scale factors of the base design."""
+    base: str | ArrayLike | BlockBase,
+    t: NDArray[np.float64],
+    t0: float,
+    span: float,
+    chan: NDArray[np.int64] | None,
+    names: tuple[str, ...],
+) -> BlockBase:
+    """The base as a :class:`BlockBase` on all samples."""
+    if isinstance(base, BlockBase):
+        if base.block.size != t.size:
+            raise ValidationError(f"base must cover {t.size} samples, got {base.block.size}")
+        return base
     if isinstance(base, str):
         check_option("base", base, _POLY_BASES)
-        order = int(base[-1])
-        u = (t - t0) / span
-        cols = np.column_stack([u**k for k in range(order + 1)])
-        scale = np.array([span**-k for k in range(order + 1)])
-        return cols, _POLY_NAMES[: order + 1], tuple(f"t^{k}" for k in range(order + 1)), scale
+        return _poly_base(int(base[-1]), t, t0, span, chan, names)
     x = np.asarray(base, dtype=np.float64)
     if x.ndim == 1:
         x = x[:, None]
     if x.ndim != 2 or x.shape[0] != t.size:
         raise ValidationError(f"base design must have shape ({t.size}, p), got {x.shape}")
     p = x.shape[1]
-    names = tuple(f"b{j}" for j in range(p))
-    return x, names, tuple(f"base{j}" for j in range(p)), np.ones(p)
+    return BlockBase.from_dense(
+        x, tuple(f"b{j}" for j in range(p)), tuple(f"base{j}" for j in range(p))
+    )
+
+
+# --------------------------------------------------------------------------------------
+# helpers
 
 
 def _segment_masks(t: NDArray[np.float64], k: int = 3) -> list[NDArray[np.bool_]]:
@@ -266,27 +354,26 @@ def _segment_masks(t: NDArray[np.float64], k: int = 3) -> list[NDArray[np.bool_]
 
 
 def _consistency(
-    grid: Grid, x: NDArray[np.float64], z: NDArray[np.float64], y: NDArray[np.float64], t
+    grid: Grid, basis: Basis, z: NDArray[np.float64], y: NDArray[np.float64], t
 ) -> tuple[bool, dict[str, Any]]:
     """Is the effect's coefficient the same in each third of the record?"""
     masks = _segment_masks(t)
-    xz = np.column_stack([x, z])
-    fit = _lsq(xz, y)
+    q = z.shape[1]
+    bxz = basis.extend(z)
+    fit = bxz.fit(y)
     extra = np.column_stack([z * m[:, None] for m in masks[:-1]])
-    zt = orthonormal_complement(extra, fit.qx)
+    zt = bxz.complement(extra)
     if zt.shape[1] == 0:
         return True, {}
-    q_fft = np.fft.rfft(grid.place(fit.qx), axis=1)
-    w = wald_test(grid, fit.resid, zt, q_fft)
-    full = fit.coef[x.shape[1] :]
+    w = wald_test(grid, fit.resid, zt, bxz.leverage(grid))
+    full = fit.gamma[-q:]
     seg_coefs = []
     for m in masks:
-        if m.sum() < 10 * (x.shape[1] + z.shape[1]):
+        if m.sum() < 10 * (int(basis.rank.sum()) + basis.n_extra + q):
             continue
-        sub = np.column_stack([x * m[:, None], z * m[:, None]])
-        keep = np.linalg.norm(sub, axis=0) > 0
-        c, *_ = np.linalg.lstsq(sub[:, keep][m], y[m], rcond=None)
-        seg_coefs.append(c[-z.shape[1] :])
+        c = bxz.restrict(m).fit(y[m]).gamma[-q:]
+        if np.all(np.isfinite(c)):
+            seg_coefs.append(c)
     scale = float(np.linalg.norm(full)) or 1.0
     rel = max((float(np.linalg.norm(c - full)) / scale for c in seg_coefs), default=0.0)
     ok = not (w.pvalue < _CONSISTENCY_P and rel > _CONSISTENCY_REL)
@@ -310,11 +397,57 @@ def _resolve(candidates: Sequence[str | Callable]) -> list[tuple[str, Callable]]
     return out
 
 
+def _independent(basis: Basis, prop: Proposal, use: NDArray[np.bool_], tol: float = 1e-8):
+    """``prop`` reduced to columns that are independent of the design and of each other."""
+    z = prop.columns[use]
+    zt = z - basis.project(z)
+    norms0 = np.linalg.norm(z, axis=0)
+    from scipy.linalg import qr
+
+    _, r, piv = qr(zt, mode="economic", pivoting=True)
+    d = np.abs(np.diag(r))
+    keep = np.sort(piv[: int(np.sum(d > tol * max(float(norms0.max()), 1e-300)))])
+    if keep.size == z.shape[1]:
+        return prop
+    return Proposal(
+        prop.name,
+        prop.channel,
+        prop.columns[:, keep],
+        tuple(prop.labels[i] for i in keep),
+        prop.multiplicity,
+        prop.params,
+        prop.check_consistency,
+        None if prop.axes is None else tuple(prop.axes[i] for i in keep),
+    )
+
+
+def _families(builders, aux, orbit_period) -> int:
+    n = 0
+    for name, _ in builders:
+        if name == "auxiliary":
+            n += len(aux)
+        elif name == "periodic":
+            n += 2 if orbit_period else 1
+        else:
+            n += 1
+    return max(n, 1)
+
+
+def _split_cols(cols, chan_u, names):
+    """Per-channel copies of ``cols`` on the used samples (several channels)."""
+    if not names:
+        return cols
+    return np.column_stack([cols * (chan_u == c)[:, None] for c in range(len(names))])
+
+
+# --------------------------------------------------------------------------------------
+
+
 def close_loop(
     t: ArrayLike,
     y: ArrayLike,
     *,
-    base: str | ArrayLike = "poly1",
+    base: str | ArrayLike | BlockBase = "poly1",
     aux: dict[str, ArrayLike] | None = None,
     valid: ArrayLike | None = None,
     candidates: Sequence[str | Callable] = DEFAULT_CANDIDATES,
@@ -323,18 +456,23 @@ def close_loop(
     orbit_period: float | None = None,
     catchall_knots: int = 24,
     options: dict[str, Any] | None = None,
+    channel: ArrayLike | None = None,
+    channel_names: Sequence[str] | None = None,
 ) -> ClosureResult:
     """Find the effects a linear base model lacks, add them and refit.
 
     Parameters
     ----------
     t : array_like, shape (N,)
-        Sample times, strictly increasing [s].
+        Sample times, strictly increasing (within each channel, non-decreasing
+        overall when ``channel`` is given) [s].
     y : array_like, shape (N,)
         Data [m/s²] (e.g. one accelerometer axis, or raw − reference).
-    base : {"poly0", "poly1", "poly2", "poly3"} or array_like, shape (N, p0)
-        The base model: a polynomial in ``t − t0`` (``t0``: first used sample) or
-        the caller's own design matrix (e.g. the demodulation basis).
+    base : {"poly0", "poly1", "poly2", "poly3"}, array_like (N, p0) or BlockBase
+        The base model: a polynomial in ``t − t0`` (``t0``: first used sample; one
+        per channel), the caller's own dense design matrix, or a block-diagonal
+        design (:class:`~accal.closure.basis.BlockBase`, e.g. the per-period
+        demodulation model; never formed densely).
     aux : dict of str to array_like, shape (N,), optional
         Auxiliary channels (temperatures, ...) for the ``auxiliary`` candidate.
     valid : array_like of bool, shape (N,), optional
@@ -355,6 +493,13 @@ def close_loop(
         (24 over a day: structure slower than ~1 h); 0 disables it.
     options : dict, optional
         Search settings passed to the builders (see :class:`Context`).
+    channel : array_like of int, shape (N,), optional
+        Data channel ``0 .. C-1`` of every sample, for several channels sharing one
+        time grid (e.g. the y and z axes of the rotating platform, interleaved in
+        time).  Noises are taken as independent with a common PSD; every generic
+        effect gets one coefficient per channel.
+    channel_names : sequence of str, optional
+        Names of the channels (default ``"0"``, ``"1"``, ...).
 
     Returns
     -------
@@ -371,8 +516,7 @@ def close_loop(
         raise ValidationError(
             f"t and y must be 1-D of equal length, got {t_all.shape}, {y_all.shape}"
         )
-    if t_all.size > 1 and not np.all(np.diff(t_all) > 0):
-        raise ValidationError("sample times must be strictly increasing")
+    chan_all, names = _check_channels(t_all, channel, channel_names)
     use = np.isfinite(y_all) & np.isfinite(t_all)
     if valid is not None:
         v = np.asarray(valid, dtype=bool)
@@ -395,33 +539,32 @@ def close_loop(
     opts = dict(options or {})
 
     t_u, y_u = t_all[use], y_all[use]
+    chan_u = None if chan_all is None else chan_all[use]
     t0 = float(t_u[0])
     span = float(t_u[-1] - t_u[0]) or 1.0
-    grid = make_grid(t_u)
-    x0, base_names, base_labels, base_scale = _base_design(base, t_all, t0, span)
-    p0 = x0.shape[1]
-    n_families = 0
-    for name, _ in builders:
-        if name == "auxiliary":
-            n_families += len(aux_all)
-        elif name == "periodic":
-            n_families += 2 if orbit_period else 1
-        else:
-            n_families += 1
-    n_families = max(n_families, 1)
+    grid = make_grid(t_u, chan_u)
+    bbase = _base_design(base, t_all, t0, span, chan_all, names)
+    p0 = bbase.n_columns
+    basis0 = Basis(bbase.block[use], bbase.columns[use], n_blocks=bbase.n_blocks)
+    if basis0.rank_total + 10 > t_u.size:
+        raise ValidationError(
+            f"the base has rank {basis0.rank_total} for {t_u.size} usable samples: "
+            "nothing is left to test"
+        )
+    n_families = _families(builders, aux_all, orbit_period)
 
-    cols = [x0]
-    labels = list(base_labels)
     found: list[tuple[Proposal, float, dict[str, Any]]] = []
+    removed: list[tuple[Proposal, float, dict[str, Any]]] = []
     unexplained: list[Effect] = []
+    notes: dict[tuple, dict[str, Any]] = {}
     excluded: list[float] = []
-    fit0 = _lsq(x0[use], y_u)
-    fit = fit0
+    fit0 = basis0.fit(y_u)
+    basis, fit = basis0, fit0
+    lev = basis.leverage(grid)
     iterations = 0
-    for _ in range(max_effects):
+    additions = 0
+    while additions < max_effects and iterations < 3 * max_effects:
         iterations += 1
-        x = np.column_stack(cols)
-        qx_fft = np.fft.rfft(grid.place(fit.qx), axis=1)
         ctx = Context(
             t_all=t_all,
             use=use,
@@ -429,21 +572,29 @@ def close_loop(
             span=span,
             grid=grid,
             residual=fit.resid,
-            qx=fit.qx,
-            qx_fft=qx_fft,
-            labels=frozenset(labels),
+            basis=basis,
+            leverage=lev,
+            labels=frozenset(bbase.column_labels()) | {lb for pr, *_ in found for lb in pr.labels},
             aux=aux_all,
             orbit_period=orbit_period,
             excluded_freqs=tuple(excluded),
             options={**opts, "enabled": tuple(n for n, _ in builders)},
+            channel_all=chan_all,
+            channel_names=names,
         )
         tested = []
         for _, build in builders:
             for prop in build(ctx):
-                zt = orthonormal_complement(prop.columns[use], fit.qx)
-                if zt.shape[1] == 0:
+                if prop.note is not None:
+                    _note(notes, prop.name, prop.channel, prop.note, prop.params)
                     continue
-                w = wald_test(grid, fit.resid, zt, qx_fft)
+                zt = basis.complement(prop.columns[use])
+                if zt.shape[1] == 0:
+                    _note(
+                        notes, prop.name, prop.channel, "not identifiable: in the span of the model"
+                    )
+                    continue
+                w = wald_test(grid, fit.resid, zt, lev)
                 p_adj = min(1.0, w.pvalue * prop.multiplicity * n_families)
                 # gate: significance; rank: explained power (RSS reduction)
                 gain = float(w.gamma @ w.gamma)
@@ -455,7 +606,7 @@ def close_loop(
                 break
             info: dict[str, Any] = {"stat": w.stat, "dof": w.dof, "multiplicity": prop.multiplicity}
             if prop.check_consistency:
-                ok, cinfo = _consistency(grid, x[use], prop.columns[use], y_u, t_u)
+                ok, cinfo = _consistency(grid, basis, prop.columns[use], y_u, t_u)
                 info.update(cinfo)
                 if not ok:
                     f = prop.params.get("frequency")
@@ -465,7 +616,7 @@ def close_loop(
                         Effect(
                             "unexplained",
                             prop.name if prop.channel is None else f"{prop.name}:{prop.channel}",
-                            _component_rms(prop.columns[use], x[use], y_u),
+                            _component_rms(basis, prop.columns[use], y_u),
                             float("nan"),
                             p_adj,
                             frequency=f,
@@ -477,57 +628,121 @@ def close_loop(
                         )
                     )
                     continue
-            accepted = (prop, p_adj, info)
+            accepted = (_independent(basis, prop, use), p_adj, info)
             break
         if accepted is None:
             break
-        prop = accepted[0]
         found.append(accepted)
-        cols.append(prop.columns)
-        labels.extend(prop.labels)
-        if prop.params.get("frequency") is not None:
-            excluded.append(float(prop.params["frequency"]))
-        fit = _lsq(np.column_stack(cols)[use], y_u)
+        additions += 1
+        if accepted[0].params.get("frequency") is not None:
+            excluded.append(float(accepted[0].params["frequency"]))
+        basis = _rebuild(basis0, found, use)
+        fit = basis.fit(y_u)
+        lev = basis.leverage(grid)
+        # backward elimination: drop earlier effects the new one made redundant
+        while len(found) > 1:
+            worst = _weakest(grid, basis0, found, use, y_u, n_families, alpha)
+            if worst is None:
+                break
+            gone = found.pop(worst)
+            removed.append(gone)
+            f = gone[0].params.get("frequency")
+            if f is not None and float(f) in excluded:
+                excluded.remove(float(f))
+            basis = _rebuild(basis0, found, use)
+            fit = basis.fit(y_u)
+            lev = basis.leverage(grid)
 
-    x_all = np.column_stack(cols)
-    cov = sandwich_cov(grid, fit.resid, fit.weights, fit.qx)
-    cov0 = sandwich_cov(grid, fit0.resid, fit0.weights, fit0.qx)
-    dw = fit.weights[:p0] - fit0.weights
-    covd = sandwich_cov(grid, fit.resid, dw, fit.qx)
+    # ------------------------------------------------------------------ covariances
+    noise = estimate_psd(grid, fit.resid, lev)
+    noise0 = estimate_psd(grid, fit0.resid, basis0.leverage(grid))
+    psd, psd0 = noise.psd, noise0.psd
+    ns = basis.seg_start.size
+    rinv = basis.rinv
+    v_ll = _sandwich(rinv, basis.block_cov(grid, psd))
+    v_ll0 = _sandwich(rinv, basis0.block_cov(grid, psd0))
+    k = fit.w_gamma.shape[0]
+    if k:
+        wg = fit.w_gamma.T  # (n, k)
+        g_fft = grid.fft(wg)
+        v_ww = _quad(g_fft, _two_sided(grid.size, g_fft.shape[-1]) * psd, grid.size)
+        v_ww = 0.5 * (v_ww + v_ww.T)
+        cw = np.fft.irfft(g_fft * psd, grid.size, axis=-1)[:, grid.channel, grid.idx].T  # C W'
+        v_lw = np.einsum("spr,srk->spk", rinv, basis.block_coef(cw))
+        a = fit.a_mat
+        at = np.transpose(a, (0, 2, 1))
+        cov_b = v_ll - v_lw @ at - a @ np.transpose(v_lw, (0, 2, 1)) + a @ (v_ww[None] @ at)
+        cov_bg = v_lw - a @ v_ww[None]
+        cov_d = a @ (v_ww[None] @ at)
+    else:
+        v_ww = np.zeros((0, 0))
+        cov_b = v_ll
+        cov_bg = np.zeros((ns, basis.p, 0))
+        cov_d = np.zeros_like(v_ll)
+    seg_of = basis.seg_of_block()
+    nb, p = bbase.n_blocks, bbase.p
+    base_cov = np.full((nb, p, p), np.nan)
+    cross = np.full((nb, p, k), np.nan)
+    var0 = np.full((nb, p), np.nan)
+    var1 = np.full((nb, p), np.nan)
+    vard = np.full((nb, p), np.nan)
+    has = seg_of >= 0
+    sg = seg_of[has]
+    base_cov[has] = cov_b[sg]
+    cross[has] = cov_bg[sg]
+    var0[has] = np.einsum("sii->si", v_ll0[sg])
+    var1[has] = np.einsum("sii->si", cov_b[sg])
+    vard[has] = np.einsum("sii->si", cov_d[sg])
+    ident = np.isfinite(fit0.beta.reshape(nb, p))
+    for arr in (var0, var1, vard):
+        arr[~ident] = np.nan
 
+    # ------------------------------------------------------------------ unexplained
     if catchall_knots and catchall_knots >= 3:
-        zt = orthonormal_complement(_catchall(t_u, catchall_knots), fit.qx)
+        cols = _split_cols(_catchall(t_u, catchall_knots), chan_u, names)
+        zt = basis.complement(cols)
         if zt.shape[1]:
-            qx_fft = np.fft.rfft(grid.place(fit.qx), axis=1)
-            noise = estimate_psd(grid, fit.resid, qx_fft)
             f_lo = 2.0 * catchall_knots / (grid.size * grid.step)
             model, _ = white_plus_flicker(grid, noise, f_lo)
-            w = wald_test(grid, fit.resid, zt, qx_fft, psd=model)
+            w = wald_test(grid, fit.resid, zt, lev, psd=model)
             if w.pvalue < alpha:
                 unexplained.append(_describe_smooth(grid, t_u, zt @ w.gamma, w))
 
-    effects = _effects(found, fit.coef, cov, p0, span, t0)
-    base_out = []
-    for j, nm in enumerate(base_names):
-        s = base_scale[j]
-        base_out.append(
-            BaseCoefficient(
-                nm,
-                float(fit0.coef[j] * s),
-                float(np.sqrt(max(cov0[j, j], 0.0)) * s),
-                float(fit.coef[j] * s),
-                float(np.sqrt(max(cov[j, j], 0.0)) * s),
-                float((fit.coef[j] - fit0.coef[j]) * s),
-                float(np.sqrt(max(covd[j, j], 0.0)) * s),
-            )
+    coef = np.concatenate([fit.beta, fit.gamma])
+    eff_cols = (
+        np.column_stack([pr.columns for pr, *_ in found]) if found else np.zeros((t_all.size, 0))
+    )
+    labels = bbase.column_labels() + tuple(lb for pr, *_ in found for lb in pr.labels)
+    effects = _effects(found, fit.gamma, v_ww, span, t0)
+    removed_eff = tuple(
+        Effect(pr.name, pr.channel, float("nan"), float("nan"), pa, details={"removed": True})
+        for pr, pa, _ in removed
+    )
+    scale = bbase.column_scale()
+    b0 = fit0.beta
+    b1 = fit.beta
+    sd = np.sqrt(np.maximum(var0.ravel(), 0.0)) * scale
+    s1 = np.sqrt(np.maximum(var1.ravel(), 0.0)) * scale
+    sdd = np.sqrt(np.maximum(vard.ravel(), 0.0)) * scale
+    base_out = tuple(
+        BaseCoefficient(
+            nm,
+            float(b0[j] * scale[j]),
+            float(sd[j]),
+            float(b1[j] * scale[j]),
+            float(s1[j]),
+            float((b1[j] - b0[j]) * scale[j]),
+            float(sdd[j]),
         )
-    res_before = y_all - x0 @ fit0.coef
-    res_after = y_all - x_all @ fit.coef
+        for j, nm in enumerate(bbase.column_names())
+    )
+    res_before = y_all - bbase.matvec(fit0.beta)
+    res_after = y_all - bbase.matvec(fit.beta) - eff_cols @ fit.gamma
     seg = orbit_period if orbit_period else None
     return ClosureResult(
         effects=tuple(effects),
         unexplained=tuple(unexplained),
-        base=tuple(base_out),
+        base=base_out,
         t0=t0,
         rms_before=float(np.sqrt(np.mean(fit0.resid**2))),
         rms_after=float(np.sqrt(np.mean(fit.resid**2))),
@@ -535,30 +750,112 @@ def close_loop(
         use=use,
         residual_before=res_before,
         residual_after=res_after,
-        design=x_all,
-        labels=tuple(labels),
-        coef=fit.coef,
-        cov=cov,
+        base_design=bbase,
+        effect_columns=eff_cols,
+        labels=labels,
+        coef=coef,
+        base_cov=base_cov,
+        cross_cov=cross.reshape(nb * p, k),
+        effects_cov=v_ww,
         n_base=p0,
-        stats_before=characterise(t_u, fit0.resid, segment=seg),
-        stats_after=characterise(t_u, res_after[use], segment=seg),
+        stats_before=characterise(t_u, fit0.resid, segment=seg, chan=chan_u),
+        stats_after=characterise(t_u, res_after[use], segment=seg, chan=chan_u),
         iterations=iterations,
+        notes=tuple(notes.values()),
+        channel=chan_all,
+        channel_names=names,
+        removed=removed_eff,
     )
 
 
-def _component_rms(z: NDArray[np.float64], x: NDArray[np.float64], y: NDArray[np.float64]) -> float:
-    """RMS of the part of ``y`` explained by columns ``z`` on top of design ``x``."""
-    c = _lsq(np.column_stack([x, z]), y).coef[x.shape[1] :]
+def _check_channels(t_all, channel, channel_names):
+    if channel is None:
+        if t_all.size > 1 and not np.all(np.diff(t_all) > 0):
+            raise ValidationError("sample times must be strictly increasing")
+        if channel_names:
+            raise ValidationError("channel_names given without channel")
+        return None, ()
+    ch = np.asarray(channel)
+    if ch.shape != t_all.shape or not np.issubdtype(ch.dtype, np.integer):
+        raise ValidationError(
+            f"channel must be integers of shape {t_all.shape}, got {ch.dtype} {ch.shape}"
+        )
+    ch = ch.astype(np.int64)
+    n_ch = int(ch.max()) + 1 if ch.size else 1
+    if ch.min(initial=0) < 0 or np.unique(ch).size != n_ch:
+        raise ValidationError(f"channel must use every index 0 .. {n_ch - 1}")
+    if t_all.size > 1 and not np.all(np.diff(t_all) >= 0):
+        raise ValidationError("sample times must be non-decreasing")
+    for c in range(n_ch):
+        tc = t_all[ch == c]
+        if tc.size > 1 and not np.all(np.diff(tc) > 0):
+            raise ValidationError(f"sample times of channel {c} must be strictly increasing")
+    names = (
+        tuple(channel_names) if channel_names is not None else tuple(str(c) for c in range(n_ch))
+    )
+    if len(names) != n_ch:
+        raise ValidationError(f"channel_names must have {n_ch} entries, got {len(names)}")
+    if n_ch == 1:
+        return None, ()
+    return ch, names
+
+
+def _note(notes: dict, name: str, channel: str | None, text: str, params=None) -> None:
+    key = (name, channel, text)
+    if key not in notes:
+        d: dict[str, Any] = {"name": name, "channel": channel, "note": text}
+        if params:
+            d["details"] = dict(params)
+        notes[key] = d
+
+
+def _rebuild(basis0: Basis, found, use) -> Basis:
+    if not found:
+        return basis0
+    return basis0.extend(np.column_stack([pr.columns[use] for pr, *_ in found]))
+
+
+def _weakest(grid, basis0, found, use, y_u, n_families, alpha) -> int | None:
+    """Index of an earlier effect that is no longer significant given the others, or None."""
+    worst, worst_p = None, alpha
+    for i in range(len(found) - 1):  # the newest effect was just shown significant
+        others = [f for j, f in enumerate(found) if j != i]
+        b = _rebuild(basis0, others, use)
+        fr = b.fit(y_u)
+        prop = found[i][0]
+        zt = b.complement(prop.columns[use])
+        if zt.shape[1] == 0:
+            return i
+        w = wald_test(grid, fr.resid, zt, b.leverage(grid))
+        p_adj = min(1.0, w.pvalue * prop.multiplicity * n_families)
+        if p_adj >= worst_p:
+            worst, worst_p = i, p_adj
+    return worst
+
+
+def _sandwich(rinv: NDArray[np.float64], g: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``R⁻¹ G R⁻ᵀ`` per block."""
+    return np.einsum("spr,srq,stq->spt", rinv, g, rinv)
+
+
+def _component_rms(basis: Basis, z: NDArray[np.float64], y: NDArray[np.float64]) -> float:
+    """RMS of the part of ``y`` explained by columns ``z`` on top of the design."""
+    fit: FitResult = basis.extend(z).fit(y)
+    c = np.nan_to_num(fit.gamma[-z.shape[1] :])
     return float(np.sqrt(np.mean((z @ c) ** 2)))
 
 
 def _describe_smooth(grid: Grid, t: NDArray[np.float64], comp: NDArray[np.float64], w) -> Effect:
     """An ``unexplained`` effect from the catch-all component ``comp`` (used samples)."""
-    spec = np.abs(np.fft.rfft(grid.place(comp)[0])) ** 2
+    spec = np.sum(np.abs(grid.fft(comp)[0]) ** 2, axis=0)
     spec[0] = 0.0
     k = int(np.argmax(spec))
     f = float(grid.freqs[k])
-    idx = np.linspace(0, t.size - 1, min(100, t.size)).astype(int)
+    ch = grid.channel
+    rms_c = [np.sqrt(np.mean(comp[ch == c] ** 2)) for c in range(grid.n_chan)]
+    sel = ch == int(np.argmax(rms_c))
+    tc, cc = t[sel], comp[sel]
+    idx = np.linspace(0, tc.size - 1, min(100, tc.size)).astype(int)
     return Effect(
         "unexplained",
         "smooth",
@@ -571,97 +868,94 @@ def _describe_smooth(grid: Grid, t: NDArray[np.float64], comp: NDArray[np.float6
             "period": 1.0 / f if f > 0 else None,
             "stat": w.stat,
             "dof": w.dof,
-            "shape_t": t[idx].tolist(),
-            "shape": comp[idx].tolist(),
+            "shape_t": tc[idx].tolist(),
+            "shape": cc[idx].tolist(),
         },
     )
 
 
+def _main_coefficient(prop: Proposal, c, cc, span: float) -> tuple[float, float, dict[str, Any]]:
+    """The reported coefficient/sigma of one channel's columns of an effect, plus details."""
+    sig = np.sqrt(np.clip(np.diag(cc), 0, None))
+    q = c.size
+    if prop.name in ("quadratic_drift", "cubic_drift"):
+        powers = prop.params["powers"][-q:]
+        si = np.array([span**-k for k in powers])
+        return (
+            float(c[-1] * si[-1]),
+            float(sig[-1] * si[-1]),
+            {"coefficients": (c * si).tolist(), "sigmas": (sig * si).tolist()},
+        )
+    if prop.name == "periodic":
+        amps, phases, amp_sig = [], [], []
+        for h in range(q // 2):
+            a, b = c[2 * h], c[2 * h + 1]
+            amp = float(np.hypot(a, b))
+            g = np.array([a, b]) / amp if amp > 0 else np.zeros(2)
+            sub = cc[2 * h : 2 * h + 2, 2 * h : 2 * h + 2]
+            amps.append(amp)
+            amp_sig.append(float(np.sqrt(max(g @ sub @ g, 0.0))))
+            phases.append(float(np.arctan2(-b, a)))
+        return (
+            amps[0],
+            amp_sig[0],
+            {
+                "coefficients": c.tolist(),
+                "sigmas": sig.tolist(),
+                "amplitudes": amps,
+                "amplitude_sigmas": amp_sig,
+                "phases": phases,
+            },
+        )
+    return float(c[0]), float(sig[0]), {"coefficients": c.tolist(), "sigmas": sig.tolist()}
+
+
 def _effects(
     found: list[tuple[Proposal, float, dict[str, Any]]],
-    coef: NDArray[np.float64],
+    gamma: NDArray[np.float64],
     cov: NDArray[np.float64],
-    p0: int,
     span: float,
     t0: float,
 ) -> list[Effect]:
     out = []
-    j = p0
+    j = 0
     for prop, p_adj, info in found:
         q = prop.columns.shape[1]
-        c = coef[j : j + q]
+        c = gamma[j : j + q]
         cc = cov[j : j + q, j : j + q]
-        sig = np.sqrt(np.clip(np.diag(cc), 0, None))
-        details: dict[str, Any] = {**info, "coefficients": c.tolist(), "sigmas": sig.tolist()}
+        details: dict[str, Any] = {**info}
+        axis = None
+        if prop.axes is None:
+            coef, sig, det = _main_coefficient(prop, c, cc, span)
+            details.update(det)
+        else:
+            per: dict[str, dict[str, Any]] = {}
+            for ax in dict.fromkeys(prop.axes):
+                idx = [i for i, a in enumerate(prop.axes) if a == ax]
+                ca, sa, det = _main_coefficient(prop, c[idx], cc[np.ix_(idx, idx)], span)
+                per[ax] = {"coefficient": ca, "sigma": sa, **det}
+            axis = max(per, key=lambda a: abs(per[a]["coefficient"]) / max(per[a]["sigma"], 1e-300))
+            coef, sig = per[axis]["coefficient"], per[axis]["sigma"]
+            details["axes"] = per
+        kw: dict[str, Any] = {}
         if prop.name in ("quadratic_drift", "cubic_drift"):
-            powers = prop.params["powers"]
-            si = np.array([span**-k for k in powers])
-            details["powers"] = list(powers)
-            details["coefficients"] = (c * si).tolist()
-            details["sigmas"] = (sig * si).tolist()
+            details["powers"] = list(prop.params["powers"])
             details["t0"] = t0
-            eff = Effect(
-                prop.name,
-                None,
-                float(c[-1] * si[-1]),
-                float(sig[-1] * si[-1]),
-                p_adj,
-                details=details,
-            )
         elif prop.name == "periodic":
-            amps, phases, amp_sig = [], [], []
-            for h in range(q // 2):
-                a, b = c[2 * h], c[2 * h + 1]
-                amp = float(np.hypot(a, b))
-                g = np.array([a, b]) / amp if amp > 0 else np.zeros(2)
-                sub = cc[2 * h : 2 * h + 2, 2 * h : 2 * h + 2]
-                amps.append(amp)
-                amp_sig.append(float(np.sqrt(max(g @ sub @ g, 0.0))))
-                phases.append(float(np.arctan2(-b, a)))
-            details.update(
-                {
-                    "harmonics": list(prop.params["harmonics"]),
-                    "amplitudes": amps,
-                    "amplitude_sigmas": amp_sig,
-                    "phases": phases,
-                    "t0": t0,
-                }
-            )
-            eff = Effect(
-                "periodic",
-                prop.channel,
-                amps[0],
-                amp_sig[0],
-                p_adj,
-                frequency=prop.params["frequency"],
-                details=details,
-            )
+            details.update({"harmonics": list(prop.params["harmonics"]), "t0": t0})
+            kw["frequency"] = prop.params["frequency"]
         elif prop.name == "bias_step":
-            eff = Effect(
-                "bias_step",
-                None,
-                float(c[0]),
-                float(sig[0]),
-                p_adj,
-                epoch=prop.params["epoch"],
-                details=details,
-            )
+            kw["epoch"] = prop.params["epoch"]
         elif prop.name == "auxiliary":
-            eff = Effect(
-                "auxiliary",
-                prop.channel,
-                float(c[0]),
-                float(sig[0]),
-                p_adj,
-                lag=prop.params["lag"],
-                tau=prop.params["tau"],
-                details=details,
-            )
-        else:  # caller-supplied builders
+            kw["lag"] = prop.params["lag"]
+            kw["tau"] = prop.params["tau"]
+        elif prop.name == "intra_period_shape":
+            kw["tau"] = prop.params["tau"]
             details.update(prop.params)
-            eff = Effect(
-                prop.name, prop.channel, float(c[0]), float(sig[0]), p_adj, details=details
-            )
-        out.append(eff)
+        else:  # angle_offset and caller-supplied builders
+            details.update(prop.params)
+        out.append(
+            Effect(prop.name, prop.channel, coef, sig, p_adj, details=details, axis=axis, **kw)
+        )
         j += q
     return out

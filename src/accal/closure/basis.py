@@ -1,0 +1,612 @@
+"""Base designs of :func:`accal.closure.close_loop` and their orthonormal bases.
+
+A base is *block-diagonal over contiguous sample blocks*: block ``b`` owns a run of
+consecutive samples and ``p`` columns that are zero outside it
+(:class:`BlockBase`).  A polynomial or any dense design is the special case of one
+block.  The demodulation model of the rotating platform (Lenoir et al. 2013,
+eqs. 17-19: per modulation period the signal columns ``Λc Va``, ``Λs Va`` and the
+bias columns ``V̂b``) is the case that needs it: one day at 1 Hz is ~144 periods
+× 4-8 columns, and the dense design (86,400 × ~800) is never formed.
+
+:class:`Basis` is the orthonormal basis of ``[base | extra dense columns]`` on the
+used samples: one SVD per block (``Q_b``), and a QR of the extra columns (the
+effects found) after projecting the blocks out.  Everything the selection needs is
+computed block by block:
+
+* projections ``Qᵀz`` and ``QQᵀz`` (``np.add.reduceat`` over the blocks);
+* the squared norms ``‖Qᵀ 1[t ≥ t_i]‖²`` of every step indicator (cumulative sums);
+* the *leverage spectrum* ``Σ_j |Q_j(f)|²`` (the white-noise power the fit removes
+  at each frequency, used to correct the residual periodogram): the autocorrelations
+  of the block columns, computed on each block's own short grid and folded onto the
+  record's frequency grid;
+* covariances ``Gᵀ C G`` of block-local linear estimators under a stationary noise
+  with autocovariance ``C`` (local FFTs), and of the few dense ones (full FFTs).
+
+With one block all of this reduces to the dense computation, so the dense and the
+block path give the same numbers (tested).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from accal.errors import ValidationError
+
+if TYPE_CHECKING:
+    from accal.closure.residual import Grid
+
+__all__ = ["Basis", "BlockBase", "FitResult"]
+
+_RANK_TOL = 1e-9
+
+
+@dataclass(frozen=True)
+class BlockBase:
+    """A base design that is block-diagonal over contiguous sample blocks.
+
+    Column ``j`` of block ``b`` is ``columns[:, j]`` on the samples with
+    ``block == b`` and zero elsewhere; the coefficients are ordered block by block
+    (``b·p + j``).
+
+    Attributes
+    ----------
+    block : ndarray of int, shape (N,)
+        Block of each sample, ``0 .. n_blocks-1``; ``-1``: no base column there.
+        The samples of one block must be consecutive.
+    columns : ndarray, shape (N, p)
+        Per-sample values of the ``p`` column kinds.
+    names : tuple of str
+        Name of each column kind (``BaseCoefficient.name``; with several blocks
+        ``f"{name}[{block_label}]"``).
+    labels : tuple of str, optional
+        Design labels of the column kinds (default ``names``); candidate builders
+        look for them (e.g. ``"t^2"``: no quadratic proposal).
+    scale : ndarray, shape (p,), optional
+        Factor turning each coefficient into SI units (default 1).
+    block_labels : tuple, optional
+        Label of each block (default its index), e.g. the period number.
+    """
+
+    block: NDArray[np.int64]
+    columns: NDArray[np.float64]
+    names: tuple[str, ...]
+    labels: tuple[str, ...] | None = None
+    scale: NDArray[np.float64] | None = None
+    block_labels: tuple[Any, ...] | None = None
+    _n_blocks: int = field(default=0, repr=False)
+
+    def __post_init__(self) -> None:
+        block = np.asarray(self.block)
+        cols = np.asarray(self.columns, dtype=np.float64)
+        if cols.ndim == 1:
+            cols = cols[:, None]
+        if block.ndim != 1 or cols.ndim != 2 or cols.shape[0] != block.size:
+            raise ValidationError(
+                f"block must be (N,) and columns (N, p), got {block.shape} and {cols.shape}"
+            )
+        if not np.issubdtype(block.dtype, np.integer):
+            raise ValidationError(f"block must hold integers, got dtype {block.dtype}")
+        block = block.astype(np.int64)
+        p = cols.shape[1]
+        if len(self.names) != p:
+            raise ValidationError(
+                f"names must have {p} entries (one per column), got {len(self.names)}"
+            )
+        if self.labels is not None and len(self.labels) != p:
+            raise ValidationError(f"labels must have {p} entries, got {len(self.labels)}")
+        if np.any(block < -1):
+            raise ValidationError("block indices must be >= -1")
+        nb = int(block.max()) + 1 if block.size else 0
+        ids = block[block >= 0]
+        if ids.size:
+            # each block one contiguous run
+            starts = np.flatnonzero(np.r_[True, block[1:] != block[:-1]])
+            run_ids = block[starts]
+            run_ids = run_ids[run_ids >= 0]
+            counts = np.bincount(run_ids)
+            if np.any(counts > 1):
+                dup = int(np.flatnonzero(counts > 1)[0])
+                raise ValidationError(f"the samples of block {dup} are not consecutive")
+        scale = np.ones(p) if self.scale is None else np.asarray(self.scale, dtype=np.float64)
+        if scale.shape != (p,):
+            raise ValidationError(f"scale must have shape ({p},), got {scale.shape}")
+        if self.block_labels is not None and len(self.block_labels) != nb:
+            raise ValidationError(
+                f"block_labels must have {nb} entries (one per block), got {len(self.block_labels)}"
+            )
+        object.__setattr__(self, "block", block)
+        object.__setattr__(self, "columns", cols)
+        object.__setattr__(self, "scale", scale)
+        object.__setattr__(self, "_n_blocks", nb)
+
+    # ------------------------------------------------------------------
+    @classmethod
+    def from_dense(
+        cls,
+        x: ArrayLike,
+        names: Sequence[str] | None = None,
+        labels: Sequence[str] | None = None,
+        scale: ArrayLike | None = None,
+    ) -> BlockBase:
+        """One block holding a dense design ``x`` (N, p)."""
+        x = np.asarray(x, dtype=np.float64)
+        if x.ndim == 1:
+            x = x[:, None]
+        p = x.shape[1]
+        names = tuple(names) if names is not None else tuple(f"b{j}" for j in range(p))
+        return cls(
+            np.zeros(x.shape[0], dtype=np.int64),
+            x,
+            names,
+            None if labels is None else tuple(labels),
+            None if scale is None else np.asarray(scale, dtype=np.float64),
+        )
+
+    @classmethod
+    def from_slices(
+        cls,
+        n: int,
+        blocks: Sequence[tuple[slice, ArrayLike]],
+        names: Sequence[str],
+        *,
+        labels: Sequence[str] | None = None,
+        scale: ArrayLike | None = None,
+        block_labels: Sequence[Any] | None = None,
+    ) -> BlockBase:
+        """Build from ``[(slice, columns (len, p)), ...]`` over ``n`` samples.
+
+        Slices must be disjoint and increasing; samples outside every slice have no
+        base column.
+        """
+        p = len(names)
+        block = np.full(n, -1, dtype=np.int64)
+        cols = np.zeros((n, p))
+        last = 0
+        for b, (sl, c) in enumerate(blocks):
+            start, stop, step = sl.indices(n)
+            if step != 1 or start < last or stop <= start:
+                raise ValidationError(
+                    f"block {b}: slices must be increasing, disjoint and non-empty"
+                )
+            c = np.asarray(c, dtype=np.float64)
+            if c.ndim == 1:
+                c = c[:, None]
+            if c.shape != (stop - start, p):
+                raise ValidationError(
+                    f"block {b}: columns must have shape ({stop - start}, {p}), got {c.shape}"
+                )
+            block[start:stop] = b
+            cols[start:stop] = c
+            last = stop
+        return cls(
+            block,
+            cols,
+            tuple(names),
+            None if labels is None else tuple(labels),
+            None if scale is None else np.asarray(scale, dtype=np.float64),
+            None if block_labels is None else tuple(block_labels),
+        )
+
+    # ------------------------------------------------------------------
+    @property
+    def n_blocks(self) -> int:
+        """Number of blocks."""
+        return self._n_blocks
+
+    @property
+    def p(self) -> int:
+        """Columns per block."""
+        return int(self.columns.shape[1])
+
+    @property
+    def n_columns(self) -> int:
+        """Columns of the full design, ``n_blocks · p``."""
+        return self.n_blocks * self.p
+
+    def _suffix(self, b: int) -> str:
+        if self.n_blocks == 1:
+            return ""
+        lab = b if self.block_labels is None else self.block_labels[b]
+        return f"[{lab}]"
+
+    def column_names(self) -> tuple[str, ...]:
+        """Names of all coefficients, block by block."""
+        return tuple(f"{nm}{self._suffix(b)}" for b in range(self.n_blocks) for nm in self.names)
+
+    def column_labels(self) -> tuple[str, ...]:
+        """Design labels of all columns, block by block."""
+        labs = self.labels if self.labels is not None else self.names
+        return tuple(f"{lb}{self._suffix(b)}" for b in range(self.n_blocks) for lb in labs)
+
+    def column_scale(self) -> NDArray[np.float64]:
+        """SI factor of every coefficient, block by block."""
+        return np.tile(self.scale, self.n_blocks)
+
+    def matvec(self, coef: ArrayLike) -> NDArray[np.float64]:
+        """``X @ coef`` without forming ``X`` (NaN coefficients propagate)."""
+        c = np.asarray(coef, dtype=np.float64).reshape(self.n_blocks, self.p)
+        out = np.zeros(self.block.size)
+        inb = self.block >= 0
+        out[inb] = np.einsum("ij,ij->i", self.columns[inb], c[self.block[inb]])
+        return out
+
+    def dense(self) -> NDArray[np.float64]:
+        """The full design ``(N, n_blocks·p)`` (for small cases and tests only)."""
+        x = np.zeros((self.block.size, self.n_columns))
+        for b in range(self.n_blocks):
+            m = self.block == b
+            x[m, b * self.p : (b + 1) * self.p] = self.columns[m]
+        return x
+
+
+# --------------------------------------------------------------------------------------
+
+
+def _next_pow2(n: int) -> int:
+    return 1 << max(int(np.ceil(np.log2(max(n, 1)))), 0)
+
+
+def _two_sided(size: int, nf: int) -> NDArray[np.float64]:
+    w = np.full(nf, 2.0)
+    w[0] = 1.0
+    if size % 2 == 0:
+        w[-1] = 1.0
+    return w
+
+
+@dataclass
+class FitResult:
+    """Least-squares fit of ``y`` on ``[base | extra]`` (used samples).
+
+    Attributes
+    ----------
+    beta : ndarray, shape (n_blocks·p,)
+        Base coefficients (NaN where not identifiable: block without used samples,
+        or a column in the span of the block's other columns).
+    gamma : ndarray, shape (k,)
+        Coefficients of the extra columns (NaN for columns left out as dependent).
+    resid : ndarray, shape (n,)
+        Residual on the used samples.
+    w_gamma : ndarray, shape (k_kept, n)
+        Weights of the kept ``gamma`` (``gamma[keep] = w_gamma @ y``).
+    a_mat : ndarray, shape (n_seg, p, k_kept)
+        ``L E`` per block (``beta_b = L_b y − a_mat_b gamma``).
+    """
+
+    beta: NDArray[np.float64]
+    gamma: NDArray[np.float64]
+    resid: NDArray[np.float64]
+    w_gamma: NDArray[np.float64]
+    a_mat: NDArray[np.float64]
+
+
+class Basis:
+    """Orthonormal basis of ``[block base | extra dense columns]`` on the used samples.
+
+    Parameters
+    ----------
+    block : ndarray of int, shape (n,)
+        Block of each used sample (``-1``: none), consecutive per block.
+    columns : ndarray, shape (n, p)
+        Per-sample base column values.
+    extra : ndarray, shape (n, k), optional
+        Extra dense columns (raw, not orthonormal).
+    n_blocks : int, optional
+        Number of blocks of the base (default ``block.max() + 1``).
+    """
+
+    def __init__(
+        self,
+        block: NDArray[np.int64],
+        columns: NDArray[np.float64],
+        extra: NDArray[np.float64] | None = None,
+        n_blocks: int | None = None,
+    ) -> None:
+        self.block = np.asarray(block, dtype=np.int64)
+        self.columns = np.asarray(columns, dtype=np.float64)
+        n, p = self.columns.shape
+        self.n = n
+        self.p = p
+        self.n_blocks = int(self.block.max()) + 1 if n_blocks is None else int(n_blocks)
+        self._build_blocks()
+        self.extra = np.zeros((n, 0)) if extra is None else np.asarray(extra, dtype=np.float64)
+        self._build_extra()
+
+    # ----------------------------------------------------------------- construction
+    def _build_blocks(self) -> None:
+        n, p = self.n, self.p
+        starts = (
+            np.flatnonzero(np.r_[True, self.block[1:] != self.block[:-1]])
+            if n
+            else np.zeros(0, int)
+        )
+        stops = np.r_[starts[1:], n].astype(np.int64)
+        self.seg_start = starts.astype(np.int64)
+        self.seg_stop = stops
+        self.seg_block = self.block[starts] if n else np.zeros(0, np.int64)
+        ns = starts.size
+        self.sample_seg = np.repeat(np.arange(ns), stops - starts)
+        q = np.zeros((n, p))
+        rinv = np.zeros((ns, p, p))
+        ident = np.zeros((ns, p), dtype=bool)
+        rank = np.zeros(ns, dtype=np.int64)
+        lengths = stops - starts
+        active = self.seg_block >= 0
+        for length in np.unique(lengths[active]):
+            segs = np.flatnonzero(active & (lengths == length))
+            rows = self.seg_start[segs][:, None] + np.arange(length)[None, :]
+            x = self.columns[rows]  # (g, L, p)
+            nrm = np.sqrt(np.sum(x**2, axis=1))  # (g, p)
+            d = np.where(nrm > 0, nrm, 1.0)
+            u, s, vt = np.linalg.svd(x / d[:, None, :], full_matrices=False)
+            r = min(int(length), p)
+            smax = s[:, :1] if s.shape[1] else np.zeros((len(segs), 1))
+            keep = (s > _RANK_TOL * np.maximum(smax, 1e-300)) & (smax > 0)
+            rk = keep.sum(axis=1)
+            uk = u * keep[:, None, :]
+            sinv = np.where(keep, 1.0 / np.where(keep, s, 1.0), 0.0)
+            # beta = D^-1 V S^-1 U' y   -> rinv (p, r): columns follow U's columns
+            ri = (np.transpose(vt, (0, 2, 1)) * sinv[:, None, :]) / d[:, :, None]
+            q[rows.ravel(), :r] = uk.reshape(-1, uk.shape[2])
+            rinv[segs, :, :r] = ri
+            vk = vt * keep[:, :, None]
+            ident[segs] = (np.sum(vk**2, axis=1) > 1 - 1e-6) & (nrm > 0)
+            rank[segs] = rk
+        self.q = q
+        self.rinv = rinv
+        self.ident = ident
+        self.rank = rank
+
+    def _build_extra(self) -> None:
+        """QR of the extra columns after projecting the blocks out.
+
+        Columns (numerically) dependent on the blocks or on earlier extra columns
+        are left out (``self.keep`` lists the kept ones; their coefficient is NaN).
+        """
+        e = self.extra
+        k = e.shape[1]
+        self.keep = np.arange(k)
+        if k == 0:
+            self.qe = np.zeros((self.n, 0))
+            self.re = np.zeros((0, 0))
+            return
+        et = e - self.block_project(e)
+        norms = np.linalg.norm(e, axis=0)
+        qe, re = np.linalg.qr(et)
+        d = np.abs(np.diag(re))
+        ok = d > _RANK_TOL * np.maximum(norms, 1e-300)
+        if not ok.all():
+            from scipy.linalg import qr
+
+            _, r2, piv = qr(et, mode="economic", pivoting=True)
+            d2 = np.abs(np.diag(r2))
+            rank = int(np.sum(d2 > 1e-8 * max(float(norms.max()), 1e-300)))
+            self.keep = np.sort(piv[:rank])
+            qe, re = np.linalg.qr(et[:, self.keep])
+        self.qe = qe
+        self.re = re
+
+    def extend(self, z: NDArray[np.float64]) -> Basis:
+        """A new basis with the raw columns ``z`` (n, q) appended to the extra ones."""
+        z = np.asarray(z, dtype=np.float64)
+        if z.ndim == 1:
+            z = z[:, None]
+        new = Basis.__new__(Basis)
+        new.__dict__.update(self.__dict__)
+        new.extra = np.column_stack([self.extra, z])
+        new._build_extra()
+        return new
+
+    def restrict(self, mask: NDArray[np.bool_]) -> Basis:
+        """The basis of the same design on the samples ``mask`` (rebuilt)."""
+        return Basis(self.block[mask], self.columns[mask], self.extra[mask], self.n_blocks)
+
+    # ----------------------------------------------------------------- projections
+    @property
+    def n_extra(self) -> int:
+        """Number of extra (dense) columns."""
+        return int(self.extra.shape[1])
+
+    @property
+    def rank_total(self) -> int:
+        """Dimension of the spanned space."""
+        return int(self.rank.sum()) + int(self.keep.size)
+
+    def block_coef(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``Q_bᵀ z`` for every block: shape (n_seg, p, m)."""
+        z = np.asarray(z, dtype=np.float64)
+        if z.ndim == 1:
+            z = z[:, None]
+        if self.seg_start.size == 1:
+            return (self.q.T @ z)[None]
+        out = np.empty((self.seg_start.size, self.p, z.shape[1]))
+        for j in range(self.p):
+            out[:, j, :] = np.add.reduceat(self.q[:, j : j + 1] * z, self.seg_start, axis=0)
+        return out
+
+    def block_expand(self, c: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``Σ_j Q_bj c_bj`` on every sample: (n_seg, p, m) -> (n, m)."""
+        if self.seg_start.size == 1:
+            return self.q @ c[0]
+        out = np.zeros((self.n, c.shape[2]))
+        for j in range(self.p):
+            out += self.q[:, j : j + 1] * c[self.sample_seg, j, :]
+        return out
+
+    def block_project(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Projection of ``z`` onto the block part."""
+        z = np.asarray(z, dtype=np.float64)
+        one = z.ndim == 1
+        out = self.block_expand(self.block_coef(z))
+        return out[:, 0] if one else out
+
+    def project(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Projection of ``z`` (n,) or (n, m) onto the whole design."""
+        z = np.asarray(z, dtype=np.float64)
+        one = z.ndim == 1
+        z2 = z[:, None] if one else z
+        out = self.block_expand(self.block_coef(z2))
+        if self.qe.shape[1]:
+            out = out + self.qe @ (self.qe.T @ z2)
+        return out[:, 0] if one else out
+
+    def captured(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``‖Qᵀz‖²`` of each column of ``z`` (n, m): the power the design captures."""
+        z = np.asarray(z, dtype=np.float64)
+        if z.ndim == 1:
+            z = z[:, None]
+        out = np.sum(self.block_coef(z) ** 2, axis=(0, 1))
+        if self.qe.shape[1]:
+            out = out + np.sum((self.qe.T @ z) ** 2, axis=0)
+        return out
+
+    def complement(self, z: NDArray[np.float64], tol: float = 1e-8) -> NDArray[np.float64]:
+        """Orthonormal basis of the part of the columns ``z`` orthogonal to the design.
+
+        Columns (numerically) in the span of the design or of each other are dropped.
+        """
+        z = np.asarray(z, dtype=np.float64)
+        if z.ndim == 1:
+            z = z[:, None]
+        norms0 = np.linalg.norm(z, axis=0)
+        if z.shape[1] == 0 or not np.any(norms0 > 0):
+            return np.zeros((z.shape[0], 0))
+        zt = z - self.project(z)
+        u, s, _ = np.linalg.svd(zt, full_matrices=False)
+        keep = s > tol * max(float(norms0.max()), 1e-300)
+        return u[:, keep]
+
+    def dense_q(self) -> NDArray[np.float64]:
+        """The orthonormal basis as a dense (n, rank) matrix (small designs only)."""
+        cols = []
+        for s in range(self.seg_start.size):
+            a, b = self.seg_start[s], self.seg_stop[s]
+            for j in range(int(self.rank[s])):
+                c = np.zeros(self.n)
+                c[a:b] = self.q[a:b, j]
+                cols.append(c)
+        cols.extend(self.qe.T)
+        return np.column_stack(cols) if cols else np.zeros((self.n, 0))
+
+    def step_norms(self, mask: NDArray[np.bool_] | None = None) -> NDArray[np.float64]:
+        """``‖Qᵀ v_i‖²`` for every step indicator ``v_i = 1[k ≥ i] · mask`` (n,)."""
+        m = np.ones(self.n) if mask is None else np.asarray(mask, dtype=np.float64)
+        qm = self.q * m[:, None]
+        rc = np.zeros((self.n + 1, self.p))
+        rc[:-1] = np.cumsum(qm[::-1], axis=0)[::-1]
+        ssum = rc[self.seg_start] - rc[self.seg_stop]  # (n_seg, p)
+        tot = np.sum(ssum**2, axis=1)
+        tail = np.zeros(tot.size + 1)
+        tail[:-1] = np.cumsum(tot[::-1])[::-1]
+        seg = self.sample_seg
+        partial = rc[:-1] - rc[self.seg_stop[seg]]
+        out = np.sum(partial**2, axis=1) + tail[seg + 1]
+        if self.qe.shape[1]:
+            em = self.qe * m[:, None]
+            s_e = np.cumsum(em[::-1], axis=0)[::-1]
+            out = out + np.sum(s_e**2, axis=1)
+        return out
+
+    # ----------------------------------------------------------------- spectra
+    def _local_groups(self, grid: Grid, vals: NDArray[np.float64]):
+        """Per-block values on each block's own zero-padded grid, grouped by FFT length.
+
+        Yields ``(segments, M, F)`` with ``F`` of shape (g, C, m, M//2+1): the rfft of
+        the block values (``vals`` (n, m)) per channel, on a grid of length ``M`` ≥ twice
+        the block's grid span (so products of two such spectra are linear, not
+        circular, correlations).
+        """
+        seg = np.flatnonzero(self.rank > 0)
+        if seg.size == 0:
+            return
+        gpos = grid.idx
+        g0 = gpos[self.seg_start[seg]]
+        span = gpos[self.seg_stop[seg] - 1] - g0 + 1
+        mlen = np.array([_next_pow2(2 * int(s)) for s in span])
+        chan = grid.channel
+        for m_len in np.unique(mlen):
+            segs = seg[mlen == m_len]
+            gi = np.repeat(np.arange(segs.size), self.seg_stop[segs] - self.seg_start[segs])
+            rows = np.concatenate([np.arange(self.seg_start[s], self.seg_stop[s]) for s in segs])
+            arr = np.zeros((segs.size, grid.n_chan, vals.shape[1], int(m_len)))
+            arr[gi, chan[rows], :, gpos[rows] - gpos[self.seg_start[segs]][gi]] = vals[rows]
+            yield segs, int(m_len), np.fft.rfft(arr, axis=-1)
+
+    def leverage(self, grid: Grid) -> NDArray[np.float64]:
+        """``Σ_j |Q_j(f)|²`` per channel on the grid's frequencies: shape (C, nf).
+
+        The share of white-noise power the fit removes at ``f`` is this over the
+        channel's sample count.  Block columns: their summed linear autocorrelation
+        (local FFTs), folded onto the record's circle of length ``N`` and transformed
+        (identical to ``|rfft(Q_j)|²`` summed, without N-point FFTs per column).
+        """
+        nn = grid.size
+        circ = np.zeros((grid.n_chan, nn))
+        for _, m_len, f in self._local_groups(grid, self.q):
+            acf = np.fft.irfft(np.sum(np.abs(f) ** 2, axis=(0, 2)), m_len, axis=-1)  # (C, M)
+            half = m_len // 2
+            lags = np.r_[np.arange(half), np.arange(half - m_len, 0)]
+            keep = np.abs(lags) < nn
+            np.add.at(circ, (slice(None), lags[keep] % nn), acf[:, keep])
+        lev = np.fft.rfft(circ, axis=-1).real
+        if self.qe.shape[1]:
+            lev = lev + np.sum(np.abs(grid.fft(self.qe)) ** 2, axis=0)
+        return lev
+
+    def block_cov(
+        self, grid: Grid, psd: NDArray[np.float64], vals: NDArray[np.float64] | None = None
+    ) -> NDArray[np.float64]:
+        """``V_bᵀ C V_b`` for every block: shape (n_seg, m, m).
+
+        ``vals`` (n, m) are per-sample block-local weights (default the orthonormal
+        columns ``Q_b``); ``C`` is the circulant noise covariance of the
+        one-sided PSD level ``psd`` (nf,) on the grid (channels independent).
+        """
+        v = self.q if vals is None else vals
+        nn = grid.size
+        acov = np.fft.irfft(psd, nn)  # circulant autocovariance on the grid
+        out = np.zeros((self.seg_start.size, v.shape[1], v.shape[1]))
+        for segs, m_len, f in self._local_groups(grid, v):
+            half = m_len // 2
+            lags = np.abs(np.r_[np.arange(half), np.arange(half - m_len, 0)])
+            kern = np.where(lags < nn, acov[np.minimum(lags, nn - 1)], 0.0)
+            kf = np.fft.rfft(kern).real * _two_sided(m_len, f.shape[-1])
+            c = np.einsum("gcif,gcjf,f->gij", f, np.conj(f), kf).real / m_len
+            out[segs] = 0.5 * (c + np.transpose(c, (0, 2, 1)))
+        return out
+
+    # ----------------------------------------------------------------- fitting
+    def fit(self, y: NDArray[np.float64]) -> FitResult:
+        """Least squares of ``y`` on the design (minimum norm within rank-deficient blocks)."""
+        k = self.n_extra
+        kept = self.extra[:, self.keep]
+        gamma = np.full(k, np.nan)
+        if self.keep.size:
+            w_gamma = np.linalg.solve(self.re, self.qe.T)  # (k_kept, n)
+            gamma[self.keep] = w_gamma @ y
+            a_mat = np.einsum("spr,srk->spk", self.rinv, self.block_coef(kept))
+            yb = y - kept @ gamma[self.keep]
+        else:
+            w_gamma = np.zeros((0, self.n))
+            a_mat = np.zeros((self.seg_start.size, self.p, 0))
+            yb = y
+        cb = self.block_coef(yb)[:, :, 0]  # (n_seg, p)
+        beta_seg = np.einsum("spr,sr->sp", self.rinv, cb)
+        beta = np.full((self.n_blocks, self.p), np.nan)
+        act = self.seg_block >= 0
+        b_ids = self.seg_block[act]
+        beta[b_ids] = np.where(self.ident[act], beta_seg[act], np.nan)
+        resid = y - self.project(y)
+        return FitResult(beta.ravel(), gamma, resid, w_gamma, a_mat)
+
+    def seg_of_block(self) -> NDArray[np.int64]:
+        """Segment index of every block (``-1`` when the block has no used sample)."""
+        out = np.full(self.n_blocks, -1, dtype=np.int64)
+        act = self.seg_block >= 0
+        out[self.seg_block[act]] = np.flatnonzero(act)
+        return out
