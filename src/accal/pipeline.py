@@ -380,10 +380,15 @@ def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutco
     closure: dict[str, Any] = {}
     extra_outputs: list[Path] = []
     if opts.close_loop:
+        fits_before = estimate(fit_series, opts)
         fit_series, closure, extra_outputs = close_the_loop(
             path, series, fit_series, use, opts, out_dir / stem
         )
     fits = estimate(fit_series, opts)
+    if opts.close_loop:
+        truth = load_truth(opts.truth, series, opts.reference is not None) if opts.truth else {}
+        for ax, entry in closure.items():
+            entry["summary"]["estimates"] = _before_after(fits_before, fits, ax, truth.get(ax))
     rows = table_rows(path, series, fits, scale, opts)
     for r in rows:
         r["model"] = closure.get(r["axis"], {}).get("model", f"poly{opts.order}")
@@ -560,7 +565,6 @@ def close_the_loop(
     }
     if opts.aux is not None:
         aux.update(load_aux(opts.aux, series.time))
-    truth = load_truth(opts.truth, series, opts.reference is not None) if opts.truth else {}
     candidates, note = closure_candidates(opts)
     out: dict[str, Any] = {}
     plots: list[Path] = []
@@ -583,18 +587,15 @@ def close_the_loop(
             if e.name in INSTRUMENT_EFFECTS:
                 inst += m
                 labels.append(_effect_label(e))
-        tr = truth.get(ax)
-        tr_base = None
-        if tr is not None:
-            # express the true bias at the closure's t0
-            tr_base = {"bias": tr["bias"] + tr["drift"] * (res.t0 - tr["t0"]), "drift": tr["drift"]}
-        summary = res.to_dict(truth=tr_base)
+        # the true errors are those of the refitted estimators (see _before_after): the
+        # closure's own base coefficients share their design with periodic terms
+        summary = res.to_dict()
         summary["model"] = "+".join(labels)
         summary["candidates"] = list(candidates)
         if note:
             summary["note"] = note
         summary["removed_from_calibrated"] = labels[1:]
-        summary["markdown"] = to_markdown(res, title=f"{path.name} axis {ax}", truth=tr_base)
+        summary["markdown"] = to_markdown(res, title=f"{path.name} axis {ax}")
         out[ax] = {"summary": summary, "instrument": inst, "model": "+".join(labels)}
         cols.append(y - inst)
         plots += _plot_closure(res, prefix, ax)
@@ -620,6 +621,43 @@ def _plot_closure(res: Any, prefix: Path, ax: str) -> list[Path]:
         ta.with_suffix(".png").replace(ta)
         tb.with_suffix(".png").replace(tb)
     return [a, b]
+
+
+def _before_after(
+    before: dict[tuple[str, str], Any],
+    after: dict[tuple[str, str], Any],
+    ax: str,
+    truth: dict[str, float] | None,
+) -> dict[str, Any]:
+    """Bias and drift of each method before/after closing the loop (and their true errors).
+
+    ``change_sigmas`` is ``|after − before| / σ_after``: how many of the final
+    uncertainties the extended model moved the estimate.
+    """
+    out: dict[str, Any] = {}
+    for (a, m), fb in before.items():
+        if a != ax:
+            continue
+        fa = after[(a, m)]
+        entry: dict[str, Any] = {}
+        for k, name in enumerate(("bias", "drift")):
+            b, s_b = float(fb.coef[k]), float(fb.sigma[k])
+            v, s_v = float(fa.coef[k]), float(fa.sigma[k])
+            e = {
+                "before": b,
+                "sigma_before": s_b,
+                "after": v,
+                "sigma_after": s_v,
+                "change_sigmas": abs(v - b) / s_v if s_v > 0 else float("inf"),
+            }
+            if truth is not None:
+                tb = truth["bias"] + truth["drift"] * (fb.t0 - truth["t0"])
+                tv = tb if name == "bias" else truth["drift"]
+                e["true_error_before"] = b - tv
+                e["true_error_after"] = v - tv
+            entry[name] = e
+        out[m] = entry
+    return out
 
 
 def _with_effects_removed(series: AccSeries, closure: dict[str, Any]) -> AccSeries:
@@ -1044,6 +1082,7 @@ def write_closure_reports(out_dir: Path, outcomes: Sequence[FileOutcome]) -> tup
         for ax, entry in axes.items():
             md = entry.get("markdown") or f"## {src} axis {ax}\n"
             lines.append(md.rstrip())
+            lines += _estimates_markdown(entry.get("estimates") or {})
             removed = entry.get("removed_from_calibrated") or []
             lines += ["", f"Removed from calibrated: {', '.join(removed) or 'nothing'}.", ""]
     from accal.io.writers import atomic_path
@@ -1052,6 +1091,28 @@ def write_closure_reports(out_dir: Path, outcomes: Sequence[FileOutcome]) -> tup
     with atomic_path(mpath) as tmp:
         tmp.write_text("\n".join(lines) + "\n")
     return jpath, mpath
+
+
+def _estimates_markdown(estimates: dict[str, Any]) -> list[str]:
+    if not estimates:
+        return []
+    has_truth = any("true_error_before" in e for m in estimates.values() for e in m.values())
+    head = "| method | quantity | before ± σ | after ± σ | change / σ_after |"
+    sep = "|---|---|---|---|---|"
+    if has_truth:
+        head += " true error before | true error after |"
+        sep += "---|---|"
+    lines = ["", "Refitted estimates (the table's values):", "", head, sep]
+    for m, ent in estimates.items():
+        for q, e in ent.items():
+            row = (
+                f"| {m} | {q} | {e['before']:.4g} ± {e['sigma_before']:.2g} "
+                f"| {e['after']:.4g} ± {e['sigma_after']:.2g} | {e['change_sigmas']:.2f} |"
+            )
+            if has_truth:
+                row += f" {e['true_error_before']:.3g} | {e['true_error_after']:.3g} |"
+            lines.append(row)
+    return lines
 
 
 def find_bias_drift(directory: Path) -> Path:
