@@ -23,10 +23,8 @@ run: $(STAMP)
 	$(BIN)/accal simulate grace --date 2005-01-01 --satellite A --out $(OUT)/sim/ACC1B_2005-01-01_A_sim.asc
 	$(BIN)/accal grace-bias $(OUT)/sim/ACC1B_2005-01-01_A_sim.asc --method both --scale tn02 \
 	    --format csv --out $(OUT)/grace-bias
-	@echo "--- $(OUT)/grace-bias/bias_drift.csv"
-	@$(BIN)/python -c "import pandas as pd; pd.set_option('display.width', 200); \
-	  print(pd.read_csv('$(OUT)/grace-bias/bias_drift.csv', comment='#')[['source', 'axis', 'method', \
-	  'bias', 'bias_sigma', 'drift', 'drift_sigma', 'n', 'rms']].to_string(index=False))"
+	@echo "--- $(OUT)/grace-bias/bias_drift.csv (accal table $(OUT)/grace-bias)"
+	@$(BIN)/accal table $(OUT)/grace-bias
 
 ## test: the full default test suite (what CI runs)
 test: $(STAMP)
