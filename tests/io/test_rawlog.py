@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 
 from accal.errors import FormatError
-from accal.io.rawlog import read_psd, read_rawlog
+from accal.io.rawlog import open_rawlog, read_psd, read_rawlog
 from accal.io.writers import write_table
 
 CSV = """# units: {"theta": "rad", "temperature": "K"}
@@ -94,3 +94,88 @@ def test_psd_table(tmp_path):
     p.write_text("freq,S\n1,2\n")
     with pytest.raises(FormatError, match=r"psd\.csv: PSD table: missing column\(s\) f"):
         read_psd(p)
+
+
+# --- streamed reading (open_rawlog) ------------------------------------------
+
+
+def _concat(stream):
+    chunks = list(stream)
+    return chunks, {
+        "time": np.concatenate([c.time for c in chunks]),
+        "acc": np.concatenate([c.acc for c in chunks]),
+        "theta": np.concatenate([c.theta for c in chunks]),
+        "temperature": np.concatenate([c.aux["temperature"] for c in chunks]),
+    }
+
+
+@pytest.mark.parametrize("kind", ["csv", "csv.gz", "parquet"])
+def test_stream_equals_whole_file(tmp_path, kind):
+    rng = np.random.default_rng(0)
+    n = 103
+    df = pd.DataFrame(
+        {
+            "time": np.arange(n) * 0.5,
+            "m_y": rng.normal(size=n),
+            "m_z": rng.normal(size=n),
+            "theta": np.where(np.arange(n) % 20 < 10, 0.0, np.pi),
+            "temperature": 293.0 + rng.normal(size=n),
+        }
+    )
+    p = tmp_path / f"run.{kind}"
+    if kind == "csv.gz":
+        write_table(df, tmp_path / "run.csv", units={"theta": "rad", "temperature": "K"})
+        p.write_bytes(gzip.compress((tmp_path / "run.csv").read_bytes()))
+    else:
+        write_table(df, p, units={"theta": "rad", "temperature": "K"})
+    whole = read_rawlog(p)
+    stream = open_rawlog(p, rows=10)
+    assert stream.axes == ("y", "z") and stream.units["temperature"] == "K"
+    chunks, cat = _concat(stream)
+    assert [c.first_row for c in chunks] == list(range(0, n, 10))
+    assert max(len(c) for c in chunks) == 10
+    np.testing.assert_array_equal(cat["time"], whole.time)
+    np.testing.assert_array_equal(cat["acc"], whole.acc)
+    np.testing.assert_array_equal(cat["theta"], whole.aux["theta"])
+    np.testing.assert_array_equal(cat["temperature"], whole.aux["temperature"])
+    # a stream can be read again (each pass re-opens the file)
+    np.testing.assert_array_equal(_concat(stream)[1]["time"], whole.time)
+
+
+def test_stream_csv_types_fixed_on_first_chunk(tmp_path):
+    """An integer column in the first chunk may hold decimals later (read as float)."""
+    p = tmp_path / "int.csv"
+    p.write_text("time,m_y,m_z,theta,heater\n0,1,2,0,1\n1,1,2,0,2\n2,1,2,3.14,2.5\n3,1,2,3.14,x\n")
+    chunks = []
+    with pytest.raises(FormatError, match=r"int\.csv: CSV: .*invalid value 'x' \(in lines 4-5\)"):
+        for c in open_rawlog(p, rows=2):
+            chunks.append(c)
+    assert [c.aux["heater"].tolist() for c in chunks] == [[1.0, 2.0]]
+    p.write_text(p.read_text().replace(",x\n", ",3\n"))
+    heater = np.concatenate([c.aux["heater"] for c in open_rawlog(p, rows=2)])
+    np.testing.assert_array_equal(heater, [1, 2, 2.5, 3])
+
+
+def test_stream_time_checked_across_chunks(tmp_path):
+    p = tmp_path / "back.csv"
+    p.write_text(CSV.replace("\n2,1e-6", "\n0.5,1e-6"))
+    with pytest.raises(FormatError, match=r"back\.csv:5: time is not strictly increasing"):
+        list(open_rawlog(p, rows=2))  # the bad step is the first row of the second chunk
+    p.write_text(CSV.rstrip("\n"))
+    with pytest.raises(FormatError, match=r":6: truncated last line"):
+        list(open_rawlog(p, rows=3))
+
+
+def test_stream_header_checks_on_open(tmp_path):
+    p = tmp_path / "bad.csv"
+    p.write_text("time,m_y,angle\n0,1,0\n")
+    with pytest.raises(FormatError, match=r"missing column\(s\) m_z, theta"):
+        open_rawlog(p, rows=5)
+    p.write_text(CSV.replace('"theta": "rad"', '"theta": "degrees"'))
+    with pytest.raises(FormatError, match="give it in radians"):
+        open_rawlog(p, rows=5)
+    p.write_text("time,m_y,m_z,theta\n")
+    with pytest.raises(FormatError, match="header but no data rows"):
+        list(open_rawlog(p, rows=5))
+    with pytest.raises(FormatError, match="no such file"):
+        open_rawlog(tmp_path / "nope.parquet")

@@ -12,17 +12,30 @@ strictly increasing (a run file is not sorted or de-duplicated behind the user's
 back), and a θ column whose declared unit is degrees is refused.  Checks that
 need the modulation period (uniform sampling, θ range, masking) are made by the
 demodulation, see :mod:`accal.estimators.demod`.
+
+Two entry points: :func:`read_rawlog` reads a whole file into an
+:class:`~accal.series.AccSeries`; :func:`open_rawlog` reads it in chunks of a
+bounded number of rows (a year of 1 Hz data in a few hundred MB), with the same
+checks carried across chunk borders.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import NDArray
 
 from accal.errors import FormatError
-from accal.io._common import PARQUET_MAGIC, read_bytes
-from accal.io.tables import _numeric, _read_csv, _read_parquet
+from accal.io.tables import (
+    STREAM_ROWS,
+    TableStream,
+    column_list,
+    numeric_column,
+    read_table_arrow,
+)
 from accal.series import AccSeries, ReadReport
 
 #: Columns every run file must have.
@@ -41,11 +54,189 @@ DEGREE_UNITS = ("deg", "degree", "degrees", "°")
 PSD_COLUMNS = ("f", "S")
 
 
-def _read_any(path: Path):
-    raw = read_bytes(path)
-    if raw.startswith(PARQUET_MAGIC):
-        return _read_parquet(raw, path)
-    return _read_csv(raw, path)
+@dataclass(frozen=True)
+class RawlogChunk:
+    """Consecutive rows of a run file.
+
+    Attributes
+    ----------
+    first_row : int
+        0-based index of the chunk's first data row in the file.
+    time : ndarray, shape (n,)
+        [s], finite and strictly increasing (also across chunks).
+    acc : ndarray, shape (n, k)
+        ``(m_x,) m_y, m_z`` [m s⁻²], columns in the order of :attr:`RawlogStream.axes`.
+    theta : ndarray, shape (n,)
+        Platform angle [rad].
+    aux : dict of str to ndarray
+        The other numeric channels.
+    axes : tuple of str
+        ``("x",) "y", "z"``.
+    """
+
+    first_row: int
+    time: NDArray[np.float64]
+    acc: NDArray[np.float64]
+    theta: NDArray[np.float64]
+    aux: dict[str, NDArray] = field(default_factory=dict)
+    axes: tuple[str, ...] = ("y", "z")
+
+    def __len__(self) -> int:
+        return int(self.time.size)
+
+    def axis(self, name: str) -> NDArray[np.float64]:
+        """Column of ``acc`` for axis ``name`` [m s⁻²]."""
+        return self.acc[:, self.axes.index(name)]
+
+
+class RawlogStream:
+    """A run file opened for reading in chunks (see :func:`open_rawlog`).
+
+    Attributes
+    ----------
+    path : Path
+        The file.
+    names : list of str
+        Its columns.
+    axes : tuple of str
+        Accelerometer axes present: ``("x",) "y", "z"``.
+    units : dict
+        Units as in :attr:`AccSeries.units`: ``time``, ``acc``, ``theta``, and one
+        per other column (``"unknown"`` when the file does not say).
+    file_meta : dict
+        The file's own metadata.
+    warnings : list of str
+        Findings of the last pass (non-numeric columns ignored).
+    """
+
+    def __init__(self, path: str | Path, rows: int | None = STREAM_ROWS) -> None:
+        self.path = Path(path)
+        self.rows = rows
+        if rows is None:
+            self._whole = read_table_arrow(self.path)
+            table, units, fmeta, first_line = self._whole
+            names = list(table.column_names)
+        else:
+            self._stream = TableStream(self.path, rows=rows)
+            units, fmeta = self._stream.units, self._stream.meta
+            names, first_line = list(self._stream.names), self._stream.first_line
+        missing = [c for c in REQUIRED_COLUMNS if c not in names]
+        if missing:
+            raise FormatError(
+                f"missing column(s) {', '.join(missing)} (need {', '.join(REQUIRED_COLUMNS)}; "
+                f"columns are {column_list(names)})",
+                self.path,
+            )
+        th_unit = str(units.get("theta", "rad")).strip().lower()
+        if th_unit.split(" ")[0] in DEGREE_UNITS:
+            raise FormatError(
+                f"theta is declared in {units['theta']!r}; give it in radians", self.path
+            )
+        self.names = names
+        self.first_line = first_line
+        self.file_meta = fmeta
+        self.axes = (("x",) if "m_x" in names else ()) + ("y", "z")
+        self.units = dict(UNITS)
+        self.units["acc"] = units.get("m_y", UNITS["acc"])
+        self.units.update(
+            {
+                k: units.get(k, "unknown")
+                for k in names
+                if k not in REQUIRED_COLUMNS and k not in OPTIONAL_COLUMNS
+            }
+        )
+        self.warnings: list[str] = []
+
+    def _line(self, row: int) -> int | None:
+        # CSV: 1-based line of data row ``row``; Parquet has no lines (first_line = 0)
+        return self.first_line + int(row) if self.first_line else None
+
+    def _tables(self) -> Iterator[tuple[int, object]]:
+        if self.rows is None:
+            table = self._whole[0]
+            if table.num_rows == 0:
+                raise FormatError("header but no data rows", self.path, self.first_line or None)
+            yield 0, table
+        else:
+            yield from self._stream
+
+    def __iter__(self) -> Iterator[RawlogChunk]:
+        path = self.path
+        last_t: float | None = None
+        aux_names: list[str] | None = None
+        self.warnings = []
+        for row0, table in self._tables():
+            cols = {
+                c: numeric_column(table.column(c), c, path).astype(np.float64)
+                for c in REQUIRED_COLUMNS
+            }
+            time = cols["time"]
+            bad = np.flatnonzero(~np.isfinite(time))
+            if bad.size:
+                raise FormatError(
+                    "time: missing or non-finite value", path, self._line(row0 + bad[0])
+                )
+            if last_t is not None and time[0] <= last_t:
+                raise FormatError(
+                    f"time is not strictly increasing: {time[0]:.9g} s after {last_t:.9g} s",
+                    path,
+                    self._line(row0),
+                )
+            back = np.flatnonzero(np.diff(time) <= 0)
+            if back.size:
+                i = int(back[0]) + 1
+                raise FormatError(
+                    f"time is not strictly increasing: {time[i]:.9g} s after {time[i - 1]:.9g} s "
+                    f"({back.size} such step(s))",
+                    path,
+                    self._line(row0 + i),
+                )
+            last_t = float(time[-1])
+            acc = []
+            if "x" in self.axes:
+                acc.append(numeric_column(table.column("m_x"), "m_x", path).astype(np.float64))
+            acc += [cols["m_y"], cols["m_z"]]
+            if aux_names is None:  # decided on the first chunk (CSV types are fixed there)
+                aux_names, skipped = [], []
+                for name in self.names:
+                    if name in REQUIRED_COLUMNS or name in OPTIONAL_COLUMNS:
+                        continue
+                    try:
+                        numeric_column(table.column(name), name, path)
+                        aux_names.append(name)
+                    except FormatError:
+                        skipped.append(name)
+                if skipped:
+                    self.warnings.append(f"non-numeric columns ignored: {column_list(skipped)}")
+            aux = {k: numeric_column(table.column(k), k, path) for k in aux_names}
+            yield RawlogChunk(row0, time, np.column_stack(acc), cols["theta"], aux, self.axes)
+
+
+def open_rawlog(path: str | Path, *, rows: int | None = STREAM_ROWS) -> RawlogStream:
+    """Open a rotating-platform run file for reading in chunks.
+
+    Parameters
+    ----------
+    path : str or Path
+        Parquet, CSV or gzipped CSV table (columns as in :func:`read_rawlog`).
+    rows : int or None
+        Rows per chunk; ``None`` reads the whole file as one chunk.
+
+    Returns
+    -------
+    RawlogStream
+        Iterate it (as often as needed; each pass re-reads the file) for
+        :class:`RawlogChunk` objects.
+
+    Raises
+    ------
+    FormatError
+        On opening: unreadable or corrupt file, missing columns (all listed), θ
+        declared in degrees.  While iterating: non-numeric required columns,
+        non-finite or not strictly increasing time (checked across chunks, with
+        the CSV line).
+    """
+    return RawlogStream(path, rows)
 
 
 def read_rawlog(path: str | Path) -> AccSeries:
@@ -72,75 +263,26 @@ def read_rawlog(path: str | Path) -> AccSeries:
         Unreadable or corrupt file, missing columns (all listed), non-numeric
         columns, non-finite or not strictly increasing time, θ declared in degrees.
     """
-    path = Path(path)
-    table, units, fmeta, first_line = _read_any(path)
-    names = list(table.column_names)
-    missing = [c for c in REQUIRED_COLUMNS if c not in names]
-    if missing:
-        raise FormatError(
-            f"missing column(s) {', '.join(missing)} (need {', '.join(REQUIRED_COLUMNS)}; "
-            f"columns are {', '.join(names) or 'none'})",
-            path,
-        )
-    if table.num_rows == 0:
-        raise FormatError("header but no data rows", path, first_line or None)
-    th_unit = str(units.get("theta", "rad")).strip().lower()
-    if th_unit.split(" ")[0] in DEGREE_UNITS:
-        raise FormatError(f"theta is declared in {units['theta']!r}; give it in radians", path)
-    cols = {c: _numeric(table.column(c), c, path).astype(np.float64) for c in REQUIRED_COLUMNS}
-    time = cols["time"]
-    bad = np.flatnonzero(~np.isfinite(time))
-    if bad.size:
-        raise FormatError("time: missing or non-finite value", path, _line(first_line, bad[0]))
-    back = np.flatnonzero(np.diff(time) <= 0)
-    if back.size:
-        i = int(back[0]) + 1
-        raise FormatError(
-            f"time is not strictly increasing: {time[i]:.9g} s after {time[i - 1]:.9g} s "
-            f"({back.size} such step(s))",
-            path,
-            _line(first_line, i),
-        )
-    axes, acc = [], []
-    if "m_x" in names:
-        axes.append("x")
-        acc.append(_numeric(table.column("m_x"), "m_x", path).astype(np.float64))
-    axes += ["y", "z"]
-    acc += [cols["m_y"], cols["m_z"]]
-    aux = {"theta": cols["theta"]}
-    skipped = []
-    for name in names:
-        if name in aux or name in REQUIRED_COLUMNS or name in OPTIONAL_COLUMNS:
-            continue
-        try:
-            aux[name] = _numeric(table.column(name), name, path)
-        except FormatError:
-            skipped.append(name)
-    warnings = (f"non-numeric columns ignored: {', '.join(skipped)}",) if skipped else ()
-    step = np.diff(time)
+    stream = open_rawlog(path, rows=None)
+    (chunk,) = list(stream)
+    aux = {"theta": chunk.theta, **chunk.aux}
+    step = np.diff(chunk.time)
     report = ReadReport(
-        n_rows=int(time.size),
+        n_rows=len(chunk),
         nominal_step=float(np.median(step)) if step.size else float("nan"),
-        warnings=warnings,
+        warnings=tuple(stream.warnings),
     )
-    col_units = dict(UNITS)
-    col_units["acc"] = units.get("m_y", UNITS["acc"])
-    col_units.update({k: units.get(k, "unknown") for k in aux if k != "theta"})
+    units = {k: v for k, v in stream.units.items() if k in ("time", "acc", "theta") or k in aux}
     return AccSeries(
-        time=time,
-        acc=np.column_stack(acc),
-        axes=tuple(axes),
+        time=chunk.time,
+        acc=chunk.acc,
+        axes=chunk.axes,
         aux=aux,
         frame="platform",
-        units=col_units,
-        meta={"rawlog": {"file_meta": fmeta, "columns": names}},
+        units=units,
+        meta={"rawlog": {"file_meta": stream.file_meta, "columns": stream.names}},
         report=report,
     )
-
-
-def _line(first_line: int, row: int) -> int | None:
-    # CSV: 1-based line of data row ``row``; Parquet has no lines (first_line = 0)
-    return first_line + int(row) if first_line else None
 
 
 def read_psd(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
@@ -163,13 +305,13 @@ def read_psd(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
         Unreadable file, missing or non-numeric columns.
     """
     path = Path(path)
-    table, _, _, _ = _read_any(path)
+    table, _, _, _ = read_table_arrow(path)
     names = list(table.column_names)
     missing = [c for c in PSD_COLUMNS if c not in names]
     if missing:
         raise FormatError(
             f"PSD table: missing column(s) {', '.join(missing)} (need f [Hz], S [m^2 s^-4 Hz^-1]; "
-            f"columns are {', '.join(names)})",
+            f"columns are {column_list(names)})",
             path,
         )
-    return tuple(_numeric(table.column(c), c, path).astype(np.float64) for c in PSD_COLUMNS)
+    return tuple(numeric_column(table.column(c), c, path).astype(np.float64) for c in PSD_COLUMNS)

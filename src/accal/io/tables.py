@@ -21,6 +21,7 @@ from __future__ import annotations
 import io
 import json
 import re
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -55,6 +56,28 @@ SATELLITE_PATTERNS = ((re.compile(r"(?:^|[_/])SW_(?:OPER_\w*?_)?([ABC])_"), "Swa
 _FMTS = ("parquet", "csv")
 
 
+def one_line(text: str, limit: int = 200) -> str:
+    """``text`` as one short line: control characters escaped, cut at ``limit``."""
+    text = str(text)
+    if not text.isprintable():
+        text = repr(text)[1:-1]
+    return text[:limit]
+
+
+def column_list(names: Any, limit: int = 160) -> str:
+    """Column names for a one-line message (non-printable names escaped, cut at ``limit``)."""
+    names = list(names)
+    out, size = [], 0
+    for n in names:
+        shown = one_line(n, 40)
+        if out and size + len(shown) > limit:
+            break
+        out.append(shown)
+        size += len(shown) + 2
+    more = len(names) - len(out)
+    return ", ".join(out) + (f", ... ({more} more)" if more > 0 else "") if names else "none"
+
+
 def sniff_table(path: str | Path) -> bool:
     """Return True if ``path`` looks like a Parquet or CSV table (never raises)."""
     try:
@@ -84,7 +107,53 @@ def _guess_satellite(path: Path) -> str:
     return ""
 
 
-def _read_csv(raw: bytes, path: Path) -> tuple[Any, dict, dict, int]:
+def _json_object(raw: bytes | str, path: Path, line: int | None, what: str) -> dict:
+    """Parse metadata JSON that must be an object; FormatError otherwise."""
+    try:
+        obj = json.loads(raw)
+    except (json.JSONDecodeError, UnicodeDecodeError):
+        raise FormatError(f"{what} is not valid JSON", path, line) from None
+    if not isinstance(obj, dict):
+        raise FormatError(f"{what} is not a JSON object", path, line)
+    return obj
+
+
+def _comment(line: bytes, path: Path, lineno: int, units: dict, meta: dict) -> None:
+    """Parse one ``# key: value`` comment line into ``units``/``meta`` (in place)."""
+    text = line.decode("utf-8", "replace").rstrip("\r\n")
+    key, _, rest = text[1:].partition(":")
+    key = key.strip()
+    if key in ("units", "meta"):
+        obj = _json_object(rest, path, lineno, f"comment '{key}:'")
+        target = units if key == "units" else meta
+        target.clear()
+        target.update(obj)
+
+
+def read_csv_table(raw: bytes, path: Path) -> tuple[Any, dict, dict, int]:
+    """Parse a whole CSV table (comment header, then a header line and rows).
+
+    Parameters
+    ----------
+    raw : bytes
+        The decompressed file content.
+    path : Path
+        The file (for messages).
+
+    Returns
+    -------
+    table : pyarrow.Table
+        The columns, types inferred by pyarrow (``qualflg`` kept as strings).
+    units, meta : dict
+        From the ``# units: {...}`` and ``# meta: {...}`` comment lines.
+    first_line : int
+        1-based line number of the first data row.
+
+    Raises
+    ------
+    FormatError
+        Bad comment JSON, binary data, no rows, truncated last line, parse errors.
+    """
     import pyarrow as pa
     import pyarrow.csv as pacsv
 
@@ -94,17 +163,7 @@ def _read_csv(raw: bytes, path: Path) -> tuple[Any, dict, dict, int]:
     while raw.startswith(b"#", pos):
         nl = raw.find(b"\n", pos)
         nl = len(raw) if nl < 0 else nl
-        line = raw[pos:nl].decode("utf-8", "replace")
-        key, _, rest = line[1:].partition(":")
-        try:
-            if key.strip() == "units":
-                units = json.loads(rest)
-            elif key.strip() == "meta":
-                meta = json.loads(rest)
-        except json.JSONDecodeError:
-            raise FormatError(
-                f"comment '{key.strip()}:' is not valid JSON", path, n_comment + 1
-            ) from None
+        _comment(raw[pos:nl], path, n_comment + 1, units, meta)
         pos, n_comment = nl + 1, n_comment + 1
     body = raw[pos:]
     check_binary(body[:65536], path, n_comment + 1)
@@ -139,7 +198,29 @@ def _read_csv(raw: bytes, path: Path) -> tuple[Any, dict, dict, int]:
     return table, units, meta, n_comment + 2
 
 
-def _read_parquet(raw: bytes, path: Path) -> tuple[Any, dict, dict, int]:
+def read_parquet_table(raw: bytes, path: Path) -> tuple[Any, dict, dict, int]:
+    """Parse a whole Parquet table held in memory.
+
+    Parameters
+    ----------
+    raw : bytes
+        The file content.
+    path : Path
+        The file (for messages).
+
+    Returns
+    -------
+    table : pyarrow.Table
+    units, meta : dict
+        From the ``accal.units`` and ``accal.meta`` schema metadata.
+    first_line : int
+        Always 0 (Parquet has no lines).
+
+    Raises
+    ------
+    FormatError
+        Corrupt file or metadata.
+    """
     import pyarrow as pa
     import pyarrow.parquet as pq
 
@@ -150,15 +231,19 @@ def _read_parquet(raw: bytes, path: Path) -> tuple[Any, dict, dict, int]:
             f"corrupt Parquet file ({str(exc).splitlines()[0][:200]})", path
         ) from None
     md = table.schema.metadata or {}
-    try:
-        units = json.loads(md.get(b"accal.units", b"{}"))
-        meta = json.loads(md.get(b"accal.meta", b"{}"))
-    except json.JSONDecodeError:
-        raise FormatError("accal metadata is not valid JSON", path) from None
+    units = _json_object(md.get(b"accal.units", b"{}"), path, None, "accal metadata")
+    meta = _json_object(md.get(b"accal.meta", b"{}"), path, None, "accal metadata")
     return table, units, meta, 0
 
 
-def _numeric(col: Any, name: str, path: Path) -> np.ndarray:
+def numeric_column(col: Any, name: str, path: Path) -> np.ndarray:
+    """An integer, float or boolean Arrow column as numpy; nulls become NaN.
+
+    Raises
+    ------
+    FormatError
+        The column is not numeric (names the column).
+    """
     import pyarrow as pa
 
     t = col.type
@@ -202,9 +287,9 @@ def read_table_series(path: str | Path, *, columns: dict[str, str] | None = None
         check_option("columns key", key, tuple(AXIS_COLUMNS))
     raw = read_bytes(path)
     if raw.startswith(PARQUET_MAGIC):
-        table, units, fmeta, first_line = _read_parquet(raw, path)
+        table, units, fmeta, first_line = read_parquet_table(raw, path)
     else:
-        table, units, fmeta, first_line = _read_csv(raw, path)
+        table, units, fmeta, first_line = read_csv_table(raw, path)
     names = list(table.column_names)
     if table.num_rows == 0:
         raise FormatError("header but no data rows", path, first_line or None)
@@ -213,7 +298,7 @@ def read_table_series(path: str | Path, *, columns: dict[str, str] | None = None
     tname = next((c for c in TIME_COLUMNS if c in names), None)
     if tname is None:
         raise FormatError(
-            f"no time column (one of {', '.join(TIME_COLUMNS)}); columns are {', '.join(names)}",
+            f"no time column (one of {', '.join(TIME_COLUMNS)}); columns are {column_list(names)}",
             path,
         )
     tcol = table.column(tname)
@@ -226,9 +311,9 @@ def read_table_series(path: str | Path, *, columns: dict[str, str] | None = None
         try:
             time = utc_to_gps(vals)
         except (ValueError, TypeError) as exc:
-            raise FormatError(f"time_utc: {exc}", path) from None
+            raise FormatError(f"time_utc: {one_line(str(exc))}", path) from None
     else:
-        time = _numeric(tcol, tname, path).astype(np.float64)
+        time = numeric_column(tcol, tname, path).astype(np.float64)
     bad = np.flatnonzero(~np.isfinite(time))
     if bad.size:
         raise FormatError(
@@ -243,15 +328,17 @@ def read_table_series(path: str | Path, *, columns: dict[str, str] | None = None
             acc_cols.append(src)
         elif ax in columns:
             raise FormatError(
-                f"column {src!r} (for axis {ax}) not found; columns are {', '.join(names)}", path
+                f"column {src!r} (for axis {ax}) not found; columns are {column_list(names)}", path
             )
     if not axes:
         raise FormatError(
             "no acceleration column (lin_accl_x/y/z, or map one with columns={'x': name}); "
-            f"columns are {', '.join(names)}",
+            f"columns are {column_list(names)}",
             path,
         )
-    acc = np.column_stack([_numeric(table.column(c), c, path) for c in acc_cols]).astype(np.float64)
+    acc = np.column_stack([numeric_column(table.column(c), c, path) for c in acc_cols]).astype(
+        np.float64
+    )
 
     warn: list[str] = []
     n = table.num_rows
@@ -268,26 +355,26 @@ def read_table_series(path: str | Path, *, columns: dict[str, str] | None = None
                 quality = bits_from_strings(qcol, path, first_line or 1)
             except FormatError:
                 try:  # an integer bitmask read as text
-                    quality = _numeric(qcol.cast(pa.int64()), qname, path).astype(np.uint32)
+                    quality = numeric_column(qcol.cast(pa.int64()), qname, path).astype(np.uint32)
                 except (pa.ArrowException, FormatError):
                     raise FormatError(
                         f"column {qname!r} is neither 8-character 0/1 flags nor integers", path
                     ) from None
         else:
-            q = _numeric(qcol, qname, path)
+            q = numeric_column(qcol, qname, path)
             if not np.all(np.isfinite(q)) or np.any(q < 0) or np.any(q != np.round(q)):
                 raise FormatError(f"column {qname!r} must hold non-negative integers", path)
             quality = q.astype(np.uint32)
         valid = (quality & np.uint32(DEFAULT_INVALID_BITS)) == 0
         used.add(qname)
     if FLAG_COLUMN in names:
-        f = _numeric(table.column(FLAG_COLUMN), FLAG_COLUMN, path)
+        f = numeric_column(table.column(FLAG_COLUMN), FLAG_COLUMN, path)
         if qname is None:
             quality = np.where(np.isfinite(f), f, 1).astype(np.uint32)
         valid = f == 0
         used.add(FLAG_COLUMN)
     if VALID_COLUMN in names:
-        v = _numeric(table.column(VALID_COLUMN), VALID_COLUMN, path)
+        v = numeric_column(table.column(VALID_COLUMN), VALID_COLUMN, path)
         valid = np.asarray(v == 1, dtype=bool)
         used.add(VALID_COLUMN)
     nonfinite = ~np.isfinite(acc).all(axis=1)
@@ -303,7 +390,7 @@ def read_table_series(path: str | Path, *, columns: dict[str, str] | None = None
         if name in used:
             continue
         try:
-            aux[name] = _numeric(table.column(name), name, path)
+            aux[name] = numeric_column(table.column(name), name, path)
         except FormatError:
             skipped.append(name)
     if series_meta is not None:
@@ -416,3 +503,267 @@ def write_series(series: AccSeries, path: str | Path, fmt: str | None = None) ->
         }
     }
     return write_table(pd.DataFrame(data), path, fmt=fmt, units=units, meta=meta)
+
+
+# ---------------------------------------------------------------------------
+# whole-file and streamed reading of any table (used by accal.io.rawlog)
+
+#: Rows per chunk of :func:`open_table` by default (~3 days at 1 Hz).
+STREAM_ROWS = 1 << 18
+
+
+def read_table_arrow(path: str | Path) -> tuple[Any, dict, dict, int]:
+    """Read a whole Parquet or CSV (optionally gzipped) table.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file; Parquet is recognised by its magic bytes, anything else is CSV.
+
+    Returns
+    -------
+    table, units, meta, first_line
+        As :func:`read_csv_table` / :func:`read_parquet_table`.
+
+    Raises
+    ------
+    FormatError
+        Unreadable or corrupt file.
+    """
+    path = Path(path)
+    raw = read_bytes(path)
+    if raw.startswith(PARQUET_MAGIC):
+        return read_parquet_table(raw, path)
+    return read_csv_table(raw, path)
+
+
+def _open_binary(path: Path) -> Any:
+    """Open ``path`` for reading bytes, decompressing gzip (by magic); FormatError on failure."""
+    import gzip
+
+    if path.is_dir():
+        raise FormatError("is a directory, not a file", path)
+    try:
+        fh = open(path, "rb")  # noqa: SIM115 (returned to the caller, who closes it)
+    except FileNotFoundError:
+        raise FormatError("no such file", path) from None
+    except PermissionError:
+        raise FormatError("permission denied (file not readable)", path) from None
+    except OSError as exc:
+        raise FormatError(f"cannot read file: {exc.strerror or exc}", path) from None
+    if fh.read(2) == b"\x1f\x8b":
+        fh.seek(0)
+        return gzip.GzipFile(fileobj=fh, mode="rb")
+    fh.seek(0)
+    return fh
+
+
+class TableStream:
+    """A Parquet or CSV table read in chunks of at most ``rows`` rows.
+
+    Iterating yields ``(first_row, table)`` pairs: the 0-based index of the
+    chunk's first data row and a ``pyarrow.Table`` of the next rows.  Each
+    iteration re-opens the file, so a stream can be read several times.  Memory
+    is bounded by the chunk, not the file (except gzipped Parquet, which has to
+    be decompressed in memory).
+
+    CSV column types are inferred on the first chunk; integer and all-empty
+    columns are read as float64 from then on, so that a later chunk holding a
+    decimal point reads the same way.
+
+    Attributes
+    ----------
+    path : Path
+        The file.
+    names : list of str
+        Column names.
+    units, meta : dict
+        ``accal.units`` / ``accal.meta`` (Parquet) or ``# units:`` / ``# meta:`` (CSV).
+    first_line : int
+        1-based line of the first data row (CSV); 0 for Parquet.
+    rows : int
+        Rows per chunk.
+    """
+
+    def __init__(self, path: str | Path, *, rows: int = STREAM_ROWS) -> None:
+        self.path = Path(path)
+        self.rows = int(rows)
+        if self.rows < 1:
+            raise ValidationError(f"rows per chunk must be >= 1, got {rows}")
+        with _open_binary(self.path) as fh:
+            head = fh.read(4)
+            gz = not isinstance(fh, io.BufferedReader)
+        if not head.strip():
+            raise FormatError("empty file", self.path)
+        self.units: dict[str, str] = {}
+        self.meta: dict[str, Any] = {}
+        if head == PARQUET_MAGIC:
+            self.kind = "parquet-gz" if gz else "parquet"
+            self._open_parquet_header()
+        else:
+            self.kind = "csv"
+            self._open_csv_header()
+
+    # -- Parquet ------------------------------------------------------------
+
+    def _parquet_file(self) -> Any:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        try:
+            if self.kind == "parquet-gz":
+                return pq.ParquetFile(io.BytesIO(read_bytes(self.path)))
+            return pq.ParquetFile(self.path)
+        except (pa.ArrowException, OSError, ValueError) as exc:
+            raise FormatError(
+                f"corrupt Parquet file ({str(exc).splitlines()[0][:200]})", self.path
+            ) from None
+
+    def _open_parquet_header(self) -> None:
+        pf = self._parquet_file()
+        schema = pf.schema_arrow
+        md = schema.metadata or {}
+        self.units = _json_object(md.get(b"accal.units", b"{}"), self.path, None, "accal metadata")
+        self.meta = _json_object(md.get(b"accal.meta", b"{}"), self.path, None, "accal metadata")
+        self.names = list(schema.names)
+        self.first_line = 0
+        self.num_rows: int | None = pf.metadata.num_rows
+
+    def _iter_parquet(self) -> Iterator[tuple[int, Any]]:
+        import pyarrow as pa
+
+        pf = self._parquet_file()
+        row = 0
+        try:
+            for batch in pf.iter_batches(batch_size=self.rows):
+                if batch.num_rows:
+                    yield row, pa.Table.from_batches([batch])
+                    row += batch.num_rows
+        except (pa.ArrowException, OSError) as exc:
+            raise FormatError(
+                f"corrupt Parquet file ({str(exc).splitlines()[0][:200]})", self.path
+            ) from None
+
+    # -- CSV ----------------------------------------------------------------
+
+    def _read_csv_header(self, fh: Any) -> tuple[bytes, int]:
+        lineno = 0
+        while True:
+            line = fh.readline()
+            lineno += 1
+            if not line.startswith(b"#"):
+                break
+            _comment(line, self.path, lineno, self.units, self.meta)
+        check_binary(line, self.path, lineno)
+        if not line.strip():
+            raise FormatError("no table after the comment lines", self.path, lineno)
+        if not line.endswith(b"\n"):
+            raise FormatError("header but no data rows", self.path, lineno + 1)
+        return line, lineno
+
+    def _open_csv_header(self) -> None:
+        import pyarrow as pa
+        import pyarrow.csv as pacsv
+
+        with _open_binary(self.path) as fh:
+            header, lineno = self._read_csv_header(fh)
+        try:
+            self.names = pacsv.read_csv(pa.py_buffer(header)).column_names
+        except (pa.ArrowException, ValueError) as exc:
+            msg = str(exc).splitlines()[0][:200]
+            raise FormatError(f"CSV header: {msg}", self.path, lineno) from None
+        self.first_line = lineno + 1
+        self.num_rows = None
+
+    def _iter_csv(self) -> Iterator[tuple[int, Any]]:
+        import itertools
+
+        import pyarrow as pa
+        import pyarrow.csv as pacsv
+
+        types: dict[str, Any] = {"qualflg": pa.string()}
+        fixed = False
+        row = 0
+        with _open_binary(self.path) as fh:
+            header, lineno = self._read_csv_header(fh)
+            line = lineno + 1
+            while True:
+                lines = list(itertools.islice(fh, self.rows))
+                if not lines:
+                    break
+                if not lines[-1].endswith(b"\n"):
+                    raise FormatError(
+                        "truncated last line (no newline at end of file)",
+                        self.path,
+                        line + len(lines) - 1,
+                    )
+                body = b"".join(lines)
+                check_binary(body, self.path, line)
+                try:
+                    table = pacsv.read_csv(
+                        pa.py_buffer(header + body),
+                        parse_options=pacsv.ParseOptions(ignore_empty_lines=True),
+                        convert_options=pacsv.ConvertOptions(
+                            timestamp_parsers=[pacsv.ISO8601],
+                            strings_can_be_null=False,
+                            column_types=types,
+                        ),
+                    )
+                except (pa.ArrowException, ValueError) as exc:
+                    msg = str(exc).splitlines()[0][:200]
+                    raise FormatError(
+                        f"CSV: {msg} (in lines {line}-{line + len(lines) - 1})", self.path
+                    ) from None
+                if not fixed:
+                    for f in table.schema:
+                        if pa.types.is_integer(f.type) or pa.types.is_null(f.type):
+                            types[f.name] = pa.float64()
+                        elif f.name not in types:
+                            types[f.name] = f.type
+                    table = pa.Table.from_arrays(
+                        [
+                            c.cast(types[f.name]) if c.type != types[f.name] else c
+                            for f, c in zip(table.schema, table.columns, strict=True)
+                        ],
+                        names=table.column_names,
+                    )
+                    fixed = True
+                if table.num_rows:
+                    yield row, table
+                    row += table.num_rows
+                line += len(lines)
+
+    # -- both ---------------------------------------------------------------
+
+    def __iter__(self) -> Iterator[tuple[int, Any]]:
+        it = self._iter_csv() if self.kind == "csv" else self._iter_parquet()
+        empty = True
+        for item in it:
+            empty = False
+            yield item
+        if empty:
+            raise FormatError("header but no data rows", self.path, self.first_line or None)
+
+
+def open_table(path: str | Path, *, rows: int = STREAM_ROWS) -> TableStream:
+    """Open a Parquet or CSV (optionally gzipped) table for reading in chunks.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+    rows : int
+        Rows per chunk.
+
+    Returns
+    -------
+    TableStream
+        Column names, units and metadata are read on opening; iterate it for
+        ``(first_row, pyarrow.Table)`` chunks.
+
+    Raises
+    ------
+    FormatError
+        Missing, unreadable, empty or corrupt file, bad comment header.
+    """
+    return TableStream(path, rows=rows)
