@@ -479,8 +479,17 @@ def load_aux(path: Path, t: np.ndarray) -> dict[str, np.ndarray]:
     from accal.io.housekeeping import read_housekeeping
 
     hk = read_housekeeping(path)
-    chans = hk.on(t)
-    return {k: np.asarray(v, dtype=np.float64) for k, v in chans.items()}
+    out = {}
+    for k, v in hk.on(t).items():
+        v = np.asarray(v, dtype=np.float64)
+        ok = np.isfinite(v)
+        # a channel must cover the day and vary to be a candidate regressor
+        if ok.mean() < 0.9 or np.ptp(v[ok]) == 0:
+            continue
+        if not ok.all():  # short holes: bridge linearly (the closure needs finite regressors)
+            v[~ok] = np.interp(t[~ok], t[ok], v[ok])
+        out[k] = v
+    return out
 
 
 def load_truth(path: Path, series: AccSeries, reference: bool) -> dict[str, dict[str, float]]:
