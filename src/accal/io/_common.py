@@ -34,6 +34,12 @@ MAX_INPUT_BYTES = 1 << 31
 
 _GUNZIP_STEP = 64 << 20
 
+#: Plausible GPS epochs [s since 2000-01-01 12:00:00 GPS]: from the GPS epoch
+#: (1980-01-06 00:00:00) to 2100-01-01 00:00:00.  A time outside is corrupt (a
+#: flipped exponent, a binary field read as time), and would break every date
+#: computation downstream.
+GPS_TIME_RANGE = (-630_763_200.0, 3_155_716_800.0)
+
 
 def read_bytes(path: str | Path) -> bytes:
     """Return the (decompressed) content of ``path``.
@@ -109,6 +115,40 @@ def gunzip(raw: bytes, path: str | Path, limit: int = MAX_INPUT_BYTES) -> bytes:
             raise FormatError("corrupt gzip stream (truncated: no end-of-stream marker)", path)
         rest = d.unused_data.lstrip(b"\x00")
     return b"".join(out)
+
+
+def check_gps_time(
+    time: NDArray[np.float64],
+    path: str | Path,
+    line_of: Callable[[int], int | None] | None = None,
+    *,
+    name: str = "gps_time",
+    unit: str = "record",
+) -> None:
+    """Raise FormatError if an epoch lies outside :data:`GPS_TIME_RANGE`.
+
+    Parameters
+    ----------
+    time : ndarray of float64
+        Epochs in file order [s, GPS since 2000-01-01 12:00:00]; already finite.
+    path : str or Path
+        The file, for the message.
+    line_of : callable, optional
+        Row index -> 1-based file line (text formats).  Without it the message
+        names the ``unit`` number instead (``"record 12"`` for binary L1B).
+    name, unit : str
+        Column name and row noun used in the message.
+    """
+    lo, hi = GPS_TIME_RANGE
+    if time.size and (time.min() < lo or time.max() > hi):
+        i = int(np.flatnonzero((time < lo) | (time > hi))[0])
+        where = f"{unit} {i + 1}: " if line_of is None else ""
+        raise FormatError(
+            f"{where}{name} {time[i]:.9g} s is outside 1980-01-06 ... 2100-01-01 "
+            "(GPS seconds since 2000-01-01 12:00:00)",
+            path,
+            None if line_of is None else line_of(i),
+        )
 
 
 def _short(value: Any, n: int = 20) -> str:

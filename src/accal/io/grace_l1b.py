@@ -36,10 +36,12 @@ import numpy as np
 
 from accal.errors import FormatError, UnsupportedFormatError, ValidationError, check_option
 from accal.io._common import (
+    GPS_TIME_RANGE,
     _short,
     arrow_to_numpy,
     bits_from_strings,
     check_binary,
+    check_gps_time,
     peek,
     read_bytes,
     tidy,
@@ -129,7 +131,7 @@ GRACE_KEY_WIDTH = 30
 #: Accepted ``gps_time`` range [s since 2000-01-01 12:00:00 GPS]: from the GPS epoch
 #: (1980-01-06 00:00:00) to 2100-01-01 00:00:00.  Anything outside is a corrupt time
 #: (a flipped exponent, a binary field read as time), not an L1B epoch.
-TIME_RANGE = (-630_763_200.0, 3_155_716_800.0)
+TIME_RANGE = GPS_TIME_RANGE
 
 #: Deepest nesting accepted in a GRACE-FO YAML header (the real headers nest 5 deep).
 YAML_MAX_DEPTH = 32
@@ -440,20 +442,6 @@ def _locate_bad_line(data: bytes, first_line: int, n_fields: int, path: Path) ->
     return FormatError("cannot parse data records", path)
 
 
-def _check_time(time: np.ndarray, path: Path, line_of: Callable[[int], int] | None) -> None:
-    """Raise FormatError if an epoch lies outside :data:`TIME_RANGE` (records or lines)."""
-    lo, hi = TIME_RANGE
-    if time.size and (time.min() < lo or time.max() > hi):
-        i = int(np.flatnonzero((time < lo) | (time > hi))[0])
-        where = f"record {i + 1}: " if line_of is None else ""
-        raise FormatError(
-            f"{where}gps_time {time[i]:.9g} s is outside 1980-01-06 ... 2100-01-01 "
-            "(GPS seconds since 2000-01-01 12:00:00)",
-            path,
-            None if line_of is None else line_of(i),
-        )
-
-
 def _parse_ascii(data: bytes, first_line: int, path: Path) -> dict[str, Any]:
     import pyarrow as pa
     import pyarrow.csv as pacsv
@@ -501,7 +489,7 @@ def _parse_ascii(data: bytes, first_line: int, path: Path) -> dict[str, Any]:
             raise _locate_bad_line(data, first_line, len(names), path)
         out[name] = arr
     line_of = _row_to_line(data, first_line)
-    _check_time(out["gps_time"], path, line_of)
+    check_gps_time(out["gps_time"], path, line_of)
     out["GRACE_id"] = table.column("GRACE_id")
     out["qualflg"] = bits_from_strings(table.column("qualflg"), path, first_line, line_of=line_of)
     out["line_of"] = line_of
@@ -520,7 +508,7 @@ def _parse_binary(data: bytes, path: Path) -> dict[str, Any]:
         )
     rec = np.frombuffer(data, dtype=BINARY_DTYPE)
     out: dict[str, Any] = {"gps_time": rec["gps_time"].astype(np.float64)}
-    _check_time(out["gps_time"], path, None)
+    check_gps_time(out["gps_time"], path)
     for name in COLUMNS[2:11]:
         arr = rec[name].astype(np.float64)
         bad = np.flatnonzero(~np.isfinite(arr))
