@@ -73,3 +73,50 @@ def test_tabulated_psd_interpolates_loglog_and_validates():
         TabulatedPSD(np.array([1.0, 0.5]), np.array([1.0, 1.0]))
     with pytest.raises(ValidationError, match="psd must be"):
         as_psd("flat")
+
+
+# --- the shared coloured-noise generator (accal.simulate.noise) ---------------
+
+
+def test_shared_coloured_noise_variance_and_grace_wrapper():
+    """White two-sided PSD K² → variance K² fs, for both ways of drawing the white noise;
+    the GRACE simulator's one-sided ASD form is the same generator."""
+    from accal.simulate.grace import coloured_noise as grace_noise
+    from accal.simulate.noise import coloured_noise
+
+    fs, k2 = 2.0, 4.0
+    white = TabulatedPSD(np.array([1e-6, 10.0]), np.array([k2, k2]))
+    for how, pad in (("frequency", True), ("time", False)):
+        x = coloured_noise(20000, white, fs, np.random.default_rng(1), size=4, pad=pad, white=how)
+        assert x.shape == (4, 20000)
+        assert np.var(x) == pytest.approx(k2 * fs, rel=0.03)
+    level, corner, dt = 1e-10, 1e-3, 0.5
+    a = grace_noise(1000, dt, level, corner, np.random.default_rng(7))
+
+    def psd(f):
+        with np.errstate(divide="ignore"):
+            return 0.5 * level**2 * (1 + corner / np.abs(f))
+
+    b = coloured_noise(1000, psd, 1 / dt, np.random.default_rng(7), pad=False, white="time")[0]
+    np.testing.assert_array_equal(a, b)
+    with pytest.raises(ValidationError, match="'white' parameter"):
+        coloured_noise(10, white, fs, np.random.default_rng(0), white="pink")
+
+
+def test_simulate_gap_chunks_continue_the_record():
+    """Noise-free: the blocks of simulate_gap_chunks concatenate to simulate_gap's record
+    (bias drift, signal phase and the temperature filter run on across blocks)."""
+    from accal.simulate.gap import simulate_gap, simulate_gap_chunks
+
+    kw = dict(days=0.5, seed=1, temperature_coupling=2e-9, noise=False, signal_amplitude=1e-9)
+    data, truth = simulate_gap(**kw)
+    blocks = list(simulate_gap_chunks(**kw, chunk_days=0.1))
+    assert len(blocks) == 6 and blocks[1][0]["time"][0] == 14 * 600.0
+    for col in data:
+        np.testing.assert_array_equal(np.concatenate([b[0][col] for b in blocks]), data[col])
+    for col in truth:
+        np.testing.assert_array_equal(np.concatenate([b[1][col] for b in blocks]), truth[col])
+    # with noise, one block is the whole record: same draws as simulate_gap
+    d1, _ = simulate_gap(days=0.1, seed=3)
+    ((d2, _),) = simulate_gap_chunks(days=0.1, seed=3, chunk_days=1.0)
+    np.testing.assert_array_equal(d1["m_y"], d2["m_y"])

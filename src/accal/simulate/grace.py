@@ -65,13 +65,37 @@ class SimulatedDay:
 def coloured_noise(
     n: int, dt: float, level: float, corner: float, rng: np.random.Generator
 ) -> NDArray[np.float64]:
-    """Gaussian noise with one-sided ASD ``level·sqrt(1 + corner/f)`` [m/s²/√Hz]."""
-    f = np.fft.rfftfreq(n, dt)
-    shape = np.zeros_like(f)
-    shape[1:] = np.sqrt(1.0 + corner / f[1:])
-    # white N(0, 1) samples have one-sided PSD 2·dt; shape it, then scale to `level`
-    white = np.fft.rfft(rng.standard_normal(n))
-    return np.fft.irfft(white * shape, n) * level / np.sqrt(2.0 * dt)
+    """Gaussian noise with one-sided ASD ``level·sqrt(1 + corner/f)`` [m/s²/√Hz].
+
+    A thin wrapper of :func:`accal.simulate.noise.coloured_noise` (two-sided PSD
+    ``level²(1 + corner/|f|)/2``, white samples drawn in time, no padding: the
+    same draws, hence the same noise for a given seed, as before the merge).
+
+    Parameters
+    ----------
+    n : int
+        Samples.
+    dt : float
+        Sampling interval [s].
+    level : float
+        White level of the one-sided ASD [m s⁻² Hz⁻¹ᐟ²].
+    corner : float
+        Corner frequency of the 1/f rise [Hz].
+    rng : numpy.random.Generator
+        Random source.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        Noise [m s⁻²].
+    """
+    from accal.simulate.noise import coloured_noise as shaped
+
+    def psd(f):
+        with np.errstate(divide="ignore"):
+            return 0.5 * level**2 * (1.0 + corner / np.abs(f))
+
+    return shaped(n, psd, 1.0 / dt, rng, pad=False, white="time")[0]
 
 
 def simulate_grace_day(
