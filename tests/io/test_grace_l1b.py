@@ -491,3 +491,9 @@ def test_gzip_bomb_and_huge_file_refused(samples, tmp_path, monkeypatch):
     with pytest.raises(FormatError, match="decompresses to more than 10,000 bytes"):
         _common.gunzip(bomb, "bomb.gz", limit=10_000)
     assert _common.gunzip(bomb, "bomb.gz", limit=50_000) == b"0" * 50_000
+
+
+@pytest.mark.parametrize("bits", [-1, 256, 2**40, 1.5, True])
+def test_invalid_bits_checked(samples, bits):
+    with pytest.raises(ValidationError, match="invalid_bits must be"):
+        read_grace_acc1b(samples["grace_a"], invalid_bits=bits)

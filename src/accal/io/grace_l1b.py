@@ -600,13 +600,22 @@ def read_grace_acc1b(path: str | Path, *, invalid_bits: int = DEFAULT_INVALID_BI
         L1B accelerometer file (``.line`` is the 1-based line where known).
     UnsupportedFormatError
         A recognised L1B file of another product (e.g. AHK1B).
+    accal.errors.ValidationError
+        ``invalid_bits`` is not an 8-bit mask.
 
     Notes
     -----
     Duplicated epochs are dropped (first kept), out-of-order records sorted, gaps
     counted; a record count different from the header's is a warning.  All of this
-    is reported in :attr:`AccSeries.report`.
+    is reported in :attr:`AccSeries.report`.  Epochs outside 1980-2100
+    (:data:`TIME_RANGE`), non-finite values and malformed records are errors.
     """
+    if isinstance(invalid_bits, bool) or not isinstance(invalid_bits, int | np.integer):
+        raise ValidationError(f"invalid_bits must be an integer bit mask, got {invalid_bits!r}")
+    if not 0 <= invalid_bits <= 0xFF:
+        raise ValidationError(
+            f"invalid_bits must be an 8-bit qualflg mask (0-255), got {invalid_bits}"
+        )
     path = Path(path)
     raw = read_bytes(path)
     flavour, header, data_start, first_line = _split_header(raw, path)
