@@ -27,12 +27,23 @@ mean, eq. 18) or ``[1, t]`` (affine signal, eq. 19):
 Every estimator is linear, ``â = W'm``; its covariance with any other period's is
 ``-W_i' T_D W_j`` (eq. 21 in the time domain), which gives σ per period and
 ``Rd[k]`` (eq. 23).
+
+Streaming
+---------
+:func:`demodulate_stream` takes the record in chunks of any size (a year of 1 Hz
+data in bounded memory) and gives the same per-period results as
+:func:`demodulate`, which is the one-chunk case: the incomplete last period of a
+chunk is carried over, the rest mask sees the neighbouring samples across chunk
+borders, the GLS covariance is per period, and the lagged products of Rd[k]
+pair periods across chunk borders.  Missing samples (``valid`` False, e.g. the
+gaps left by resampling) are masked like rotation samples.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -49,10 +60,12 @@ from .noise import (
 )
 
 __all__ = [
+    "DemodChunk",
     "DemodResult",
     "BudgetResult",
     "SinusoidFit",
     "demodulate",
+    "demodulate_stream",
     "demodulate_table",
     "budget",
     "tau_scan",
@@ -196,18 +209,21 @@ class BudgetResult:
 
 @dataclass(frozen=True)
 class SinusoidFit:
-    """Fit of ``α cos(2π f* t) + β sin(2π f* t)`` to per-period values (eq. 24).
+    """Fit of ``α cos(2π f* t) + β sin(2π f* t) [+ c]`` to per-period values (eq. 24).
 
     Attributes
     ----------
     alpha, beta : float
         Amplitudes [m s⁻²].
-    cov : ndarray, shape (2, 2)
-        Covariance of ``(α, β)`` [m² s⁻⁴].
+    cov : ndarray, shape (2, 2) or (3, 3)
+        Covariance of ``(α, β)``, or of ``(α, β, c)`` with the constant term [m² s⁻⁴].
     f_star : float
         Frequency [Hz].
     t_origin : float
         Time origin of the cos/sin [s] (``t`` is used as given).
+    offset : float
+        The constant term ``c`` [m s⁻²]; NaN when it was not fitted (eq. 24 as
+        in the paper).
     """
 
     alpha: float
@@ -215,6 +231,12 @@ class SinusoidFit:
     cov: _F64
     f_star: float
     t_origin: float = 0.0
+    offset: float = float("nan")
+
+    @property
+    def constant(self) -> bool:
+        """True if the constant term was fitted."""
+        return self.cov.shape[0] == 3
 
     @property
     def sigma_alpha(self) -> float:
@@ -226,43 +248,28 @@ class SinusoidFit:
         """``sqrt(Cov(β, β))`` [m s⁻²]."""
         return float(np.sqrt(self.cov[1, 1]))
 
+    @property
+    def sigma_offset(self) -> float:
+        """``sqrt(Cov(c, c))`` [m s⁻²] (NaN without the constant term)."""
+        return float(np.sqrt(self.cov[2, 2])) if self.constant else float("nan")
+
 
 # ---------------------------------------------------------------------------
 # validation
 
 
-def _first_bad(name: str, x: NDArray) -> None:
+def _first_bad(name: str, x: NDArray, valid: NDArray | None = None, offset: int = 0) -> None:
     bad = ~np.isfinite(x)
+    if valid is not None:
+        bad &= valid
     if bad.any():
         raise ValidationError(
-            f"{name} contains {int(bad.sum())} NaN/inf value(s) (first at index {int(np.argmax(bad))})"
+            f"{name} contains {int(bad.sum())} NaN/inf value(s) "
+            f"(first at index {offset + int(np.argmax(bad))})"
         )
 
 
-def _validate(time, m_y, m_z, theta, aux, tau, tm, theta_tol):
-    arrs = {}
-    for name, x in (("time", time), ("m_y", m_y), ("m_z", m_z), ("theta", theta), *aux.items()):
-        a = np.asarray(x, dtype=float)
-        if a.ndim != 1:
-            raise ValidationError(f"{name} must be 1-D, got shape {a.shape}")
-        arrs[name] = a
-    n = arrs["time"].size
-    for name, a in arrs.items():
-        if a.size != n:
-            raise ValidationError(f"{name} has {a.size} samples but time has {n}")
-    for name, a in arrs.items():
-        _first_bad(name, a)
-    if n < 3:
-        raise ValidationError(f"need at least 3 samples, got {n}")
-    dt_all = np.diff(arrs["time"])
-    dt = float(np.median(dt_all))
-    if dt <= 0 or np.any(np.abs(dt_all - dt) > 1e-6 * dt):
-        k = int(np.argmax(np.abs(dt_all - dt)))
-        raise ValidationError(
-            f"sampling is irregular: step {dt_all[k]:g} s at index {k} vs nominal {dt:g} s "
-            "(resample or split the record at gaps)"
-        )
-    fs = 1.0 / dt
+def _check_tau_mask(fs: float, tau: float, tm: float) -> int:
     q = tau * fs
     if not np.isfinite(q) or q <= 0:
         raise ValidationError(f"tau must be positive, got {tau}")
@@ -275,19 +282,43 @@ def _validate(time, m_y, m_z, theta, aux, tau, tm, theta_tol):
         raise ValidationError(
             f"mask (masking time TM) must be in [0, tau) s, got {tm} s for tau = {tau} s"
         )
-    th = arrs["theta"]
-    if th.max() > 2 * np.pi + theta_tol:
+    return int(round(q))
+
+
+def _validate(time, m_y, m_z, theta, aux, valid, tau, tm, theta_tol):
+    arrs = {}
+    for name, x in (("time", time), ("m_y", m_y), ("m_z", m_z), ("theta", theta), *aux.items()):
+        a = np.asarray(x, dtype=float)
+        if a.ndim != 1:
+            raise ValidationError(f"{name} must be 1-D, got shape {a.shape}")
+        arrs[name] = a
+    n = arrs["time"].size
+    ok = None if valid is None else np.asarray(valid, dtype=bool)
+    if ok is not None and ok.shape != (n,):
+        raise ValidationError(f"valid has shape {ok.shape} but time has {n} samples")
+    for name, a in arrs.items():
+        if a.size != n:
+            raise ValidationError(f"{name} has {a.size} samples but time has {n}")
+    for name, a in arrs.items():
+        _first_bad(name, a, None if name == "time" else ok)
+    if n < 3:
+        raise ValidationError(f"need at least 3 samples, got {n}")
+    dt_all = np.diff(arrs["time"])
+    dt = float(np.median(dt_all))
+    if dt <= 0 or np.any(np.abs(dt_all - dt) > 1e-6 * dt):
+        k = int(np.argmax(np.abs(dt_all - dt)))
+        raise ValidationError(
+            f"sampling is irregular: step {dt_all[k]:g} s at index {k} vs nominal {dt:g} s "
+            "(resample or split the record at gaps)"
+        )
+    fs = 1.0 / dt
+    _check_tau_mask(fs, tau, tm)
+    th = arrs["theta"] if ok is None else arrs["theta"][ok]
+    if th.size and th.max() > 2 * np.pi + theta_tol:
         raise ValidationError(
             f"theta reaches {th.max():g} > 2π: it looks like degrees; give theta in radians"
         )
-    if th.min() < -theta_tol:
-        raise ValidationError(f"theta must lie in [0, 2π] rad, got minimum {th.min():g}")
-    if not np.any(np.abs(np.cos(th) + 1.0) < 1e-3):
-        raise ValidationError(
-            f"theta never reaches π (range {th.min():.3g} to {th.max():.3g} rad): "
-            "the pattern must measure at θ = 0 and θ = π"
-        )
-    return arrs, fs, int(round(q))
+    return arrs, ok, fs
 
 
 # ---------------------------------------------------------------------------
@@ -305,7 +336,7 @@ def _batched_solve(a, b):
 
 
 def _leakage(va, vb, cmask, smask, m):
-    # va (P,q,pa) unmasked, vb (P,q,pb); normalised max |ṽ' Λ b̂| / (|ṽ||M b̂|)
+    # va (P,q,pa) unmasked, vb (P,q,pb); normalised max |ṽ' Λ b̂| / (|ṽ||M b̂|)  (eq. 16)
     vt = va * m[..., None]
     nv = np.sqrt(np.einsum("pqa,pqa->pa", vt, vt))
     bm = vb * m[..., None]
@@ -320,7 +351,7 @@ def _leakage(va, vb, cmask, smask, m):
 
 
 def _weights_eq14(va, c, s, m):
-    # returns W (P, 2q, 2pa): params (aY..., aZ...) from stacked data (my; mz)
+    # returns W (P, 2q, 2pa): params (aY..., aZ...) from stacked data (my; mz)  (eq. 14)
     vt = va * m[..., None]
     a = np.einsum("pqa,pqb->pab", vt, vt)
     eye = np.broadcast_to(np.eye(va.shape[2]), a.shape)
@@ -350,14 +381,21 @@ def _weights_joint(x):
     return np.transpose(sol, (0, 2, 1)), ok
 
 
-def _weights_gls(x, m, r_reg):
+#: Cholesky factors of distinct mask layouts kept between blocks (GLS).
+_GLS_CACHE_SIZE = 32
+
+
+def _weights_gls(x, m, r_reg, cache=None):
     import scipy.linalg as sla
 
     npr, q2, p = x.shape
     q = q2 // 2
     w = np.full(x.shape, np.nan)
     ok = np.zeros(npr, bool)
-    full = sla.toeplitz(r_reg[:q])
+    cache = {} if cache is None else cache
+    if "toeplitz" not in cache:
+        cache["toeplitz"] = sla.toeplitz(r_reg[:q])
+    full = cache["toeplitz"]
     keys = [m[i].astype(bool).tobytes() for i in range(npr)]
     groups: dict[bytes, list[int]] = {}
     for i, k in enumerate(keys):
@@ -368,7 +406,12 @@ def _weights_gls(x, m, r_reg):
         n_o = idx.size
         if n_o == 0:
             continue
-        cf = sla.cho_factor(full[np.ix_(idx, idx)], lower=True)
+        cf = cache.pop(key, None)  # re-inserted below: most recently used last
+        if cf is None:
+            cf = sla.cho_factor(full[np.ix_(idx, idx)], lower=True)
+        cache[key] = cf
+        while len(cache) > _GLS_CACHE_SIZE + 1:
+            del cache[next(k for k in cache if k != "toeplitz")]
         # stack both data axes of every period in the group as right-hand sides
         xo = np.concatenate([x[rows][:, :q][:, idx], x[rows][:, q:][:, idx]], axis=1)
         g = len(members)
@@ -390,15 +433,18 @@ def _weights_gls(x, m, r_reg):
 # covariance between periods
 
 
-def _lag_products(wa, wb, d, q, k):
-    """Σ over both data axes of -Wa_i' T_k Wb_{i+k}: returns (P-k, pa, pb)."""
-    # T_k[a, b] = D[|k q + b - a|]
+def _pair_products(wa, wb, d, q, k):
+    """Σ over both data axes of -wa_i' T_k wb_i for aligned pairs: returns (P, pa, pb).
+
+    ``wa[i]`` belongs to a period ``k`` periods before ``wb[i]``'s; ``T_k[a, b] =
+    D[|k q + b - a|]`` with the structure function D (eq. 21 in the time domain).
+    """
     j = np.arange(-(q - 1), q)
     g = d[np.abs(k * q - j)]  # h[j] = D[|kq - j|], j = a - b
     nfft = 1 << int(np.ceil(np.log2(3 * q)))
     hf = np.fft.rfft(g, nfft)
-    xa = np.ascontiguousarray(np.transpose(wa[: wa.shape[0] - k], (0, 2, 1)))
-    xb = np.ascontiguousarray(np.transpose(wb[k:], (0, 2, 1)))
+    xa = np.ascontiguousarray(np.transpose(wa, (0, 2, 1)))
+    xb = np.ascontiguousarray(np.transpose(wb, (0, 2, 1)))
     out = 0.0
     for ax in (slice(0, q), slice(q, 2 * q)):
         y = np.fft.irfft(np.fft.rfft(xb[:, :, ax], nfft, axis=2) * hf, nfft, axis=2)
@@ -408,7 +454,576 @@ def _lag_products(wa, wb, d, q, k):
 
 
 # ---------------------------------------------------------------------------
+# streaming machinery: chunks -> blocks of whole periods -> per-period results
+
+
+@dataclass(frozen=True)
+class DemodChunk:
+    """Consecutive samples of a record, the unit :func:`demodulate_stream` consumes.
+
+    Attributes
+    ----------
+    time : array_like, shape (n,)
+        Epochs [s]; consecutive chunks continue the same uniform grid.
+    m_y, m_z : array_like, shape (n,)
+        Accelerometer outputs on the rotating axes [m s⁻²].
+    theta : array_like, shape (n,)
+        Platform angle [rad].
+    aux : mapping of str to array_like
+        The auxiliary channels of the bias basis (``bias_aux`` names).
+    valid : array_like of bool, shape (n,), optional
+        False for missing samples (e.g. inside a resampling gap): they are
+        masked like rotation samples and may hold NaN.
+    """
+
+    time: ArrayLike
+    m_y: ArrayLike
+    m_z: ArrayLike
+    theta: ArrayLike
+    aux: Mapping[str, ArrayLike] = field(default_factory=dict)
+    valid: ArrayLike | None = None
+
+
+class _Checker:
+    """Per-chunk checks of a stream (the whole-record checks of :func:`_validate`)."""
+
+    def __init__(self, aux_names, tau, tm, fs, theta_tol=1e-6):
+        self.aux_names = tuple(aux_names)
+        self.tau, self.tm, self.theta_tol = float(tau), float(tm), theta_tol
+        self.fs = None if fs is None else float(fs)
+        self.q = None if fs is None else _check_tau_mask(self.fs, self.tau, self.tm)
+        self.n = 0
+        self.last_t = None
+        self.th_min, self.th_max = np.inf, -np.inf
+        self.reaches_pi = False
+
+    def __call__(self, ch: DemodChunk) -> dict[str, NDArray]:
+        arrs = {}
+        aux = dict(ch.aux)
+        missing = [k for k in self.aux_names if k not in aux]
+        if missing:
+            raise ValidationError(f"chunk lacks the auxiliary channel(s) {', '.join(missing)}")
+        cols = (("time", ch.time), ("m_y", ch.m_y), ("m_z", ch.m_z), ("theta", ch.theta))
+        for name, x in (*cols, *((k, aux[k]) for k in self.aux_names)):
+            a = np.asarray(x, dtype=float)
+            if a.ndim != 1:
+                raise ValidationError(f"{name} must be 1-D, got shape {a.shape}")
+            arrs[name] = a
+        n = arrs["time"].size
+        for name, a in arrs.items():
+            if a.size != n:
+                raise ValidationError(f"{name} has {a.size} samples but time has {n}")
+        ok = np.ones(n, bool) if ch.valid is None else np.asarray(ch.valid, dtype=bool)
+        if ok.shape != (n,):
+            raise ValidationError(f"valid has shape {ok.shape} but time has {n} samples")
+        for name, a in arrs.items():
+            _first_bad(name, a, None if name == "time" else ok, self.n)
+        t = arrs["time"]
+        if self.fs is None:
+            if n < 3:
+                raise ValidationError(
+                    f"need at least 3 samples in the first chunk to find the sampling step, got {n}"
+                )
+            self.fs = 1.0 / float(np.median(np.diff(t)))
+            self.q = _check_tau_mask(self.fs, self.tau, self.tm)
+        dt = 1.0 / self.fs
+        steps = np.diff(t) if self.last_t is None else np.diff(np.concatenate([[self.last_t], t]))
+        off = np.abs(steps - dt) > 1e-6 * dt
+        if off.any():
+            k = int(np.argmax(np.abs(steps - dt)))
+            idx = self.n + k - (0 if self.last_t is None else 1)
+            raise ValidationError(
+                f"sampling is irregular: step {steps[k]:g} s at index {idx} vs nominal {dt:g} s "
+                "(resample or split the record at gaps)"
+            )
+        th = arrs["theta"][ok]
+        if th.size:
+            if th.max() > 2 * np.pi + self.theta_tol:
+                raise ValidationError(
+                    f"theta reaches {th.max():g} > 2π: it looks like degrees; give theta in radians"
+                )
+            if th.min() < -self.theta_tol:
+                raise ValidationError(f"theta must lie in [0, 2π] rad, got minimum {th.min():g}")
+            self.th_min = min(self.th_min, float(th.min()))
+            self.th_max = max(self.th_max, float(th.max()))
+            self.reaches_pi |= bool(np.any(np.abs(np.cos(th) + 1.0) < 1e-3))
+        if n:
+            self.last_t = float(t[-1])
+        self.n += n
+        arrs["valid"] = ok
+        return arrs
+
+    def finish(self) -> None:
+        if self.n < 3:
+            raise ValidationError(f"need at least 3 samples, got {self.n}")
+        if not self.reaches_pi:
+            raise ValidationError(
+                f"theta never reaches π (range {self.th_min:.3g} to {self.th_max:.3g} rad): "
+                "the pattern must measure at θ = 0 and θ = π"
+            )
+
+
+@dataclass
+class _Block:
+    p0: int  # index of the first period
+    arrs: dict[str, NDArray]  # (P, q) arrays
+    rest: NDArray  # (P, q) bool: discrete θ̇ = θ̈ = 0 (section 4.2)
+
+
+class _Periods:
+    """Cut a stream of sample arrays into blocks of whole periods.
+
+    The incomplete last period of a chunk is carried over to the next one; the
+    rest mask (which looks ``settle + 1`` samples to each side) is computed with
+    the neighbouring samples of the adjacent chunks, so it is the same as on the
+    whole record.
+    """
+
+    def __init__(self, q: int, settle: int, rest_tol: float) -> None:
+        self.q, self.settle, self.rest_tol = q, settle, rest_tol
+        self.ctx = settle + 1
+        self.buf: dict[str, NDArray] | None = None
+        self.before = np.empty(0)
+        self.p0 = 0
+
+    def feed(self, arrs: dict[str, NDArray]) -> _Block | None:
+        if self.buf is None:
+            buf = arrs
+        else:
+            buf = {k: np.concatenate([self.buf[k], arrs[k]]) for k in arrs}
+        n_per = max(0, buf["time"].size - self.ctx) // self.q
+        return self._emit(buf, n_per)
+
+    def finish(self) -> _Block | None:
+        if self.buf is None:
+            return None
+        return self._emit(self.buf, self.buf["time"].size // self.q)
+
+    @property
+    def tail(self) -> int:
+        """Samples waiting for the rest of their period."""
+        return 0 if self.buf is None else int(self.buf["time"].size)
+
+    def _emit(self, buf: dict[str, NDArray], n_per: int) -> _Block | None:
+        q = self.q
+        if n_per == 0:
+            self.buf = buf
+            return None
+        nn = n_per * q
+        th = buf["theta"]
+        after = th[nn : nn + self.ctx]
+        ext = np.concatenate([self.before, th[:nn], after])
+        rest = rest_mask(ext, tol=self.rest_tol, settle=self.settle)
+        rest = rest[self.before.size : self.before.size + nn]
+        self.before = np.concatenate([self.before, th[:nn]])[-self.ctx :]
+        blk = _Block(self.p0, {k: v[:nn].reshape(n_per, q) for k, v in buf.items()}, rest)
+        blk.rest = rest.reshape(n_per, q)
+        self.buf = {k: v[nn:] for k, v in buf.items()}
+        self.p0 += n_per
+        return blk
+
+
+@dataclass
+class _Setup:
+    """Everything that is the same for every block of a record."""
+
+    q: int
+    fs: float
+    tau: float
+    mask: float
+    method: str
+    signal_model: str
+    aux_names: tuple[str, ...]
+    need: float
+    d: NDArray
+    r_reg: NDArray | None
+    n_lags: int
+
+    @property
+    def u(self) -> NDArray:
+        # normalised time within the period, centred on the mean sample time:
+        # u_k = (k - (q-1)/2)/q (t = u·τ), so intercepts are period means
+        return (np.arange(self.q) - (self.q - 1) / 2) / self.q
+
+    @property
+    def pa(self) -> int:
+        return 1 if self.signal_model == "mean" else 2
+
+
+def _block_basis(st: _Setup, blk: _Block, with_aux: bool = True):
+    """Mask, cos/sin, Va and V̂b of a block (eqs. 18-19; aux channels centred and scaled)."""
+    a = blk.arrs
+    ok = a["valid"].astype(bool)
+    m = (blk.rest & ok).astype(float)
+    th = np.where(ok, a["theta"], 0.0)
+    c, s = np.cos(th), np.sin(th)
+    n_per = m.shape[0]
+    ones = np.ones((n_per, st.q))
+    u = st.u
+    va = ones[..., None] if st.pa == 1 else np.stack([ones, ones * u], axis=2)
+    bcols = [ones, ones * u]
+    scales = []
+    if with_aux:
+        n_m = np.maximum(m.sum(axis=1), 1)
+        for k in st.aux_names:
+            x = np.where(ok, a[k], 0.0)
+            mean = np.sum(x * m, axis=1) / n_m
+            x = x - mean[:, None]
+            # per-period scale (conditioning only; divided out of the coefficients)
+            sc = np.sqrt(np.sum(x * x * m, axis=1) / n_m)
+            sc = np.where(sc > 0, sc, 1.0)
+            bcols.append(x / sc[:, None])
+            scales.append(sc)
+    vb = np.stack(bcols, axis=2)
+    return m, c, s, va, vb, scales
+
+
+def _scan_block(st: _Setup, blk: _Block) -> tuple[NDArray, NDArray, NDArray]:
+    """Pass 1: n_used, keep (enough samples at 0 and π), eq. 16 leakage with V̂b = [1, t]."""
+    m, c, s, va, vb, _ = _block_basis(st, blk, with_aux=False)
+    n_used = m.sum(axis=1).astype(np.int64)
+    atrest = m > 0
+    has0 = np.any(atrest & (c > 0.999), axis=1)
+    hasp = np.any(atrest & (c < -0.999), axis=1)
+    keep = (n_used >= st.need) & has0 & hasp
+    return n_used, keep, _leakage(va, vb, c * m, s * m, m)
+
+
+def _estimate_block(st: _Setup, blk: _Block, solver: str, cache: dict) -> dict[str, Any]:
+    """Pass 2: per-period estimates, weights and covariances of one block."""
+    pa, q, tau = st.pa, st.q, st.tau
+    m, c, s, va, vb, scales = _block_basis(st, blk)
+    pb = vb.shape[2]
+    a = blk.arrs
+    ok = a["valid"].astype(bool)
+    n_used = m.sum(axis=1).astype(np.int64)
+    atrest = m > 0
+    has0 = np.any(atrest & (c > 0.999), axis=1)
+    hasp = np.any(atrest & (c < -0.999), axis=1)
+    keep = (n_used >= st.need) & has0 & hasp
+    leak = _leakage(va, vb, c * m, s * m, m)
+    my = np.where(ok, a["m_y"], 0.0)
+    mz = np.where(ok, a["m_z"], 0.0)
+    data = np.concatenate([my, mz], axis=1)
+    if solver == "eq14":
+        w, good = _weights_eq14(va, c, s, m)
+    else:
+        x = _design_joint(va, vb, c, s, m)
+        if solver == "joint":
+            w, good = _weights_joint(x)
+        else:
+            w, good = _weights_gls(x, m, st.r_reg, cache)
+        w = w[:, :, : 2 * pa]
+    keep &= good
+    w[~keep] = 0.0
+    w = np.nan_to_num(w)
+    est = np.einsum("pqa,pq->pa", w, data)
+    # bias coefficients: LS fit of the residual on the unmasked samples (eqs. 17-19)
+    cy = np.einsum("pqa,pa->pq", va, est[:, :pa])
+    cz = np.einsum("pqa,pa->pq", va, est[:, pa:])
+    ry = (my - c * cy - s * cz) * m
+    rz = (mz + s * cy - c * cz) * m
+    vbm = vb * m[..., None]
+    nb = np.einsum("pqa,pqb->pab", vbm, vbm)
+    nb[~keep] = np.eye(pb)
+    bsol, _ = _batched_solve(
+        nb, np.stack([np.einsum("pqa,pq->pa", vbm, ry), np.einsum("pqa,pq->pa", vbm, rz)], axis=2)
+    )
+    bias_y, bias_z = bsol[..., 0].copy(), bsol[..., 1].copy()
+    for b in (bias_y, bias_z):
+        b[:, 1] /= tau
+        for j, sc in enumerate(scales):
+            b[:, 2 + j] /= sc
+    cov0 = _pair_products(w, w, st.d, q, 0)  # eq. 21, lag 0
+    unit = np.ones(2 * pa)
+    if pa == 2:
+        unit[[1, 3]] = 1.0 / tau  # slope = coefficient/τ (normalised time)
+    rd0 = cov0[:, 0, 0].copy()
+    est = est * unit
+    cov0 = cov0 * unit[None, :, None] * unit[None, None, :]
+    sig = np.sqrt(np.maximum(np.einsum("paa->pa", cov0), 0.0))
+    kk = np.flatnonzero(keep)
+    t = a["time"]
+    return {
+        "keep": keep,
+        "w1": w[:, :, :1],
+        "rd0": rd0,
+        "n_masked": float(m.size - m.sum()),
+        "n_samples": int(m.size),
+        "rows": {
+            "period_index": blk.p0 + kk,
+            "t_start": t[kk, 0],
+            "t_mid": 0.5 * (t[kk, 0] + t[kk, -1]),
+            "est": est[kk],
+            "sig": sig[kk],
+            "bias_y": bias_y[kk],
+            "bias_z": bias_z[kk],
+            "n_used": n_used[kk],
+            "leakage": leak[kk],
+            "cov": cov0[kk],
+        },
+    }
+
+
+def _chunks_of(source: Callable[[], Iterable[DemodChunk]]) -> Iterator[DemodChunk]:
+    """The chunks of ``source()``, the leading ones merged until there are 3 samples
+    (enough for the median step)."""
+    it = source()
+    if isinstance(it, DemodChunk):
+        raise ValidationError("source() must return an iterable of DemodChunk, got one chunk")
+    head: list[DemodChunk] | None = []
+    for ch in it:
+        if head is None:
+            yield ch
+            continue
+        head.append(ch)
+        if sum(np.size(c.time) for c in head) >= 3:
+            yield _concat_chunks(head)
+            head = None
+    if head:
+        yield _concat_chunks(head)
+
+
+def _concat_chunks(chunks: list[DemodChunk]) -> DemodChunk:
+    if len(chunks) == 1:
+        return chunks[0]
+
+    def cat(xs):
+        return np.concatenate([np.asarray(x, float) for x in xs])
+
+    valid = None
+    if any(c.valid is not None for c in chunks):
+        valid = np.concatenate(
+            [
+                np.ones(np.size(c.time), bool) if c.valid is None else np.asarray(c.valid, bool)
+                for c in chunks
+            ]
+        )
+    return DemodChunk(
+        cat(c.time for c in chunks),
+        cat(c.m_y for c in chunks),
+        cat(c.m_z for c in chunks),
+        cat(c.theta for c in chunks),
+        {k: cat(c.aux[k] for c in chunks) for k in chunks[0].aux},
+        valid,
+    )
+
+
+# ---------------------------------------------------------------------------
 # public API
+
+
+def demodulate_stream(
+    source: Callable[[], Iterable[DemodChunk]],
+    *,
+    tau: float,
+    mask: float,
+    fs: float | None = None,
+    method: str = "ls",
+    signal_model: str = "mean",
+    bias_aux: Sequence[str] = (),
+    psd: PSD | tuple[ArrayLike, ArrayLike] | None = None,
+    solver: str = "auto",
+    rest_tol: float = 1e-9,
+    settle: float = 0.0,
+    min_fraction: float = 0.5,
+    n_lags: int = 5,
+    leak_tol: float = 1e-9,
+) -> DemodResult:
+    """Demodulate a record delivered in chunks, in memory bounded by the chunk size.
+
+    The same estimator as :func:`demodulate` (which calls this with one chunk),
+    period by period; chunks may have any length, the incomplete last period of
+    a chunk is carried over to the next.  Per-period results do not depend on
+    the chunking (up to rounding): the rest mask sees the samples of the
+    neighbouring chunks, the GLS covariance is per period (section 5.3), and the
+    lagged covariances of Rd[k] (eq. 23) pair periods across chunk borders.
+
+    Two passes over ``source()``: the first checks every chunk (NaNs, uniform
+    sampling, θ in radians and reaching π, usable periods) and, for
+    ``solver="auto"``, decides between eq. 14 and the joint LS of eq. 17 on the
+    leakage of every period; the second estimates.  Nothing is estimated from
+    a record that fails a check.
+
+    Parameters
+    ----------
+    source : callable
+        Returns a fresh iterable of :class:`DemodChunk` each time it is called
+        (e.g. a function re-opening the run file).
+    tau, mask : float
+        Modulation period τ and nominal masking time TM [s].
+    fs : float, optional
+        Sampling frequency [Hz]; by default ``1/median step`` of the first chunk.
+    method, signal_model, psd, solver, rest_tol, settle, min_fraction, n_lags, leak_tol
+        As :func:`demodulate`.
+    bias_aux : sequence of str
+        Names of the auxiliary channels (keys of :attr:`DemodChunk.aux`) added
+        to the bias basis (eq. 18's temperature).
+
+    Returns
+    -------
+    DemodResult
+
+    Raises
+    ------
+    ValidationError
+        As :func:`demodulate`.
+
+    Notes
+    -----
+    The auxiliary channels of the bias basis are centred and scaled per period
+    (the scale only conditions the least squares and is divided out of the
+    coefficients); before streaming, the scale was one standard deviation over
+    the whole record, which changed the coefficients only by rounding.
+    """
+    check_option("method", method, ("ls", "gls"))
+    check_option("signal_model", signal_model, ("mean", "affine"))
+    check_option("solver", solver, ("auto", "eq14", "joint"))
+    tau, mask = float(tau), float(mask)
+    aux_names = tuple(bias_aux)
+    psd = as_psd(psd)
+    # pass 1: checks, rest masks, usable periods, eq. 16 leakage
+    chk = _Checker(aux_names, tau, mask, fs)
+    cutter = None
+    st = None
+    n_per, n_keep, best, leak_max = 0, 0, 0, 0.0
+
+    def scan(blk: _Block | None) -> None:
+        nonlocal n_per, n_keep, best, leak_max
+        if blk is None:
+            return
+        n_used, keep, leak = _scan_block(st, blk)
+        n_per += n_used.size
+        n_keep += int(keep.sum())
+        best = max(best, int(n_used.max()))
+        if keep.any():
+            leak_max = max(leak_max, float(np.max(leak[keep])))
+
+    for ch in _chunks_of(source):
+        arrs = chk(ch)
+        if cutter is None:
+            q = chk.q
+            cutter = _Periods(q, int(round(settle * chk.fs)), rest_tol)
+            pa = 1 if signal_model == "mean" else 2
+            st = _Setup(
+                q=q,
+                fs=chk.fs,
+                tau=tau,
+                mask=mask,
+                method=method,
+                signal_model=signal_model,
+                aux_names=aux_names,
+                need=max(min_fraction * (q - mask * chk.fs), 2 * (pa + 2 + len(aux_names))),
+                d=np.empty(0),
+                r_reg=None,
+                n_lags=int(n_lags),
+            )
+        scan(cutter.feed(arrs))
+    if cutter is None:
+        raise ValidationError("need at least 3 samples, got 0")
+    chk.finish()
+    scan(cutter.finish())
+    if n_per < 1:
+        raise ValidationError(f"record of {chk.n} samples is shorter than one period ({st.q})")
+    if n_keep == 0:
+        raise ValidationError(
+            f"no period has enough unmasked samples at both θ = 0 and π (need {st.need:g} of "
+            f"{st.q}; best period has {best})"
+        )
+    if method == "gls":
+        used = "gls-eq17"
+    elif solver == "auto":
+        used = "eq14" if (not aux_names and leak_max <= leak_tol) else "joint"
+    else:
+        used = solver
+    st.d = structure_function(psd, (st.n_lags + 2) * st.q, st.fs)
+    if used == "gls-eq17":
+        st.r_reg, _ = regularised_autocov(st.d, st.q)
+
+    # pass 2: estimates, covariances, Rd[k] across block borders
+    rows: list[dict[str, NDArray]] = []
+    rd_sum = np.zeros(st.n_lags + 1)
+    rd_cnt = np.zeros(st.n_lags + 1, dtype=np.int64)
+    prev_w = np.zeros((0, 2 * st.q, 1))
+    prev_keep = np.zeros(0, bool)
+    n_masked, n_samples = 0.0, 0
+    cache: dict = {}
+    cutter = _Periods(st.q, int(round(settle * st.fs)), rest_tol)
+    chk2 = _Checker(aux_names, tau, mask, st.fs)
+
+    def estimate(blk: _Block | None) -> None:
+        nonlocal prev_w, prev_keep, n_masked, n_samples
+        if blk is None:
+            return
+        r = _estimate_block(st, blk, used, cache)
+        rows.append(r["rows"])
+        keep = r["keep"]
+        rd_sum[0] += float(np.sum(r["rd0"][keep]))
+        rd_cnt[0] += int(keep.sum())
+        n_masked += r["n_masked"]
+        n_samples += r["n_samples"]
+        w_ext = np.concatenate([prev_w, r["w1"]])
+        k_ext = np.concatenate([prev_keep, keep])
+        lp = prev_w.shape[0]
+        for k in range(1, st.n_lags + 1):
+            i0, i1 = max(0, lp - k), w_ext.shape[0] - k
+            if i1 <= i0:
+                continue
+            both = k_ext[i0:i1] & k_ext[i0 + k : i1 + k]
+            if not both.any():
+                continue
+            ck = _pair_products(w_ext[i0:i1][both], w_ext[i0 + k : i1 + k][both], st.d, st.q, k)
+            rd_sum[k] += float(np.sum(ck[:, 0, 0]))
+            rd_cnt[k] += int(both.sum())
+        prev_w = w_ext[-st.n_lags :] if st.n_lags else w_ext[:0]
+        prev_keep = k_ext[-st.n_lags :] if st.n_lags else k_ext[:0]
+
+    for ch in _chunks_of(source):
+        estimate(cutter.feed(chk2(ch)))
+    estimate(cutter.finish())
+    if not any(r["period_index"].size for r in rows):
+        raise ValidationError(
+            "the design is singular in every period (auxiliary channel constant?)"
+        )
+    cat = {k: np.concatenate([r[k] for r in rows]) for k in rows[0]}
+    n_lag_max = min(st.n_lags, n_per - 1)
+    with np.errstate(invalid="ignore"):
+        rd = np.where(rd_cnt > 0, rd_sum / np.maximum(rd_cnt, 1), np.nan)[: n_lag_max + 1]
+    pa = st.pa
+    est, sig = cat["est"], cat["sig"]
+    nanp = np.full(est.shape[0], np.nan)
+    names = ("bias", "drift", *aux_names)
+    kk = cat["period_index"]
+    return DemodResult(
+        period_index=kk,
+        t_start=cat["t_start"],
+        t_mid=cat["t_mid"],
+        a_Y=est[:, 0],
+        a_Z=est[:, pa],
+        sigma_Y=sig[:, 0],
+        sigma_Z=sig[:, pa],
+        slope_Y=est[:, 1] if pa == 2 else nanp,
+        slope_Z=est[:, 3] if pa == 2 else nanp,
+        sigma_slope_Y=sig[:, 1] if pa == 2 else nanp,
+        sigma_slope_Z=sig[:, 3] if pa == 2 else nanp,
+        bias_y=cat["bias_y"],
+        bias_z=cat["bias_z"],
+        bias_names=names,
+        n_used=cat["n_used"],
+        masked_time=(st.q - cat["n_used"]) / st.fs,
+        nominal_masked_time=mask,
+        masked_fraction=float(n_masked / n_samples),
+        leakage=cat["leakage"],
+        Rd=np.asarray(rd),
+        cov=cat["cov"],
+        dropped=int(n_per - kk.size),
+        n_periods=int(n_per),
+        tau=tau,
+        fs=float(st.fs),
+        method=method,
+        solver=used,
+        signal_model=signal_model,
+    )
 
 
 def demodulate(
@@ -429,6 +1044,7 @@ def demodulate(
     min_fraction: float = 0.5,
     n_lags: int = 5,
     leak_tol: float = 1e-9,
+    valid: ArrayLike | None = None,
 ) -> DemodResult:
     """Demodulate accelerometer data taken on a rotating platform, period by period.
 
@@ -465,6 +1081,10 @@ def demodulate(
         Number of lags of Rd[k] computed besides k = 0.
     leak_tol : float
         ``solver="auto"`` uses eq. 14 only when every period's leakage is below this.
+    valid : array_like of bool, optional
+        False for missing samples (e.g. gaps left by resampling): masked like
+        rotation samples; they may hold NaN (also in θ, which then masks their
+        neighbours too, since θ̇ and θ̈ cannot be evaluated there).
 
     Returns
     -------
@@ -480,140 +1100,25 @@ def demodulate(
     check_option("signal_model", signal_model, ("mean", "affine"))
     check_option("solver", solver, ("auto", "eq14", "joint"))
     aux = dict(bias_aux or {})
-    arrs, fs, q = _validate(time, m_y, m_z, theta, aux, float(tau), float(mask), 1e-6)
-    psd = as_psd(psd)
-    t = arrs["time"]
-    n_per = t.size // q
-    if n_per < 1:
-        raise ValidationError(f"record of {t.size} samples is shorter than one period ({q})")
-    nn = n_per * q
-    rest = rest_mask(arrs["theta"], tol=rest_tol, settle=int(round(settle * fs)))[:nn]
-    th = arrs["theta"][:nn].reshape(n_per, q)
-    m = rest.reshape(n_per, q).astype(float)
-    c, s = np.cos(th), np.sin(th)
-    # normalised time within the period, centred on the mean sample time:
-    # u_k = (k - (q-1)/2)/q (t = u·τ), so intercepts are period means
-    u = (np.arange(q) - (q - 1) / 2) / q
-    ones = np.ones((n_per, q))
-    va = ones[..., None] if signal_model == "mean" else np.stack([ones, ones * u], axis=2)
-    pa = va.shape[2]
-    bcols = [ones, ones * u]
-    names = ["bias", "drift"]
-    aux_scale = []
-    for k, v in aux.items():
-        a = v[:nn].reshape(n_per, q)
-        mean = np.sum(a * m, axis=1) / np.maximum(m.sum(axis=1), 1)
-        a = a - mean[:, None]
-        sc = float(np.std(a)) or 1.0
-        bcols.append(a / sc)
-        aux_scale.append(sc)
-        names.append(k)
-    vb = np.stack(bcols, axis=2)
-    pb = vb.shape[2]
-
-    n_used = m.sum(axis=1).astype(np.int64)
-    need = max(min_fraction * (q - mask * fs), 2 * (pa + pb))
-    atrest = m > 0
-    has0 = np.any(atrest & (c > 0.999), axis=1)
-    hasp = np.any(atrest & (c < -0.999), axis=1)
-    keep = (n_used >= need) & has0 & hasp
-    if not keep.any():
-        raise ValidationError(
-            f"no period has enough unmasked samples at both θ = 0 and π (need {need:g} of "
-            f"{q}; best period has {int(n_used.max())})"
-        )
-    leak = _leakage(va, vb, c * m, s * m, m)
-
-    if method == "gls":
-        used = "gls-eq17"
-    elif solver == "auto":
-        used = "eq14" if (not aux and np.all(leak[keep] <= leak_tol)) else "joint"
-    else:
-        used = solver
-    my = arrs["m_y"][:nn].reshape(n_per, q)
-    mz = arrs["m_z"][:nn].reshape(n_per, q)
-    data = np.concatenate([my, mz], axis=1)
-    d = structure_function(psd, (n_lags + 2) * q, fs)
-    if used == "eq14":
-        w, ok = _weights_eq14(va, c, s, m)
-    else:
-        x = _design_joint(va, vb, c, s, m)
-        if used == "joint":
-            w, ok = _weights_joint(x)
-        else:
-            r_reg, _ = regularised_autocov(d, q)
-            w, ok = _weights_gls(x, m, r_reg)
-        w = w[:, :, : 2 * pa]
-    keep &= ok
-    if not keep.any():
-        raise ValidationError(
-            "the design is singular in every period (auxiliary channel constant?)"
-        )
-    w[~keep] = 0.0
-    est = np.einsum("pqa,pq->pa", np.nan_to_num(w), data)
-    # bias coefficients: LS fit of the residual on the unmasked samples
-    cy = np.einsum("pqa,pa->pq", va, est[:, :pa])
-    cz = np.einsum("pqa,pa->pq", va, est[:, pa:])
-    ry = (my - c * cy - s * cz) * m
-    rz = (mz + s * cy - c * cz) * m
-    vbm = vb * m[..., None]
-    nb = np.einsum("pqa,pqb->pab", vbm, vbm)
-    nb[~keep] = np.eye(pb)
-    bsol, _ = _batched_solve(
-        nb, np.stack([np.einsum("pqa,pq->pa", vbm, ry), np.einsum("pqa,pq->pa", vbm, rz)], axis=2)
+    arrs, ok, fs = _validate(time, m_y, m_z, theta, aux, valid, float(tau), float(mask), 1e-6)
+    chunk = DemodChunk(
+        arrs["time"], arrs["m_y"], arrs["m_z"], arrs["theta"], {k: arrs[k] for k in aux}, ok
     )
-    bias_y, bias_z = bsol[..., 0].copy(), bsol[..., 1].copy()
-    for b in (bias_y, bias_z):
-        b[:, 1] /= tau
-        for j, sc in enumerate(aux_scale):
-            b[:, 2 + j] /= sc
-    # covariances (eq. 21 / 23)
-    cov0 = _lag_products(w, w, d, q, 0)
-    rd = [np.mean(cov0[keep, 0, 0])]
-    for k in range(1, n_lags + 1):
-        if k >= n_per:
-            break
-        ck = _lag_products(w[:, :, :1], w[:, :, :1], d, q, k)[:, 0, 0]
-        both = keep[:-k] & keep[k:]
-        rd.append(np.mean(ck[both]) if both.any() else np.nan)
-    unit = np.ones(2 * pa)
-    if pa == 2:
-        unit[[1, 3]] = 1.0 / tau  # slope = coefficient/τ (normalised time)
-    est = est * unit
-    cov0 = cov0 * unit[None, :, None] * unit[None, None, :]
-    sig = np.sqrt(np.maximum(np.einsum("paa->pa", cov0), 0.0))
-    kk = np.flatnonzero(keep)
-    nanp = np.full(kk.size, np.nan)
-    t_start = t[0] + kk * q / fs
-    return DemodResult(
-        period_index=kk,
-        t_start=t_start,
-        t_mid=t_start + 0.5 * (q - 1) / fs,
-        a_Y=est[kk, 0],
-        a_Z=est[kk, pa],
-        sigma_Y=sig[kk, 0],
-        sigma_Z=sig[kk, pa],
-        slope_Y=est[kk, 1] if pa == 2 else nanp,
-        slope_Z=est[kk, 3] if pa == 2 else nanp,
-        sigma_slope_Y=sig[kk, 1] if pa == 2 else nanp,
-        sigma_slope_Z=sig[kk, 3] if pa == 2 else nanp,
-        bias_y=bias_y[kk],
-        bias_z=bias_z[kk],
-        bias_names=tuple(names),
-        n_used=n_used[kk],
-        masked_time=(q - n_used[kk]) / fs,
-        nominal_masked_time=float(mask),
-        masked_fraction=float(1.0 - m.sum() / m.size),
-        leakage=leak[kk],
-        Rd=np.asarray(rd),
-        cov=cov0[kk],
-        dropped=int(n_per - kk.size),
-        n_periods=int(n_per),
-        tau=float(tau),
-        fs=float(fs),
+    return demodulate_stream(
+        lambda: [chunk],
+        tau=tau,
+        mask=mask,
+        fs=fs,
         method=method,
-        solver=used,
         signal_model=signal_model,
+        bias_aux=tuple(aux),
+        psd=psd,
+        solver=solver,
+        rest_tol=rest_tol,
+        settle=settle,
+        min_fraction=min_fraction,
+        n_lags=n_lags,
+        leak_tol=leak_tol,
     )
 
 
@@ -687,12 +1192,14 @@ def fit_sinusoid(
     rd: ArrayLike | None = None,
     cov: ArrayLike | None = None,
     t_origin: float = 0.0,
+    index: ArrayLike | None = None,
+    constant: bool = False,
 ) -> SinusoidFit:
-    """Fit ``α cos(2π f*(t - t0)) + β sin(2π f*(t - t0))`` to per-period values (eq. 24).
+    """Fit ``α cos(2π f*(t - t0)) + β sin(2π f*(t - t0)) [+ c]`` to per-period values (eq. 24).
 
     Generalised least squares with the full covariance of the points (from
-    ``rd`` for equally spaced points, or ``cov``); ordinary LS if neither is given
-    (then ``cov`` of the result is the formal one with unit variance).
+    ``rd``, or ``cov``); ordinary LS if neither is given (then ``cov`` of the
+    result is the formal one with unit variance).
 
     Parameters
     ----------
@@ -703,35 +1210,80 @@ def fit_sinusoid(
     f_star : float
         Known frequency f* [Hz].
     rd : array_like, optional
-        Rd[k] of equally spaced points (lags beyond its length are 0) [m² s⁻⁴].
+        Rd[k] (eq. 23) of the points, lag k in periods; lags beyond its length
+        are 0 [m² s⁻⁴].  The covariance is banded and solved as such, so a year
+        of periods costs O(n).
     cov : array_like, shape (n, n), optional
         Full covariance of the points [m² s⁻⁴].
     t_origin : float
         Time origin ``t0`` [s]; the covariance of (α, β) depends on it.
+    index : array_like of int, shape (n,), optional
+        Period index of each point, for ``rd`` when some periods are missing
+        (``Cov(i, j) = Rd[|index_i - index_j|]``); consecutive by default.
+    constant : bool
+        Also fit a constant ``c``.  Eq. 24 has none (the default, which
+        reproduces the paper): a non-zero mean acceleration then leaks into α
+        and β unless the points span whole periods of the sinusoid.
 
     Returns
     -------
     SinusoidFit
+
+    Raises
+    ------
+    ValidationError
+        Shapes that do not match, or fewer points than parameters.
     """
     t = np.asarray(t, float) - t_origin
     y = np.asarray(a, float)
     n = t.size
     if y.shape != t.shape:
         raise ValidationError(f"t and a must have the same shape, got {t.shape} and {y.shape}")
-    A = np.column_stack([np.cos(2 * np.pi * f_star * t), np.sin(2 * np.pi * f_star * t)])
-    if cov is None and rd is not None:
-        rd = np.asarray(rd, float)
-        full = np.zeros(n)
-        full[: min(n, rd.size)] = rd[:n]
-        ij = np.abs(np.arange(n)[:, None] - np.arange(n)[None, :])
-        cov = full[ij]
-    if cov is None:
-        cov = np.eye(n)
-    cov = np.asarray(cov, float)
-    ci_a = np.linalg.solve(cov, A)
+    cols = [np.cos(2 * np.pi * f_star * t), np.sin(2 * np.pi * f_star * t)]
+    if constant:
+        cols.append(np.ones(n))
+    A = np.column_stack(cols)
+    if n < A.shape[1]:
+        raise ValidationError(f"need at least {A.shape[1]} points for the sinusoid fit, got {n}")
+    rhs = np.column_stack([A, y])
+    if cov is not None:
+        sol = np.linalg.solve(np.asarray(cov, float), rhs)
+    elif rd is not None:
+        idx = np.arange(n) if index is None else np.asarray(index, np.int64)
+        if idx.shape != (n,) or np.any(np.diff(idx) <= 0):
+            raise ValidationError("index must hold one increasing period index per point")
+        sol = _solve_banded_rd(np.asarray(rd, float), idx, rhs)
+    else:
+        sol = rhs
+    ci_a, ci_y = sol[:, :-1], sol[:, -1]
     v = np.linalg.inv(A.T @ ci_a)
-    coef = v @ (ci_a.T @ y)
-    return SinusoidFit(float(coef[0]), float(coef[1]), v, float(f_star), float(t_origin))
+    coef = v @ (A.T @ ci_y)
+    return SinusoidFit(
+        float(coef[0]),
+        float(coef[1]),
+        v,
+        float(f_star),
+        float(t_origin),
+        float(coef[2]) if constant else float("nan"),
+    )
+
+
+def _solve_banded_rd(rd: NDArray, idx: NDArray, rhs: NDArray) -> NDArray:
+    """``C⁻¹ rhs`` for ``C[i, j] = rd[|idx_i - idx_j|]`` (0 beyond ``len(rd)``), banded."""
+    from scipy.linalg import solve_banded
+
+    n = idx.size
+    u = min(rd.size - 1, n - 1)
+    if u <= 0:
+        return rhs / rd[0]
+    ab = np.zeros((2 * u + 1, n))
+    ab[u] = rd[0]
+    for o in range(1, u + 1):
+        lag = idx[o:] - idx[:-o]
+        vals = np.where(lag < rd.size, rd[np.minimum(lag, rd.size - 1)], 0.0)
+        ab[u - o, o:] = vals  # C[j - o, j]
+        ab[u + o, :-o] = vals  # C[j + o, j]
+    return solve_banded((u, u), ab, rhs)
 
 
 def _rd_pattern(pattern: CalibrationPattern, psd, method, n_lags, use_mask):
