@@ -89,7 +89,8 @@ class Effect:
     sigma : float
         1σ uncertainty of ``coefficient`` under the coloured-noise model.
     significance : float
-        Multiplicity-corrected p-value of the test that admitted the effect.
+        Multiplicity-corrected p-value of the effect given all the other effects of
+        the final model (``details["p_accept"]``: of the test that admitted it).
     epoch : float or None
         Step epoch (first sample after the step) [s].
     frequency : float or None
@@ -551,107 +552,40 @@ def close_loop(
             f"the base has rank {basis0.rank_total} for {t_u.size} usable samples: "
             "nothing is left to test"
         )
-    n_families = _families(builders, aux_all, orbit_period)
-
-    found: list[tuple[Proposal, float, dict[str, Any]]] = []
-    removed: list[tuple[Proposal, float, dict[str, Any]]] = []
-    unexplained: list[Effect] = []
-    notes: dict[tuple, dict[str, Any]] = {}
-    excluded: list[float] = []
     fit0 = basis0.fit(y_u)
-    basis, fit = basis0, fit0
-    lev = basis.leverage(grid)
+    search = _Search(
+        t_all=t_all,
+        use=use,
+        t0=t0,
+        span=span,
+        grid=grid,
+        basis0=basis0,
+        y_u=y_u,
+        aux=aux_all,
+        orbit_period=orbit_period,
+        options={**opts, "enabled": tuple(n for n, _ in builders)},
+        builders=builders,
+        chan_all=chan_all,
+        names=names,
+        base_labels=frozenset(bbase.column_labels()),
+        n_families=_families(builders, aux_all, orbit_period),
+        alpha=alpha,
+    )
     iterations = 0
-    additions = 0
-    while additions < max_effects and iterations < 3 * max_effects:
+    seen = {search.model_key()}
+    while len(search.found) < max_effects and iterations < 3 * max_effects:
         iterations += 1
-        ctx = Context(
-            t_all=t_all,
-            use=use,
-            t0=t0,
-            span=span,
-            grid=grid,
-            residual=fit.resid,
-            basis=basis,
-            leverage=lev,
-            labels=frozenset(bbase.column_labels()) | {lb for pr, *_ in found for lb in pr.labels},
-            aux=aux_all,
-            orbit_period=orbit_period,
-            excluded_freqs=tuple(excluded),
-            options={**opts, "enabled": tuple(n for n, _ in builders)},
-            channel_all=chan_all,
-            channel_names=names,
-        )
-        tested = []
-        for _, build in builders:
-            for prop in build(ctx):
-                if prop.note is not None:
-                    _note(notes, prop.name, prop.channel, prop.note, prop.params)
-                    continue
-                zt = basis.complement(prop.columns[use])
-                if zt.shape[1] == 0:
-                    _note(
-                        notes, prop.name, prop.channel, "not identifiable: in the span of the model"
-                    )
-                    continue
-                w = wald_test(grid, fit.resid, zt, lev)
-                p_adj = min(1.0, w.pvalue * prop.multiplicity * n_families)
-                # gate: significance; rank: explained power (RSS reduction)
-                gain = float(w.gamma @ w.gamma)
-                tested.append((p_adj >= alpha, -gain, len(tested), p_adj, prop, w))
-        tested.sort(key=lambda e: e[:3])
-        accepted = None
-        for _, _, _, p_adj, prop, w in tested:
-            if p_adj >= alpha:
-                break
-            info: dict[str, Any] = {"stat": w.stat, "dof": w.dof, "multiplicity": prop.multiplicity}
-            if prop.check_consistency:
-                ok, cinfo = _consistency(grid, basis, prop.columns[use], y_u, t_u)
-                info.update(cinfo)
-                if not ok:
-                    f = prop.params.get("frequency")
-                    if f is not None:
-                        excluded.append(float(f))
-                    unexplained.append(
-                        Effect(
-                            "unexplained",
-                            prop.name if prop.channel is None else f"{prop.name}:{prop.channel}",
-                            _component_rms(basis, prop.columns[use], y_u),
-                            float("nan"),
-                            p_adj,
-                            frequency=f,
-                            details={
-                                "reason": "coefficient differs between thirds of the record",
-                                **info,
-                                **prop.params,
-                            },
-                        )
-                    )
-                    continue
-            accepted = (_independent(basis, prop, use), p_adj, info)
+        if not search.step() or search.model_key() in seen:
             break
-        if accepted is None:
-            break
-        found.append(accepted)
-        additions += 1
-        if accepted[0].params.get("frequency") is not None:
-            excluded.append(float(accepted[0].params["frequency"]))
-        basis = _rebuild(basis0, found, use)
-        fit = basis.fit(y_u)
-        lev = basis.leverage(grid)
-        # backward elimination: drop earlier effects the new one made redundant
-        while len(found) > 1:
-            worst = _weakest(grid, basis0, found, use, y_u, n_families, alpha)
-            if worst is None:
-                break
-            gone = found.pop(worst)
-            removed.append(gone)
-            f = gone[0].params.get("frequency")
-            if f is not None and float(f) in excluded:
-                excluded.remove(float(f))
-            basis = _rebuild(basis0, found, use)
-            fit = basis.fit(y_u)
-            lev = basis.leverage(grid)
+        seen.add(search.model_key())
+    found = [
+        (f.prop, p, {**f.info, "p_accept": f.p_adj})
+        for f, p in zip(search.found, search.final_p(), strict=True)
+    ]
+    removed = [(f.prop, f.p_adj, f.info) for f in search.removed]
+    unexplained = search.unexplained
+    notes = search.notes
+    basis, fit, lev = search.state(search.found)
 
     # ------------------------------------------------------------------ covariances
     noise = estimate_psd(grid, fit.resid, lev)
@@ -809,28 +743,329 @@ def _note(notes: dict, name: str, channel: str | None, text: str, params=None) -
         notes[key] = d
 
 
-def _rebuild(basis0: Basis, found, use) -> Basis:
-    if not found:
-        return basis0
-    return basis0.extend(np.column_stack([pr.columns[use] for pr, *_ in found]))
+_PAIR_FACTOR = 10.0  # pairs are tested at alpha/10: per-step FWER <= 1.1 alpha
+_PAIR_ANCHORS = 3
+_REFINE_DW = 4.0
 
 
-def _weakest(grid, basis0, found, use, y_u, n_families, alpha) -> int | None:
-    """Index of an earlier effect that is no longer significant given the others, or None."""
-    worst, worst_p = None, alpha
-    for i in range(len(found) - 1):  # the newest effect was just shown significant
-        others = [f for j, f in enumerate(found) if j != i]
-        b = _rebuild(basis0, others, use)
-        fr = b.fit(y_u)
-        prop = found[i][0]
-        zt = b.complement(prop.columns[use])
+@dataclass
+class _Found:
+    prop: Proposal
+    p_adj: float
+    info: dict[str, Any]
+    builder: int
+
+
+@dataclass
+class _Search:
+    """State of the forward selection (see the module notes, steps 1-4)."""
+
+    t_all: NDArray[np.float64]
+    use: NDArray[np.bool_]
+    t0: float
+    span: float
+    grid: Grid
+    basis0: Basis
+    y_u: NDArray[np.float64]
+    aux: dict[str, NDArray[np.float64]]
+    orbit_period: float | None
+    options: dict[str, Any]
+    builders: list[tuple[str, Callable]]
+    chan_all: NDArray[np.int64] | None
+    names: tuple[str, ...]
+    base_labels: frozenset[str]
+    n_families: int
+    alpha: float
+    found: list[_Found] = field(default_factory=list)
+    removed: list[_Found] = field(default_factory=list)
+    unexplained: list[Effect] = field(default_factory=list)
+    notes: dict[tuple, dict[str, Any]] = field(default_factory=dict)
+    excluded: list[float] = field(default_factory=list)
+
+    # ------------------------------------------------------------------
+    def state(self, found: Sequence[_Found]) -> tuple[Basis, FitResult, NDArray[np.float64]]:
+        """Basis, fit and leverage spectrum of the base plus the effects ``found``."""
+        if found:
+            basis = self.basis0.extend(np.column_stack([f.prop.columns[self.use] for f in found]))
+        else:
+            basis = self.basis0
+        return basis, basis.fit(self.y_u), basis.leverage(self.grid)
+
+    def context(self, found: Sequence[_Found], basis, fit, lev) -> Context:
+        return Context(
+            t_all=self.t_all,
+            use=self.use,
+            t0=self.t0,
+            span=self.span,
+            grid=self.grid,
+            residual=fit.resid,
+            basis=basis,
+            leverage=lev,
+            labels=self.base_labels | {lb for f in found for lb in f.prop.labels},
+            aux=self.aux,
+            orbit_period=self.orbit_period,
+            excluded_freqs=tuple(self.excluded),
+            options=self.options,
+            channel_all=self.chan_all,
+            channel_names=self.names,
+        )
+
+    def propose(self, ctx: Context, only: int | None = None) -> list[tuple[Proposal, int]]:
+        """Proposals of every builder (or of builder ``only``); notes are recorded."""
+        out = []
+        for i, (_, build) in enumerate(self.builders):
+            if only is not None and i != only:
+                continue
+            for prop in build(ctx):
+                if prop.note is not None:
+                    _note(self.notes, prop.name, prop.channel, prop.note, prop.params)
+                else:
+                    out.append((prop, i))
+        return out
+
+    def test(self, basis: Basis, fit: FitResult, lev, cols: NDArray[np.float64]):
+        """Wald test of ``cols`` (all samples) on top of ``basis``; None if in its span."""
+        zt = basis.complement(cols[self.use])
         if zt.shape[1] == 0:
-            return i
-        w = wald_test(grid, fr.resid, zt, b.leverage(grid))
-        p_adj = min(1.0, w.pvalue * prop.multiplicity * n_families)
-        if p_adj >= worst_p:
-            worst, worst_p = i, p_adj
-    return worst
+            return None
+        return wald_test(self.grid, fit.resid, zt, lev)
+
+    def _padj(self, w, *mults: float, pair: bool = False) -> float:
+        f = self.n_families ** (2 if pair else 1) * (_PAIR_FACTOR if pair else 1.0)
+        return float(min(1.0, w.pvalue * float(np.prod(mults)) * f))
+
+    # ------------------------------------------------------------------
+    def step(self) -> bool:
+        """One forward step (a single effect, or a pair); False when nothing is added.
+
+        The best significant single proposal (most explained power) is compared
+        with the best significant pair anchored on a *masked* proposal: one that
+        explains more power than that single but is not significant on its own
+        (corrected p < 1).  The larger explained power wins.
+        """
+        basis, fit, lev = self.state(self.found)
+        ctx = self.context(self.found, basis, fit, lev)
+        tested = []
+        for prop, bi in self.propose(ctx):
+            w = self.test(basis, fit, lev, prop.columns)
+            if w is None:
+                _note(
+                    self.notes,
+                    prop.name,
+                    prop.channel,
+                    "not identifiable: in the span of the model",
+                )
+                continue
+            tested.append((self._padj(w, prop.multiplicity), float(w.gamma @ w.gamma), prop, w, bi))
+        sig = sorted((e for e in tested if e[0] < self.alpha), key=lambda e: -e[1])
+        top_sig = sig[0][1] if sig else 0.0
+        masked = sorted(
+            (e for e in tested if self.alpha <= e[0] < 1.0 and e[1] > top_sig), key=lambda e: -e[1]
+        )[:_PAIR_ANCHORS]
+        pair = self._best_pair(basis, fit, lev, masked) if masked else None
+        if pair is not None and pair[-1] > top_sig and self._add_pair(pair):
+            return True
+        for p_adj, _, prop, w, bi in sig:
+            info = {"stat": w.stat, "dof": w.dof, "multiplicity": prop.multiplicity}
+            if not self._consistent(basis, prop, p_adj, info):
+                continue
+            self._add([_Found(_independent(basis, prop, self.use), p_adj, info, bi)])
+            self._settle(protect_last=True)
+            return True
+        return False
+
+    def _consistent(self, basis: Basis, prop: Proposal, p_adj: float, info) -> bool:
+        if not prop.check_consistency:
+            return True
+        ok, cinfo = _consistency(
+            self.grid, basis, prop.columns[self.use], self.y_u, self.t_all[self.use]
+        )
+        info.update(cinfo)
+        if ok:
+            return True
+        f = prop.params.get("frequency")
+        if f is not None:
+            self.excluded.append(float(f))
+        self.unexplained.append(
+            Effect(
+                "unexplained",
+                prop.name if prop.channel is None else f"{prop.name}:{prop.channel}",
+                _component_rms(basis, prop.columns[self.use], self.y_u),
+                float("nan"),
+                p_adj,
+                frequency=f,
+                details={
+                    "reason": "coefficient differs between thirds of the record",
+                    **info,
+                    **prop.params,
+                },
+            )
+        )
+        return False
+
+    def _add(self, new: list[_Found]) -> None:
+        for f in new:
+            self.found.append(f)
+            if f.prop.params.get("frequency") is not None:
+                self.excluded.append(float(f.prop.params["frequency"]))
+
+    def _drop(self, i: int) -> None:
+        gone = self.found.pop(i)
+        self.removed.append(gone)
+        f = gone.prop.params.get("frequency")
+        if f is not None and float(f) in self.excluded:
+            self.excluded.remove(float(f))
+
+    def _best_pair(self, basis, fit, lev, anchors):
+        """Two effects that mask each other: a masked proposal with its best partner.
+
+        For each anchor ``A`` every family proposes given ``A``; ``A + B`` is tested
+        jointly against the current model with the Bonferroni factor
+        ``m_A m_B F² · 10``.  Returns the significant pair that explains the most
+        power, ``(p_adj, A, B, builder_B, wald, explained power)``, or None.
+        """
+        best = None
+        for _, _, pa, _, ba in anchors:
+            fa = _Found(_independent(basis, pa, self.use), 1.0, {}, ba)
+            b_a, f_a, l_a = self.state([*self.found, fa])
+            ctx_a = self.context([*self.found, fa], b_a, f_a, l_a)
+            for pb, bb in self.propose(ctx_a):
+                w = self.test(basis, fit, lev, np.column_stack([fa.prop.columns, pb.columns]))
+                if w is None:
+                    continue
+                p_adj = self._padj(w, pa.multiplicity, pb.multiplicity, pair=True)
+                gain = float(w.gamma @ w.gamma)
+                if p_adj < self.alpha and (best is None or gain > best[-1]):
+                    best = (p_adj, fa, pb, bb, w, gain)
+        return best
+
+    def _add_pair(self, pair) -> bool:
+        p_adj, fa, pb, bb, w, _ = pair
+        b_a, *_ = self.state([*self.found, fa])
+        fb = _Found(_independent(b_a, pb, self.use), p_adj, {}, bb)
+        info = {"stat": w.stat, "dof": w.dof, "pair": [fa.prop.name, pb.name]}
+        fa = _Found(fa.prop, p_adj, {**info, "multiplicity": fa.prop.multiplicity}, fa.builder)
+        fb = _Found(fb.prop, p_adj, {**info, "multiplicity": pb.multiplicity}, bb)
+        for x, other in ((fa, fb), (fb, fa)):
+            b_o, *_ = self.state([*self.found, other])
+            if not self._consistent(b_o, x.prop, p_adj, x.info):
+                return False
+        self._add([fa, fb])
+        self._settle(protect_last=False)
+        return True
+
+    def _refine(self) -> bool:
+        """Re-search every effect's lag, epoch or frequency given all the others.
+
+        The new member replaces the old one only when its Wald statistic (given the
+        others) is larger by more than ``_REFINE_DW``: a parameter the data do not
+        determine (e.g. a lag once ``periodic`` holds the once-per-orbit part) stays
+        where it was found.
+        """
+        changed = False
+        for i in range(len(self.found)):
+            cur = self.found[i]
+            rest = [f for j, f in enumerate(self.found) if j != i]
+            b_r, f_r, l_r = self.state(rest)
+            ctx = self.context(rest, b_r, f_r, l_r)
+            alt = [
+                p
+                for p, _ in self.propose(ctx, only=cur.builder)
+                if p.name == cur.prop.name and p.channel == cur.prop.channel
+            ]
+            if not alt or _key(alt[0]) == _key(cur.prop):
+                continue
+            # move only on significant evidence (Wald statistics differ by > 4, ~2σ)
+            w_cur = self.test(b_r, f_r, l_r, cur.prop.columns)
+            w_alt = self.test(b_r, f_r, l_r, alt[0].columns)
+            if w_alt is None or (
+                w_cur is not None and w_alt.stat * w_alt.q - w_cur.stat * w_cur.q <= _REFINE_DW
+            ):
+                continue
+            self.found[i] = _Found(
+                _independent(b_r, alt[0], self.use),
+                cur.p_adj,
+                {**cur.info, "refined": True},
+                cur.builder,
+            )
+            changed = True
+        return changed
+
+    def _settle(self, protect_last: bool) -> None:
+        """After an addition: refine the nonlinear parameters, then backward elimination."""
+        for _ in range(3):
+            refined = self._refine() if len(self.found) > 1 else False
+            dropped = self._eliminate(protect_last)
+            protect_last = False
+            if not (refined or dropped):
+                break
+
+    def model_key(self) -> frozenset:
+        """The current set of effects (to stop when a model comes back)."""
+        return frozenset((f.prop.name, f.prop.channel, _key(f.prop)) for f in self.found)
+
+    def final_p(self) -> list[float]:
+        """Corrected p-value of every effect given all the others (the reported one)."""
+        out = []
+        for i, f in enumerate(self.found):
+            others = [g for j, g in enumerate(self.found) if j != i]
+            basis, fit, lev = self.state(others)
+            w = self.test(basis, fit, lev, f.prop.columns)
+            out.append(1.0 if w is None else self._padj(w, f.prop.multiplicity))
+        return out
+
+    def _significant_given(self, i: int, others: Sequence[_Found]) -> bool:
+        basis, fit, lev = self.state(others)
+        prop = self.found[i].prop
+        w = self.test(basis, fit, lev, prop.columns)
+        return w is not None and self._padj(w, prop.multiplicity) < self.alpha
+
+    def _eliminate(self, protect_last: bool) -> bool:
+        """Backward elimination, with the newest effect re-searched without each earlier one.
+
+        An earlier effect ``i`` is dropped if it is not significant given the others,
+        or given the others with the newest effect's family re-searched without
+        ``i`` (its lag, epoch or frequency may have been pulled off by ``i``: e.g. the
+        once-per-orbit part of a lagged temperature coupling taken as ``periodic``).
+        """
+        any_drop = False
+        changed = True
+        while changed and len(self.found) > 1:
+            changed = False
+            last = len(self.found) - 1
+            for i in range(len(self.found) - (1 if protect_last else 0)):
+                others = [f for j, f in enumerate(self.found) if j != i]
+                if not self._significant_given(i, others):
+                    self._drop(i)
+                    changed = any_drop = True
+                    break
+                if not protect_last or i == last:
+                    continue
+                newest = self.found[last]
+                rest = [f for j, f in enumerate(self.found) if j not in (i, last)]
+                b_r, f_r, l_r = self.state(rest)
+                ctx = self.context(rest, b_r, f_r, l_r)
+                alt = [
+                    p
+                    for p, _ in self.propose(ctx, only=newest.builder)
+                    if p.name == newest.prop.name and p.channel == newest.prop.channel
+                ]
+                if not alt:
+                    continue
+                cand = _Found(
+                    _independent(b_r, alt[0], self.use), newest.p_adj, newest.info, newest.builder
+                )
+                if not self._significant_given(i, [*rest, cand]):
+                    self.found[last] = cand
+                    self._drop(i)
+                    changed = any_drop = True
+                    break
+        return any_drop
+
+
+def _key(prop: Proposal) -> tuple:
+    """What identifies a family member (lag, epoch, frequency, ...)."""
+    return tuple(sorted((k, repr(v)) for k, v in prop.params.items()))
 
 
 def _sandwich(rinv: NDArray[np.float64], g: NDArray[np.float64]) -> NDArray[np.float64]:
