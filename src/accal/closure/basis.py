@@ -232,7 +232,10 @@ class BlockBase:
         c = np.asarray(coef, dtype=np.float64).reshape(self.n_blocks, self.p)
         out = np.zeros(self.block.size)
         inb = self.block >= 0
-        out[inb] = np.einsum("ij,ij->i", self.columns[inb], c[self.block[inb]])
+        cols = self.columns[inb]
+        prod = cols * c[self.block[inb]]
+        prod[cols == 0] = 0.0  # an undetermined coefficient does not spoil other samples
+        out[inb] = prod.sum(axis=1)
         return out
 
     def dense(self) -> NDArray[np.float64]:
