@@ -344,9 +344,9 @@ def _leakage(va, vb, cmask, smask, m):
     out = np.zeros(va.shape[0])
     for lam in (cmask, smask):
         g = np.abs(np.einsum("pqa,pq,pqb->pab", vt, lam, vb))
-        with np.errstate(invalid="ignore", divide="ignore"):
-            g = g / (nv[:, :, None] * nb[:, None, :])
-        out = np.maximum(out, np.nanmax(g.reshape(g.shape[0], -1), axis=1))
+        den = nv[:, :, None] * nb[:, None, :]
+        g = np.divide(g, den, out=np.zeros_like(g), where=den > 0)
+        out = np.maximum(out, np.max(g.reshape(g.shape[0], -1), axis=1))
     return out
 
 
@@ -491,7 +491,7 @@ class _Checker:
         self.aux_names = tuple(aux_names)
         self.tau, self.tm, self.theta_tol = float(tau), float(tm), theta_tol
         self.fs = None if fs is None else float(fs)
-        self.q = None if fs is None else _check_tau_mask(self.fs, self.tau, self.tm)
+        self.q = None  # checked when the first chunk arrives (its own checks come first)
         self.n = 0
         self.last_t = None
         self.th_min, self.th_max = np.inf, -np.inf
@@ -525,6 +525,7 @@ class _Checker:
                     f"need at least 3 samples in the first chunk to find the sampling step, got {n}"
                 )
             self.fs = 1.0 / float(np.median(np.diff(t)))
+        if self.q is None:
             self.q = _check_tau_mask(self.fs, self.tau, self.tm)
         dt = 1.0 / self.fs
         steps = np.diff(t) if self.last_t is None else np.diff(np.concatenate([[self.last_t], t]))
