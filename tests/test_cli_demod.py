@@ -87,7 +87,11 @@ def test_simulate_then_demod_recovers_truth(day, tmp_path):
             assert 0.75 < np.sqrt(np.mean(z**2)) < 1.3, (method, ax)
         units, meta = read_table_metadata(out / "periods.parquet")
         assert units["a_Y"].startswith("m/s^2") and units["drift_y"].startswith("m/s^3")
-        assert "bias_y_temperature" in df and meta["method"] == method
+        assert "bias_y_temperature" in df and set(df["source"]) == {"run.parquet"}
+        assert meta["sources"]["run.parquet"]["method"] == method
+        assert meta["sources"]["run.parquet"]["Rd"][0] == pytest.approx(
+            df.sigma_Y.median() ** 2, rel=0.01
+        )
         s = json.loads((out / "summary.json").read_text())
         # paper: Rd[0] = 1.84e-23 (LS), per-period GLS on data 1.77e-23 (docs/demod.md)
         assert s["Rd"][0] == pytest.approx(1.84e-23 if method == "ls" else 1.77e-23, rel=0.05)
@@ -164,14 +168,34 @@ def test_bad_input(case, tmp_path):
     assert not out.exists() or not any(out.iterdir())
 
 
-def test_resample_accepts_jitter(tmp_path):
+def test_resample_jitter_and_gaps(tmp_path):
+    """--resample: jittered time is interpolated onto the grid; a 7 s hole stays a hole
+    (its grid points are masked, never interpolated) and its period is still used."""
+    data = small_run()
+    t = data["time"].to_numpy() + np.random.default_rng(3).uniform(-0.02, 0.02, len(data))
+    data["time"] = t
+    data = data.drop(index=range(146, 152)).reset_index(drop=True)  # rest at θ = 0, period 2
     bad = tmp_path / "jit.csv"
-    write_table(small_run(time=_time_jitter), bad)
+    write_table(data, bad)
+    code, _, err = invoke("demod", bad, "--tau", 60, "--mask", 20, "--out", tmp_path / "x", "-q")
+    assert code == 1 and "irregular sampling" in err and "use --resample" in err
     code, _, err = invoke(
-        "demod", bad, "--tau", 60, "--mask", 20, "--out", tmp_path / "o", "--resample", "-q"
+        "demod", bad, "--tau", 60, "--mask", 20, "--out", tmp_path / "o", "--resample"
     )
     assert code == 0, err
-    assert json.loads((tmp_path / "o" / "summary.json").read_text())["input"]["resampled"]
+    # 146..152 s: the grid point at 152 s precedes the jittered sample after the hole
+    assert "1192 samples interpolated, 7 in 1 gap(s) marked invalid" in err
+    s = json.loads((tmp_path / "o" / "summary.json").read_text())
+    rs = s["input"]["resample"]
+    assert s["input"]["resampled"] and rs["step"] == 1.0 and rs["n_grid"] == 1200
+    assert rs["n_gap"] == 7 and rs["n_gaps"] == 1 and rs["n_exact"] == 1
+    assert rs["n_input"] == 1194 and rs["largest_gap"] == pytest.approx(7.0, abs=0.05)
+    df = pd.read_parquet(tmp_path / "o" / "periods.parquet").set_index("period")
+    assert len(df) == 20 and s["dropped"] == 0
+    # the hole and the sample on each side of it are masked in period 2
+    assert df.n_used.loc[2] < df.n_used.drop(2).min() - 5
+    # interpolating θ next to the rotations masks a few more samples than --mask says
+    assert s["mask"]["mismatch"] and "measured masked time" in err
 
 
 def test_batch_one_bad_one_good(tmp_path):
@@ -187,12 +211,13 @@ def test_batch_one_bad_one_good(tmp_path):
     assert f"accal: {bad}: m_y has 1 NaN" in err
     assert "1 ok, 1 failed" in err
     assert sorted(p.name for p in out.iterdir()) == [
-        "good.periods.csv",
         "good.summary.json",
         "good.summary.md",
+        "periods.csv",
     ]
-    df = pd.read_csv(out / "good.periods.csv", comment="#")
+    df = pd.read_csv(out / "periods.csv", comment="#")
     assert len(df) == 20 and {"a_Y", "sigma_Z", "bias_y", "drift_z", "leakage"} <= set(df)
+    assert set(df.source) == {"good.csv.gz"}
 
 
 def test_psd_file_and_bad_psd(tmp_path):
@@ -302,3 +327,108 @@ def test_budget_real_process():
     assert res.returncode == 0, res.stderr
     rep = json.loads(res.stdout)
     assert rep["Rd"][0] == pytest.approx(1.84e-23, rel=0.1) and rep["sigma_T"] > 0
+
+
+# --- chunked reading, cumulative table, eq. 24 constant ---------------------------
+
+
+def _outputs(out: Path):
+    df = (
+        pd.read_parquet(out / "periods.parquet")
+        if (out / "periods.parquet").exists()
+        else (pd.read_csv(out / "periods.csv", comment="#"))
+    )
+    return df, json.loads((out / "summary.json").read_text())
+
+
+@pytest.mark.parametrize("method", ["ls", "gls"])
+def test_chunked_run_equals_whole_file(day, tmp_path, method):
+    """A day read 1000 rows at a time (87 chunks, chunk borders inside periods) gives the
+    whole-file results to rounding: every column of every period, Rd and the eq. 24 fit."""
+    common = ("--tau", 600, "--mask", 200, "--method", method, "--bias-model",
+              "affine+temperature", "--sinusoid-period", 43200, "-q")  # fmt: skip
+    assert invoke("demod", day, *common, "--out", tmp_path / "whole")[0] == 0
+    code, _, err = invoke("demod", day, *common, "--chunk-size", 1000, "--out", tmp_path / "ch")
+    assert code == 0, err
+    (a, sa), (b, sb) = _outputs(tmp_path / "whole"), _outputs(tmp_path / "ch")
+    assert list(a.columns) == list(b.columns) and len(a) == len(b) == 144
+    pd.testing.assert_frame_equal(a, b, check_exact=False, rtol=1e-9, atol=0)
+    np.testing.assert_allclose(sb["Rd"], sa["Rd"], rtol=1e-9)
+    assert sb["input"]["chunk_rows"] == 1000 and sa["input"]["n_samples"] == 86400
+    for k in ("alpha", "beta"):
+        assert sb["sinusoid"]["Y"][k] == pytest.approx(sa["sinusoid"]["Y"][k], rel=1e-9)
+
+
+def test_tiny_chunks_csv_gz_and_resample(tmp_path):
+    """16-row chunks of a gzipped CSV, with jitter and a hole resampled on the way."""
+    data = small_run()
+    data["time"] = data["time"] + np.where(np.arange(len(data)) % 7 == 3, 0.01, 0.0)
+    data = data.drop(index=range(700, 704)).reset_index(drop=True)
+    write_table(data, tmp_path / "r.csv", units={"theta": "rad"})
+    run = tmp_path / "r.csv.gz"
+    run.write_bytes(__import__("gzip").compress((tmp_path / "r.csv").read_bytes()))
+    args = ("--tau", 60, "--mask", 20, "--resample", "--format", "csv", "-q")
+    assert invoke("demod", run, *args, "--out", tmp_path / "whole")[0] == 0
+    assert invoke("demod", run, *args, "--chunk-size", 16, "--out", tmp_path / "ch")[0] == 0
+    (a, sa), (b, sb) = _outputs(tmp_path / "whole"), _outputs(tmp_path / "ch")
+    assert sa["input"]["resample"] == sb["input"]["resample"]
+    assert sa["input"]["resample"]["n_gap"] == 4
+    pd.testing.assert_frame_equal(a, b, check_exact=False, rtol=1e-9, atol=0)
+
+
+def test_cumulative_periods_table(tmp_path):
+    """Several runs share periods.<fmt> (a source column); a re-run replaces its rows,
+    never duplicates them; a failed run leaves the table untouched."""
+    r1, r2, bad = tmp_path / "r1.parquet", tmp_path / "r2.csv", tmp_path / "bad.csv"
+    write_table(small_run(), r1)
+    write_table(small_run(m_y=lambda d: d["m_y"] + 1e-9), r2)
+    write_table(small_run(m_y=_nan), bad)
+    out = tmp_path / "out"
+    args = ("--tau", 60, "--mask", 20, "--out", out, "-q")
+    assert invoke("demod", r1, r2, *args)[0] == 0
+    assert sorted(p.name for p in out.iterdir()) == [
+        "periods.parquet", "r1.summary.json", "r1.summary.md", "r2.summary.json", "r2.summary.md",
+    ]  # fmt: skip
+    df = pd.read_parquet(out / "periods.parquet")
+    assert df.groupby("source").size().to_dict() == {"r1.parquet": 20, "r2.csv": 20}
+    assert df[["source", "period"]].equals(
+        df[["source", "period"]].sort_values(["source", "period"])
+    )
+    # a constant added to m_y is a bias: rejected, same a_Y
+    np.testing.assert_allclose(
+        df[df.source == "r2.csv"].a_Y.to_numpy(), df[df.source == "r1.parquet"].a_Y.to_numpy(),
+        rtol=0, atol=1e-15,
+    )  # fmt: skip
+    # re-run r2 alone with GLS and the affine signal model: its rows are replaced
+    assert invoke("demod", r2, *args, "--method", "gls", "--signal-model", "affine")[0] == 0
+    df2 = pd.read_parquet(out / "periods.parquet")
+    assert df2.groupby("source").size().to_dict() == {"r1.parquet": 20, "r2.csv": 20}
+    assert df2.slope_Y.isna().sum() == 20 and df2[df2.source == "r2.csv"].slope_Y.notna().all()
+    pd.testing.assert_frame_equal(
+        df2[df2.source == "r1.parquet"].dropna(axis=1), df[df.source == "r1.parquet"]
+    )
+    _, meta = read_table_metadata(out / "periods.parquet")
+    assert meta["sources"]["r1.parquet"]["method"] == "ls"
+    assert meta["sources"]["r2.csv"]["method"] == "gls"
+    assert meta["sources"]["r2.csv"]["solver"] == "gls-eq17"
+    before = (out / "periods.parquet").read_bytes()
+    code, _, err = invoke("demod", bad, *args)
+    assert code == 1 and "m_y has 1 NaN" in err
+    assert (out / "periods.parquet").read_bytes() == before
+    assert not [p for p in out.iterdir() if p.name.startswith(".")]  # no temporary files left
+
+
+def test_sinusoid_constant_term(day, tmp_path):
+    """Eq. 24 without a constant: the 4.6e-7 m/s² mean leaks into α, β over a day that is
+    not a whole number of sinusoid periods; --sinusoid-constant absorbs it (as c)."""
+    args = ("--tau", 600, "--mask", 200, "--sinusoid-period", 200000, "-q")
+    assert invoke("demod", day, *args, "--out", tmp_path / "a")[0] == 0
+    assert invoke("demod", day, *args, "--sinusoid-constant", "--out", tmp_path / "b")[0] == 0
+    sa, sb = _outputs(tmp_path / "a")[1]["sinusoid"], _outputs(tmp_path / "b")[1]["sinusoid"]
+    assert not sa["constant"] and sa["Y"]["offset"] is None
+    assert abs(sa["Y"]["alpha"]) > 1e-8  # the leak: thousands of sigma
+    y = sb["Y"]
+    assert sb["constant"] and len(y["cov"]) == 3
+    assert abs(y["alpha"]) < 4 * y["sigma_alpha"] and abs(y["beta"]) < 4 * y["sigma_beta"]
+    assert y["offset"] == pytest.approx(4.6e-7, abs=4 * y["sigma_offset"])
+    assert "c = " in (tmp_path / "b" / "summary.md").read_text()

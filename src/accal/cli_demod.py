@@ -67,7 +67,32 @@ PSD_HELP = "Noise PSD: 'microstar' (eq. 1 of Lenoir et al. 2013) or a CSV/Parque
     help="Integration time of the standard σ(T) in the summary [s].",
 )
 @click.option(
-    "--resample", is_flag=True, help="Interpolate irregular sampling onto a uniform grid."
+    "--sinusoid-constant",
+    is_flag=True,
+    help="Add a constant term to the sinusoid fit (α cos + β sin + c), so a non-zero mean "
+    "does not leak into α, β.",
+)
+@click.option(
+    "--resample",
+    is_flag=True,
+    help="Resample irregular sampling onto a uniform grid: linear interpolation within "
+    "continuous stretches; gaps longer than --gap-factor steps stay gaps (masked).",
+)
+@click.option(
+    "--gap-factor",
+    type=float,
+    default=2.0,
+    show_default=True,
+    help="With --resample: a step longer than this many grid steps is a gap.",
+)
+@click.option(
+    "--chunk-size",
+    "chunk_rows",
+    type=click.IntRange(min=16),
+    default=1 << 18,  # accal.pipeline_demod.CHUNK_ROWS (not imported here: start-up time)
+    show_default=True,
+    metavar="ROWS",
+    help="Rows read at a time (bounds the memory; results do not depend on it).",
 )
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar or summary lines.")
 @config_option
@@ -83,13 +108,17 @@ def demod(
     fmt: str,
     sinusoid_period: float | None,
     integration: float,
+    sinusoid_constant: bool,
     resample: bool,
+    gap_factor: float,
+    chunk_rows: int,
     quiet: bool,
 ) -> None:
     """Demodulate rotating-platform runs: unbiased a_Y, a_Z per modulation period.
 
-    With one RUN writes OUT/periods.<fmt>, OUT/summary.json and OUT/summary.md;
-    with several, OUT/<stem>.periods.<fmt>, OUT/<stem>.summary.json/.md.
+    Every RUN's periods go into the cumulative OUT/periods.<fmt> (a `source`
+    column; a re-run replaces that source's rows).  Summaries: OUT/summary.json
+    and OUT/summary.md with one RUN, OUT/<stem>.summary.json/.md with several.
     """
     from accal.errors import AccalError
     from accal.pipeline_demod import DemodOptions, run_demod
@@ -104,8 +133,11 @@ def demod(
             bias_model=bias_model,
             fmt=fmt,
             sinusoid_period=sinusoid_period,
+            sinusoid_constant=sinusoid_constant,
             resample=resample,
+            gap_factor=gap_factor,
             integration=integration,
+            chunk_rows=chunk_rows,
         )
     except AccalError as exc:
         raise click.UsageError(str(exc)) from None

@@ -1,21 +1,31 @@
 """The ``demod`` pipeline: read → validate → demodulate → write, per run file.
 
 Like :mod:`accal.pipeline`, this module sequences the other layers (the reader
-:func:`accal.io.rawlog.read_rawlog`, the estimators of
-:mod:`accal.estimators.demod`, the writers of :mod:`accal.io.writers`); the
-numbers come from the estimators.  It also holds the library side of
-``accal design``, ``accal budget`` and ``accal simulate gap`` so that the CLI stays
-thin.
+:func:`accal.io.rawlog.open_rawlog`, the estimators of
+:mod:`accal.estimators.demod` and :mod:`accal.estimators.resample`, the writers
+of :mod:`accal.io.writers` and :mod:`accal.io.merge`); the numbers come from the
+estimators.  It also holds the library side of ``accal design``, ``accal budget``
+and ``accal simulate gap`` so that the CLI stays thin.
+
+A run is read in chunks of ``chunk_rows`` rows (two passes: checks, then
+estimates; see :func:`accal.estimators.demod.demodulate_stream`), so memory is
+bounded by the chunk, not by the run: a year of 1 Hz data fits in a few hundred
+MB.  The results equal those of a whole-file run to rounding.
 
 Outputs of :func:`run_demod`
 ----------------------------
-With one input: ``DIR/periods.<fmt>``, ``DIR/summary.json``, ``DIR/summary.md``.
-With several: ``DIR/<stem>.periods.<fmt>``, ``DIR/<stem>.summary.json``,
-``DIR/<stem>.summary.md`` where ``<stem>`` is the input name without its
-suffixes (``run1.csv.gz`` → ``run1``); inputs whose stems collide are refused
-before anything runs.  The three files of an input are written together: either
-all of them appear or none (a failed input leaves no output, and an existing
-output of an earlier run is left untouched).
+``DIR/periods.<fmt>``: one cumulative table, one row per source and period, with
+a ``source`` column (the input's file name).  Every run merges its rows into it;
+a re-run of a source replaces that source's rows (never duplicates them).  The
+options, solver and Rd of every source are in the table metadata
+(``accal.meta["sources"]``).
+
+Summaries: with one input ``DIR/summary.json`` and ``DIR/summary.md``; with
+several ``DIR/<stem>.summary.json`` and ``DIR/<stem>.summary.md`` where ``<stem>``
+is the input name without its suffixes (``run1.csv.gz`` → ``run1``); inputs whose
+stems collide are refused before anything runs.  An input's summaries and its
+rows in the table are written together (temporary files renamed at the end):
+either all of them appear or none (a failed input leaves the directory as it was).
 """
 
 from __future__ import annotations
@@ -23,7 +33,7 @@ from __future__ import annotations
 import contextlib
 import json
 import time as _time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -32,7 +42,6 @@ import numpy as np
 
 from accal import __version__
 from accal.errors import AccalError, ValidationError, check_option
-from accal.series import AccSeries
 
 #: Standard integration time for σ(T) in the summary: 3 h, as in the paper (Fig. 5) [s].
 STANDARD_INTEGRATION = 3 * 3600.0
@@ -40,8 +49,15 @@ STANDARD_INTEGRATION = 3 * 3600.0
 STEP_RTOL = 1e-6
 #: Measured masked time differing from --mask by more than this fraction is flagged.
 MASK_RTOL = 0.1
+#: Rows read at a time (~3 days at 1 Hz; ~0.3 GB peak for LS, see docs/demod.md).
+CHUNK_ROWS = 1 << 18
+#: Smallest chunk accepted (the sampling step is taken from the first chunk).
+MIN_CHUNK_ROWS = 16
+#: Simulations longer than this are generated and written in blocks of this length [day].
+SIMULATE_CHUNK_DAYS = 10.0
 
 PERIOD_UNITS = {
+    "source": "input file name",
     "period": "index of the modulation period from the start of the run",
     "t_start": "s (first sample of the period; time origin of the input)",
     "t_mid": "s (mean sample time of the period: the epoch a_Y, a_Z and the bias refer to)",
@@ -85,10 +101,18 @@ class DemodOptions:
         ``"parquet"`` or ``"csv"``.
     sinusoid_period : float or None
         Fit ``α cos + β sin`` of this period [s] to the per-period values (eq. 24).
+    sinusoid_constant : bool
+        Add a constant term to that fit (``α cos + β sin + c``).
     resample : bool
-        Interpolate an irregularly sampled record onto a uniform grid instead of refusing it.
+        Resample irregular sampling onto a uniform grid (linear interpolation within
+        continuous stretches; gaps longer than ``gap_factor`` steps stay gaps,
+        masked) instead of refusing it.
+    gap_factor : float
+        With ``resample``: an input step longer than this many grid steps is a gap.
     integration : float
         Integration time of the "standard" σ(T) in the summary [s].
+    chunk_rows : int
+        Rows read at a time (memory knob; results do not depend on it).
     """
 
     tau: float
@@ -99,8 +123,11 @@ class DemodOptions:
     bias_model: str = "affine"
     fmt: str = "parquet"
     sinusoid_period: float | None = None
+    sinusoid_constant: bool = False
     resample: bool = False
+    gap_factor: float = 2.0
     integration: float = STANDARD_INTEGRATION
+    chunk_rows: int = CHUNK_ROWS
 
     def __post_init__(self) -> None:
         check_option("method", self.method, ("ls", "gls"))
@@ -116,6 +143,12 @@ class DemodOptions:
             raise ValidationError(f"tau must be positive, got {self.tau} s")
         if self.sinusoid_period is not None and not self.sinusoid_period > 0:
             raise ValidationError(f"sinusoid period must be positive, got {self.sinusoid_period}")
+        if not self.gap_factor > 1:
+            raise ValidationError(f"gap factor must be > 1 step, got {self.gap_factor}")
+        if int(self.chunk_rows) < MIN_CHUNK_ROWS:
+            raise ValidationError(
+                f"chunk size must be at least {MIN_CHUNK_ROWS} rows, got {self.chunk_rows}"
+            )
 
     @property
     def aux_channels(self) -> tuple[str, ...]:
@@ -136,7 +169,7 @@ class RunOutcome:
     message : str
         One-line error ``FILE[:LINE]: what is wrong`` when not ok.
     outputs : tuple of Path
-        Files written (periods table, summary JSON, summary Markdown).
+        Files written (the cumulative periods table, summary JSON, summary Markdown).
     summary : dict
         The JSON summary (empty on failure).
     warnings : tuple of str
@@ -169,6 +202,41 @@ class DemodRunSummary:
         return sum(not o.ok for o in self.outcomes)
 
 
+@dataclass
+class RunInfo:
+    """What the reading pass found out about a run (filled while streaming).
+
+    Attributes
+    ----------
+    n_input : int
+        Rows of the file.
+    n_samples : int
+        Samples demodulated (grid points when resampled).
+    step : float
+        Sampling step [s] (nominal, from the first chunk).
+    t_first : float
+        First sample time [s].
+    axes, aux_channels : list of str
+        Accelerometer axes and auxiliary channels of the file.
+    units : dict
+        Units of the file's channels.
+    resample : dict or None
+        :class:`accal.estimators.resample.ResampleReport` as a dict, if resampled.
+    warnings : list of str
+        Reader findings.
+    """
+
+    n_input: int = 0
+    n_samples: int = 0
+    step: float = float("nan")
+    t_first: float = float("nan")
+    axes: list[str] = field(default_factory=list)
+    aux_channels: list[str] = field(default_factory=list)
+    units: dict[str, str] = field(default_factory=dict)
+    resample: dict[str, Any] | None = None
+    warnings: list[str] = field(default_factory=list)
+
+
 # ---------------------------------------------------------------------------
 # steps
 
@@ -194,109 +262,180 @@ def load_psd(spec: str | None):
         raise ValidationError(f"{path}: {exc}") from None
 
 
-def validate_run(series: AccSeries, opts: DemodOptions) -> AccSeries:
-    """Checks that need the options: NaNs, uniform sampling, run length, channels.
+def sampling_step(stream: Any, opts: DemodOptions) -> float:
+    """Nominal sampling step of a run [s], from its first chunk.
 
-    With ``opts.resample`` an irregular (jittered) record is interpolated onto the
-    uniform grid of its median step; a gap longer than 1.5 steps is refused even
-    then (interpolating across it would invent data).  The remaining checks (τ·fs,
-    mask, θ in radians and reaching π, usable periods) are the demodulation's.
+    The median step; with ``opts.resample`` the estimate of
+    :func:`accal.estimators.resample.nominal_step` (robust to jitter and snapped to
+    a whole number of samples per τ).  Only the first chunk is read.
+    """
+    from accal.estimators.resample import nominal_step
+
+    for chunk in stream:
+        if len(chunk) < 2:
+            raise ValidationError(f"need at least 3 samples, got {len(chunk)}")
+        if opts.resample:
+            return nominal_step(chunk.time, opts.tau)
+        return float(np.median(np.diff(chunk.time)))
+    raise ValidationError("need at least 3 samples, got 0")  # pragma: no cover (reader raises)
+
+
+def validated_chunks(stream: Any, opts: DemodOptions, step: float, info: RunInfo) -> Iterator[Any]:
+    """Check a run chunk by chunk and turn it into demodulation chunks.
+
+    Checks (each a one-line :class:`ValidationError`): the ``--bias-model``
+    channels exist; no NaN/inf in m_y, m_z, θ or those channels (count over the
+    whole run, first time and row); uniform sampling (every step within 1e-6 of
+    ``step``, counted over the whole run), unless ``opts.resample``, which
+    resamples onto ``t0 + k·step`` (gaps longer than ``opts.gap_factor`` steps
+    stay gaps, marked invalid); run at least one τ long.  When a check fails the
+    rest of the file is still read (not demodulated) to count the problem.
+
+    Parameters
+    ----------
+    stream : RawlogStream
+        The opened run file.
+    opts : DemodOptions
+        Options.
+    step : float
+        Nominal sampling step [s] (:func:`sampling_step`).
+    info : RunInfo
+        Filled in while iterating.
+
+    Yields
+    ------
+    accal.estimators.demod.DemodChunk
+    """
+    from accal.estimators.demod import DemodChunk
+    from accal.estimators.resample import UniformResampler
+
+    info.n_input = info.n_samples = 0
+    info.step = step
+    info.axes = list(stream.axes)
+    resampler = UniformResampler(step, gap_factor=opts.gap_factor) if opts.resample else None
+    problem: dict[str, Any] | None = None
+    last_t: float | None = None
+    n_steps = 0
+    for chunk in stream:
+        if info.n_input == 0:
+            info.t_first = float(chunk.time[0])
+            info.aux_channels = [k for k in chunk.aux]
+            info.units = {k: v for k, v in stream.units.items() if k in chunk.aux}
+            for ch in opts.aux_channels:
+                if ch not in chunk.aux:
+                    raise ValidationError(
+                        f"--bias-model {opts.bias_model}: no auxiliary channel {ch!r} "
+                        f"(channels: {', '.join(chunk.aux) or 'none'})"
+                    )
+        cols = {"m_y": chunk.axis("y"), "m_z": chunk.axis("z"), "theta": chunk.theta}
+        cols.update({ch: np.asarray(chunk.aux[ch], float) for ch in opts.aux_channels})
+        t = chunk.time
+        steps = np.diff(t) if last_t is None else np.diff(np.concatenate([[last_t], t]))
+        t_of_step = t[:-1] if last_t is None else np.concatenate([[last_t], t[:-1]])
+        n_steps += steps.size
+        last_t = float(t[-1])
+        row0 = info.n_input
+        info.n_input += t.size
+        if problem is None or problem["kind"] == "nan":
+            for name, x in cols.items():
+                bad = np.flatnonzero(~np.isfinite(x))
+                if not bad.size:
+                    continue
+                if problem is None:
+                    problem = {
+                        "kind": "nan",
+                        "name": name,
+                        "n": 0,
+                        "t": t[bad[0]],
+                        "row": row0 + bad[0],
+                    }
+                if problem["name"] == name:
+                    problem["n"] += bad.size
+        if not opts.resample and (problem is None or problem["kind"] == "step"):
+            off = np.flatnonzero(np.abs(steps - step) > STEP_RTOL * step)
+            if off.size:
+                k = off[np.argmax(np.abs(steps[off] - step))]
+                if problem is None:
+                    problem = {"kind": "step", "n": 0, "big": steps[k], "t": t_of_step[k]}
+                problem["n"] += off.size
+                if abs(steps[k] - step) > abs(problem["big"] - step):
+                    problem["big"], problem["t"] = steps[k], t_of_step[k]
+        if problem is not None:
+            continue
+        if resampler is not None:
+            t, cols, valid = resampler.push(t, cols)
+        else:
+            valid = None
+        info.n_samples += t.size
+        yield DemodChunk(
+            t,
+            cols["m_y"],
+            cols["m_z"],
+            cols["theta"],
+            {k: cols[k] for k in opts.aux_channels},
+            valid,
+        )
+    info.warnings = list(stream.warnings)
+    if resampler is not None:
+        info.resample = resampler.report.as_dict()
+    if problem is not None and problem["kind"] == "nan":
+        raise ValidationError(
+            f"{problem['name']} has {problem['n']} NaN/inf value(s), first at "
+            f"t = {problem['t']:.9g} s (row {int(problem['row']) + 1})"
+        )
+    if problem is not None:
+        raise ValidationError(
+            f"irregular sampling: {problem['n']} of {n_steps} steps differ from the nominal "
+            f"{step:.9g} s (largest: {problem['big']:.9g} s at t = {problem['t']:.9g} s); "
+            "use --resample to interpolate onto a uniform grid"
+        )
+    duration = info.n_samples * step
+    if duration < opts.tau * (1 - 1e-9):
+        raise ValidationError(
+            f"run lasts {duration:.9g} s ({info.n_samples} samples), shorter than one "
+            f"modulation period (tau = {opts.tau:g} s)"
+        )
+
+
+def estimate(path: Path, opts: DemodOptions, psd: Any) -> tuple[Any, RunInfo]:
+    """Read and demodulate one run file in chunks (two passes, bounded memory).
+
+    Returns
+    -------
+    (DemodResult, RunInfo)
 
     Raises
     ------
-    ValidationError
-        One line describing the problem.
+    AccalError
+        Bad file or data (one line).
     """
-    names = {"m_y": series.axis("y"), "m_z": series.axis("z"), "theta": series.aux["theta"]}
-    for ch in opts.aux_channels:
-        if ch not in series.aux or ch == "theta":
-            avail = [k for k in series.aux if k != "theta"]
-            raise ValidationError(
-                f"--bias-model {opts.bias_model}: no auxiliary channel {ch!r} "
-                f"(channels: {', '.join(avail) or 'none'})"
-            )
-        names[ch] = series.aux[ch]
-    for name, x in names.items():
-        bad = np.flatnonzero(~np.isfinite(x))
-        if bad.size:
-            raise ValidationError(
-                f"{name} has {bad.size} NaN/inf value(s), first at t = {series.time[bad[0]]:.9g} s "
-                f"(row {int(bad[0]) + 1})"
-            )
-    t = series.time
-    if t.size < 3:
-        raise ValidationError(f"need at least 3 samples, got {t.size}")
-    step = np.diff(t)
-    dt = float(np.median(step))
-    off = np.abs(step - dt) > STEP_RTOL * dt
-    if off.any():
-        k = int(np.argmax(np.abs(step - dt)))
-        where = f"{int(off.sum())} of {step.size} steps differ from the median {dt:.9g} s"
-        if not opts.resample:
-            raise ValidationError(
-                f"irregular sampling: {where} (largest: {step[k]:.9g} s at t = {t[k]:.9g} s); "
-                "use --resample to interpolate onto a uniform grid"
-            )
-        if step.max() > 1.5 * dt:
-            k = int(np.argmax(step))
-            raise ValidationError(
-                f"gap of {step[k]:.9g} s at t = {t[k]:.9g} s (median step {dt:.9g} s): "
-                "--resample does not fill gaps; split the record there"
-            )
-        series = resample_uniform(series, dt)
-        t = series.time
-    duration = (t.size) * dt
-    if duration < opts.tau * (1 - 1e-9):
-        raise ValidationError(
-            f"run lasts {duration:.9g} s ({t.size} samples), shorter than one modulation "
-            f"period (tau = {opts.tau:g} s)"
-        )
-    return series
+    from accal.estimators.demod import demodulate_stream
+    from accal.io.rawlog import open_rawlog
 
-
-def resample_uniform(series: AccSeries, dt: float) -> AccSeries:
-    """Linear interpolation of every channel onto ``t0 + k·dt`` within the record."""
-    t = series.time
-    n = int(np.floor((t[-1] - t[0]) / dt + 1e-9)) + 1
-    grid = t[0] + np.arange(n) * dt
-    acc = np.column_stack(
-        [np.interp(grid, t, series.acc[:, i]) for i in range(series.acc.shape[1])]
-    )
-    aux = {k: np.interp(grid, t, np.asarray(v, float)) for k, v in series.aux.items()}
-    return series.replace(
-        time=grid,
-        acc=acc,
-        aux=aux,
-        valid=np.ones(n, bool),
-        quality=np.zeros(n, np.uint32),
-    ).with_history(f"accal {__version__}: resample_uniform(dt={dt:.9g})")
-
-
-def estimate(series: AccSeries, opts: DemodOptions, psd: Any):
-    """Demodulate ``series`` with the options (see :func:`accal.estimators.demod.demodulate`)."""
-    from accal.estimators.demod import demodulate
-
-    aux = {ch: series.aux[ch] for ch in opts.aux_channels}
-    return demodulate(
-        series.time,
-        series.axis("y"),
-        series.axis("z"),
-        series.aux["theta"],
+    stream = open_rawlog(path, rows=int(opts.chunk_rows))
+    step = sampling_step(stream, opts)
+    info = RunInfo()
+    res = demodulate_stream(
+        lambda: validated_chunks(stream, opts, step, info),
         tau=opts.tau,
         mask=opts.mask,
+        fs=1.0 / step,
         method=opts.method,
         signal_model=opts.signal_model,
-        bias_aux=aux or None,
+        bias_aux=opts.aux_channels,
         psd=psd,
     )
+    return res, info
 
 
-def periods_frame(res: Any, series: AccSeries) -> tuple[Any, dict[str, str]]:
-    """The per-period table and its units."""
-    import pandas as pd
-
+def period_rows(
+    res: Any, source: str, units_of: dict[str, str]
+) -> tuple[dict[str, Any], dict[str, str]]:
+    """The per-period rows of one source (columns as numpy arrays) and their units."""
+    n = res.a_Y.size
     data: dict[str, Any] = {
-        "period": res.period_index,
+        "source": np.array([source] * n, dtype=object),
+        "period": res.period_index.astype(np.int64),
         "t_start": res.t_start,
         "t_mid": res.t_mid,
         "a_Y": res.a_Y,
@@ -315,23 +454,16 @@ def periods_frame(res: Any, series: AccSeries) -> tuple[Any, dict[str, str]]:
                 units[col] = PERIOD_UNITS[col]
             else:
                 col = f"bias_{ax}_{name}"
-                units[col] = f"m/s^2 per {series.units.get(name, 'unit')} of {name} (m_{ax})"
-            data[col] = b[:, j]
-    data["n_used"] = res.n_used
+                units[col] = f"m/s^2 per {units_of.get(name, 'unit')} of {name} (m_{ax})"
+            data[col] = np.ascontiguousarray(b[:, j])
+    data["n_used"] = res.n_used.astype(np.int64)
     data["masked_time"] = res.masked_time
     data["leakage"] = res.leakage
     units.update({k: PERIOD_UNITS[k] for k in ("n_used", "masked_time", "leakage")})
-    return pd.DataFrame(data), units
+    return data, units
 
 
-def _points_cov(index: np.ndarray, rd: np.ndarray) -> np.ndarray:
-    lag = np.abs(index[:, None] - index[None, :])
-    full = np.zeros(int(lag.max()) + 1)
-    full[: min(full.size, rd.size)] = rd[: full.size]
-    return full[lag]
-
-
-def summarise(path: Path, series: AccSeries, res: Any, opts: DemodOptions) -> dict[str, Any]:
+def summarise(path: Path, info: RunInfo, res: Any, opts: DemodOptions) -> dict[str, Any]:
     """The run summary (JSON-ready): Rd, σ(T), leakage, masking, drops, sinusoid fit."""
     from accal.estimators.demod import fit_sinusoid, sigma_mean
 
@@ -355,13 +487,16 @@ def summarise(path: Path, series: AccSeries, res: Any, opts: DemodOptions) -> di
         "source": str(path),
         "accal_version": __version__,
         "input": {
-            "n_samples": len(series),
+            "n_rows": info.n_input,
+            "n_samples": info.n_samples,
             "fs": res.fs,
-            "duration": len(series) / res.fs,
-            "t_first": float(series.time[0]),
-            "resampled": any("resample_uniform" in h for h in series.history),
-            "axes": list(series.axes),
-            "aux_channels": [k for k in series.aux if k != "theta"],
+            "duration": info.n_samples / res.fs,
+            "t_first": info.t_first,
+            "resampled": info.resample is not None,
+            "resample": info.resample,
+            "axes": info.axes,
+            "aux_channels": info.aux_channels,
+            "chunk_rows": int(opts.chunk_rows),
         },
         "options": {
             "tau": opts.tau,
@@ -406,25 +541,33 @@ def summarise(path: Path, series: AccSeries, res: Any, opts: DemodOptions) -> di
         "scatter": scatter,
     }
     if opts.sinusoid_period is not None:
-        cov = _points_cov(res.period_index, rd)
         fits = {}
         for ax in ("Y", "Z"):
             fit = fit_sinusoid(
-                res.t_mid, getattr(res, f"a_{ax}"), 1.0 / opts.sinusoid_period, cov=cov
+                res.t_mid,
+                getattr(res, f"a_{ax}"),
+                1.0 / opts.sinusoid_period,
+                rd=rd,
+                index=res.period_index,
+                constant=opts.sinusoid_constant,
             )
             fits[ax] = {
                 "alpha": fit.alpha,
                 "beta": fit.beta,
+                "offset": fit.offset if fit.constant else None,
                 "cov": fit.cov.tolist(),
                 "sigma_alpha": fit.sigma_alpha,
                 "sigma_beta": fit.sigma_beta,
+                "sigma_offset": fit.sigma_offset if fit.constant else None,
             }
+        model = "a(t) = alpha cos(2 pi f* t) + beta sin(2 pi f* t)"
         out["sinusoid"] = {
             "period": opts.sinusoid_period,
             "f_star": 1.0 / opts.sinusoid_period,
             "t_origin": 0.0,
-            "model": "a(t) = alpha cos(2 pi f* t) + beta sin(2 pi f* t), t = t_mid",
-            "units": "m/s^2 (alpha, beta), m^2/s^4 (cov)",
+            "constant": opts.sinusoid_constant,
+            "model": model + (" + offset" if opts.sinusoid_constant else "") + ", t = t_mid",
+            "units": "m/s^2 (alpha, beta, offset), m^2/s^4 (cov, order alpha, beta[, offset])",
             **fits,
         }
     return out
@@ -441,6 +584,13 @@ def summary_warnings(summary: dict[str, Any]) -> tuple[str, ...]:
         )
     if summary["dropped"]:
         w.append(f"{summary['dropped']} of {summary['n_periods']} periods dropped")
+    rs = summary["input"].get("resample")
+    if rs:
+        w.append(
+            f"resampled onto a {rs['step']:.9g} s grid: {rs['n_interpolated']} samples "
+            f"interpolated, {rs['n_gap']} in {rs['n_gaps']} gap(s) marked invalid "
+            f"(largest gap {rs['largest_gap']:.9g} s)"
+        )
     return tuple(w)
 
 
@@ -451,6 +601,13 @@ def summary_markdown(s: dict[str, Any]) -> str:
         return "n/a" if x is None or (isinstance(x, float) and not np.isfinite(x)) else f"{x:.4g}"
 
     o = s["options"]
+    rs = s["input"].get("resample")
+    resampled = ""
+    if rs:
+        resampled = (
+            f" (resampled to {rs['step']:.9g} s: {rs['n_interpolated']} interpolated, "
+            f"{rs['n_gap']} in {rs['n_gaps']} gap(s) masked)"
+        )
     lines = [
         f"# accal demod: {Path(s['source']).name}",
         "",
@@ -460,10 +617,9 @@ def summary_markdown(s: dict[str, Any]) -> str:
         "",
         "| quantity | value |",
         "| --- | --- |",
-        f"| samples, fs | {s['input']['n_samples']}, {s['input']['fs']:g} Hz"
-        f"{' (resampled)' if s['input']['resampled'] else ''} |",
+        f"| samples, fs | {s['input']['n_samples']}, {s['input']['fs']:g} Hz{resampled} |",
         f"| periods kept / whole | {s['n_kept']} / {s['n_periods']} |",
-        f"| dropped periods | {', '.join(map(str, s['dropped_periods'])) or 'none'} |",
+        f"| dropped periods | {_ranges(s['dropped_periods']) or 'none'} |",
         f"| masked fraction | {s['masked_fraction']:.4f} |",
         f"| masked time per period (median, min–max) | {s['mask']['measured_median']:g} s "
         f"({s['mask']['measured_min']:g}–{s['mask']['measured_max']:g}); --mask {o['mask']:g} s"
@@ -481,12 +637,28 @@ def summary_markdown(s: dict[str, Any]) -> str:
         sn = s["sinusoid"]
         for ax in ("Y", "Z"):
             f = sn[ax]
+            off = f", c = {e(f['offset'])} ± {e(f['sigma_offset'])}" if sn.get("constant") else ""
             lines.append(
                 f"| sinusoid {ax} (P = {sn['period']:g} s): α, β ± σ | "
                 f"{e(f['alpha'])} ± {e(f['sigma_alpha'])}, {e(f['beta'])} ± {e(f['sigma_beta'])}"
-                f" m/s², cov(α,β) = {e(f['cov'][0][1])} |"
+                f" m/s², cov(α,β) = {e(f['cov'][0][1])}{off} |"
             )
     return "\n".join(lines) + "\n"
+
+
+def _ranges(index: Sequence[int], limit: int = 40) -> str:
+    """``[1, 2, 3, 7]`` → ``"1–3, 7"`` (at most ``limit`` ranges shown)."""
+    out: list[str] = []
+    idx = list(index)
+    i = 0
+    while i < len(idx):
+        j = i
+        while j + 1 < len(idx) and idx[j + 1] == idx[j] + 1:
+            j += 1
+        out.append(str(idx[i]) if i == j else f"{idx[i]}–{idx[j]}")
+        i = j + 1
+    more = len(out) - limit
+    return ", ".join(out[:limit]) + (f", ... ({more} more ranges)" if more > 0 else "")
 
 
 # ---------------------------------------------------------------------------
@@ -494,56 +666,62 @@ def summary_markdown(s: dict[str, Any]) -> str:
 
 
 def output_paths(paths: Sequence[Path], out_dir: Path, fmt: str) -> list[tuple[Path, Path, Path]]:
-    """``(periods, summary.json, summary.md)`` of each input (see the module notes).
+    """``(periods table, summary.json, summary.md)`` of each input (see the module notes).
+
+    The periods table is the same cumulative ``DIR/periods.<fmt>`` for every input.
 
     Raises
     ------
     ValidationError
-        Two inputs would write the same files.
+        Two inputs would write the same summaries (or the same ``source`` rows).
     """
     from accal.pipeline import output_stem
 
+    table = out_dir / f"periods.{fmt}"
     if len(paths) == 1:
-        return [(out_dir / f"periods.{fmt}", out_dir / "summary.json", out_dir / "summary.md")]
+        return [(table, out_dir / "summary.json", out_dir / "summary.md")]
     seen: dict[str, Path] = {}
     out = []
     for p in paths:
         stem = output_stem(Path(p))
-        if stem in seen:
+        other = seen.get(stem) or next((q for q in seen.values() if q.name == Path(p).name), None)
+        if other is not None:
             raise ValidationError(
-                f"inputs {seen[stem]} and {p} would both write {stem}.periods.{fmt}; rename one"
+                f"inputs {other} and {p} would both write {stem}.summary.json; rename one"
             )
         seen[stem] = Path(p)
-        out.append(
-            (
-                out_dir / f"{stem}.periods.{fmt}",
-                out_dir / f"{stem}.summary.json",
-                out_dir / f"{stem}.summary.md",
-            )
-        )
+        out.append((table, out_dir / f"{stem}.summary.json", out_dir / f"{stem}.summary.md"))
     return out
 
 
 def process_run(
     path: Path, targets: tuple[Path, Path, Path], opts: DemodOptions, psd: Any
 ) -> RunOutcome:
-    """read → validate → demodulate → write for one run file (all three outputs or none).
+    """read → validate → demodulate → write for one run file (all outputs or none).
+
+    The run's rows are merged into the cumulative periods table (replacing the
+    rows of an earlier run of the same source); the table and the run's two
+    summaries are renamed into place together.
 
     Raises
     ------
     AccalError
         On bad input; nothing is written then.
     """
-    from accal.io.rawlog import read_rawlog
-    from accal.io.writers import _json_default, atomic_path, write_table
+    from accal.io.merge import merge_table
+    from accal.io.writers import _json_default, atomic_path
 
-    series = read_rawlog(path)
-    series = validate_run(series, opts)
-    res = estimate(series, opts, psd)
-    df, units = periods_frame(res, series)
-    summary = summarise(path, series, res, opts)
-    meta = {
-        "source": path.name,
+    res, info = estimate(path, opts, psd)
+    rows, units = period_rows(res, path.name, info.units)
+    summary = summarise(path, info, res, opts)
+    history = []
+    if info.resample is not None:
+        history.append(
+            f"accal {__version__}: resample_uniform(step={info.step:.9g}, "
+            f"gap_factor={opts.gap_factor:g})"
+        )
+    history.append(f"accal {__version__}: demodulate")
+    source_meta = {
         "tau": opts.tau,
         "mask": opts.mask,
         "method": opts.method,
@@ -552,13 +730,30 @@ def process_run(
         "bias_model": opts.bias_model,
         "psd": opts.psd,
         "Rd": summary["Rd"],
+        "n_periods": res.n_periods,
+        "n_kept": int(res.a_Y.size),
         "accal_version": __version__,
-        "history": [*series.history, f"accal {__version__}: demodulate"],
+        "history": history,
     }
-    p_path, j_path, m_path = targets
+
+    def table_meta(old: dict[str, Any]) -> dict[str, Any]:
+        sources = dict(old.get("sources") or {})
+        sources[path.name] = source_meta
+        return {"accal_version": __version__, "sources": dict(sorted(sources.items()))}
+
+    p_path, _, _ = targets
     with contextlib.ExitStack() as stack:
         tmp = [stack.enter_context(atomic_path(p)) for p in targets]
-        write_table(df, tmp[0], fmt=opts.fmt, units=units, meta=meta)
+        merge_table(
+            p_path,
+            rows,
+            key=("source",),
+            sort=("source", "period"),
+            fmt=opts.fmt,
+            units=units,
+            meta=table_meta,
+            out=tmp[0],
+        )
         tmp[1].write_text(json.dumps(_nan_to_none(summary), indent=2, default=_json_default) + "\n")
         tmp[2].write_text(summary_markdown(summary))
     return RunOutcome(
@@ -788,16 +983,19 @@ def write_simulated_gap(out: Path, **params: Any) -> tuple[Path, Path]:
     """Simulate a run (:func:`accal.simulate.gap.simulate_gap`) and write it with its truth.
 
     The run goes to ``out`` (``.csv`` → CSV, else Parquet) and the per-period true
-    means to ``<stem>.truth.<ext>`` next to it; both or neither are written.
+    means to ``<stem>.truth.<ext>`` next to it; both or neither are written.  Runs
+    longer than ``SIMULATE_CHUNK_DAYS`` are simulated and written in blocks of that
+    length (:func:`accal.simulate.gap.simulate_gap_chunks`), so a simulated year
+    needs a few hundred MB; shorter ones are one block, identical to
+    :func:`~accal.simulate.gap.simulate_gap`'s record.
     """
-    from accal.io.writers import atomic_path, write_table
-    from accal.simulate.gap import simulate_gap
+    from accal.io.chunked import chunked_table_writer
+    from accal.simulate.gap import simulate_gap_chunks
 
     out = Path(out)
     if out.name.lower().endswith(".gz"):
         raise ValidationError(f"{out}: compressed output is not supported; use .parquet or .csv")
     fmt = "csv" if out.suffix.lower() == ".csv" else "parquet"
-    data, truth = simulate_gap(**params)
     truth_path = out.with_name(f"{out.stem}.truth{out.suffix or '.parquet'}")
     run_units = {
         "time": "s (from the start of the run)",
@@ -817,11 +1015,13 @@ def write_simulated_gap(out: Path, **params: Any) -> tuple[Path, Path]:
         "bias_z": "m/s^2 (true period-mean bias of m_z)",
     }
     meta = {"simulate_gap": params, "accal_version": __version__}
+    blocks = simulate_gap_chunks(**params, chunk_days=SIMULATE_CHUNK_DAYS)
     with contextlib.ExitStack() as stack:
-        t_run = stack.enter_context(atomic_path(out))
-        t_truth = stack.enter_context(atomic_path(truth_path))
-        write_table(
-            data, t_run, fmt=fmt, units={k: v for k, v in run_units.items() if k in data}, meta=meta
+        w_run = stack.enter_context(chunked_table_writer(out, fmt=fmt, units=run_units, meta=meta))
+        w_truth = stack.enter_context(
+            chunked_table_writer(truth_path, fmt=fmt, units=truth_units, meta=meta)
         )
-        write_table(truth, t_truth, fmt=fmt, units=truth_units, meta=meta)
+        for data, truth in blocks:
+            w_run.write(data)
+            w_truth.write(truth)
     return out, truth_path
