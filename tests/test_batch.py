@@ -334,3 +334,40 @@ def _row(source: str, date: str, ax: str, m: str, bias: float = 1e-6) -> dict:
         n_out_of_order=0, n_gaps=0, accal_version="0", model="poly1",
     )  # fmt: skip
     return row
+
+
+# ---------------------------------------------------------------- degraded days
+
+
+def test_degraded_days_are_flagged_in_the_table(tmp_path):
+    """GRACE-FO D (transplant) and GRACE-B in 2017 (transplant) are flagged; a user table
+    can add periods; `accal table --status` filters on it."""
+    from accal.simulate.grace import write_simulated_grace
+
+    b2017 = tmp_path / "ACC1B_2017-03-01_B_02.asc"
+    write_simulated_grace(b2017, date="2017-03-01", satellite="B", seed=1, duration=3600.0)
+    a2005 = tmp_path / "ACC1B_2005-06-01_A_02.asc"
+    write_simulated_grace(a2005, date="2005-06-01", satellite="A", seed=2, duration=3600.0)
+    user = tmp_path / "periods.toml"
+    user.write_text(
+        '[[period]]\nsatellite = "GRACE-A"\nstart = 2005-06-01\nend = 2005-06-01\n'
+        'status = "degraded"\nreason = "thruster anomaly (user table)"\n'
+    )
+    out = tmp_path / "o"
+    code, _, err = invoke(
+        "grace-bias", SAMPLES / "ACT1B_2023-06-01_D_04.txt", SAMPLES / "ACT1B_2023-06-01_C_04.txt",
+        b2017, a2005, "--degraded-days", user, "--out", out, "-q",
+    )  # fmt: skip
+    assert code == 0, err
+    df = read_outputs(out)["table"].groupby("source").first()
+    assert df.loc["ACT1B_2023-06-01_D_04.txt", "day_status"] == "transplant"
+    assert "GRACE-C" in df.loc["ACT1B_2023-06-01_D_04.txt", "day_status_reason"]
+    assert df.loc["ACT1B_2023-06-01_C_04.txt", "day_status"] == "nominal"
+    assert df.loc["ACT1B_2023-06-01_C_04.txt", "day_status_reason"] == ""
+    assert df.loc[b2017.name, "day_status"] == "transplant"
+    assert df.loc[a2005.name, "day_status"] == "degraded"
+    assert "user table" in df.loc[a2005.name, "day_status_reason"]
+    code, text, _ = invoke("table", out, "--status", "nominal", "--axis", "x")
+    assert code == 0
+    assert text.strip().splitlines()[1].split()[0] == "ACT1B_2023-06-01_C_04.txt"
+    assert len(text.strip().splitlines()) == 2

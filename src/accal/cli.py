@@ -157,6 +157,12 @@ def main(debug: bool) -> None:
     help="False-detection probability per --close-loop selection step.",
 )
 @click.option(
+    "--degraded-days",
+    type=click.Path(dir_okay=False, exists=True, path_type=Path),
+    default=None,
+    help="TOML/YAML table of degraded/transplant/off periods, ahead of the built-in one.",
+)
+@click.option(
     "--keep-going/--fail-fast",
     default=True,
     show_default=True,
@@ -185,6 +191,7 @@ def grace_bias(
     aux: Path | None,
     truth: Path | None,
     alpha: float,
+    degraded_days: Path | None,
     keep_going: bool,
     quiet: bool,
 ) -> None:
@@ -223,6 +230,7 @@ def grace_bias(
             aux=aux,
             truth=truth,
             alpha=alpha,
+            degraded_days=degraded_days,
         )
     except AccalError as exc:
         raise click.UsageError(str(exc)) from None
@@ -265,6 +273,13 @@ def grace_bias(
 @click.option("--method", "methods", multiple=True, help="Keep these methods (repeatable).")
 @click.option("--axis", "axes", multiple=True, help="Keep these axes (repeatable).")
 @click.option(
+    "--status",
+    "statuses",
+    multiple=True,
+    type=click.Choice(["nominal", "degraded", "transplant", "off"]),
+    help="Keep days of these statuses (repeatable), e.g. --status nominal.",
+)
+@click.option(
     "--columns",
     default=None,
     help="Comma-separated columns to show/export (default: all when exporting, a "
@@ -284,6 +299,7 @@ def table_cmd(
     end: str | None,
     methods: tuple[str, ...],
     axes: tuple[str, ...],
+    statuses: tuple[str, ...],
     columns: str | None,
     export: Path | None,
 ) -> None:
@@ -310,6 +326,8 @@ def table_cmd(
             keep &= df["method"].isin(methods).to_numpy()
         if axes:
             keep &= df["axis"].isin(axes).to_numpy()
+        if statuses:
+            keep &= df["day_status"].isin(statuses).to_numpy()
         df = df[keep]
         if columns:
             cols = [c.strip() for c in columns.split(",") if c.strip()]

@@ -51,6 +51,9 @@ BIAS_DRIFT_UNITS = {
     "gap_seconds": "s (total length of the gaps)",
     "accal_version": "accal version that produced the row",
     "model": "fitted model: poly<order> plus the effects --close-loop added, '+'-separated",
+    "day_status": "nominal|degraded|transplant|off: whether the day is the instrument's own "
+    "nominal measurement (accal.degraded; GRACE-FO D transplant, GRACE-B off/transplant 2016-17)",
+    "day_status_reason": "why the day is not nominal (empty when nominal)",
 }
 
 CALIBRATED_UNITS = {
@@ -100,6 +103,9 @@ class GraceBiasOptions:
         Family-wise false-detection probability of the closure per step.
     orbit_period : float or None
         Nominal orbit period [s] for the once/twice-per-revolution candidates.
+    degraded_days : Path or None
+        TOML/YAML table of degraded/transplant/off periods ahead of the built-in
+        one (:func:`accal.degraded.load_periods`).
     """
 
     methods: tuple[str, ...] = ("wavelet",)
@@ -115,6 +121,7 @@ class GraceBiasOptions:
     truth: Path | None = None
     alpha: float = 0.01
     orbit_period: float | None = 5600.0
+    degraded_days: Path | None = None
 
     def __post_init__(self) -> None:
         from accal.estimators.trend import METHODS
@@ -304,9 +311,12 @@ def table_rows(
     path: Path, series: AccSeries, fits: dict, scale: Sequence[float] | None, opts: GraceBiasOptions
 ) -> list[dict[str, Any]]:
     """Build the ``bias_drift`` rows of one input."""
+    from accal.degraded import classify_day, load_periods
     from accal.timescale import gps_to_date
 
     rep = series.report
+    periods = load_periods(opts.degraded_days) if opts.degraded_days else None
+    status: dict[str, tuple[str, str]] = {}
     rows = []
     for (ax, m), fit in fits.items():
         sig = fit.sigma
@@ -343,6 +353,10 @@ def table_rows(
                 "accal_version": __version__,
             }
         )
+        day = rows[-1]["date"]
+        if day not in status:
+            status[day] = classify_day(series.satellite, day, series.meta, periods=periods)
+        rows[-1]["day_status"], rows[-1]["day_status_reason"] = status[day]
     return rows
 
 
@@ -698,7 +712,18 @@ _NP_TYPES = {"string": object, "int64": np.int64, "double": np.float64}
 def _bias_drift_schema():
     import pyarrow as pa
 
-    strings = {"source", "satellite", "date", "axis", "frame", "method", "accal_version", "model"}
+    strings = {
+        "source",
+        "satellite",
+        "date",
+        "axis",
+        "frame",
+        "method",
+        "accal_version",
+        "model",
+        "day_status",
+        "day_status_reason",
+    }
     ints = {"order", "n", "n_total", "n_flagged", "n_duplicates", "n_out_of_order", "n_gaps"}
     return pa.schema(
         [
