@@ -9,7 +9,6 @@ handled and counted the same way for every format).
 from __future__ import annotations
 
 import gzip
-import os
 import zlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -56,12 +55,9 @@ def read_bytes(path: str | Path) -> bytes:
     if p.is_dir():
         raise FormatError("is a directory, not a file", p)
     try:
-        with open(p, "rb") as fh:
-            if os.fstat(fh.fileno()).st_size > MAX_INPUT_BYTES:
-                raise FormatError(
-                    f"file larger than {MAX_INPUT_BYTES:,} bytes (not an input file?)", p
-                )
-            raw = fh.read()
+        if p.stat().st_size > MAX_INPUT_BYTES:
+            raise FormatError(f"file larger than {MAX_INPUT_BYTES:,} bytes (not an input file?)", p)
+        raw = p.read_bytes()
     except FileNotFoundError:
         raise FormatError("no such file", p) from None
     except PermissionError:
