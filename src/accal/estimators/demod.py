@@ -433,24 +433,47 @@ def _weights_gls(x, m, r_reg, cache=None):
 # covariance between periods
 
 
-def _pair_products(wa, wb, d, q, k):
-    """Σ over both data axes of -wa_i' T_k wb_i for aligned pairs: returns (P, pa, pb).
+def _fft_length(q: int) -> int:
+    return 1 << int(np.ceil(np.log2(3 * q)))
 
-    ``wa[i]`` belongs to a period ``k`` periods before ``wb[i]``'s; ``T_k[a, b] =
-    D[|k q + b - a|]`` with the structure function D (eq. 21 in the time domain).
+
+def _lag_kernel(d: NDArray, q: int, k: int) -> NDArray:
+    """Frequency kernel of ``T_k[a, b] = D[|k q + b - a|]`` for :func:`_lag_cov`.
+
+    With ``h[j] = D[|kq - j|]`` (j = a - b), ``Σ_ab x_a T_k[a, b] y_b`` is a linear
+    correlation of ``x`` with ``h ⊛ y``; by Parseval it is
+    ``Σ_f w_f Re(conj(X_f) H_f Y_f)`` over the rfft bins (``w_f`` = 1 at 0 and
+    Nyquist, 2 elsewhere), ``H = rfft(h)·exp(2πi f (q-1)/N)/N``.  No inverse FFT
+    is needed, and the spectra of the weights are computed once per period.
     """
+    nfft = _fft_length(q)
     j = np.arange(-(q - 1), q)
-    g = d[np.abs(k * q - j)]  # h[j] = D[|kq - j|], j = a - b
-    nfft = 1 << int(np.ceil(np.log2(3 * q)))
-    hf = np.fft.rfft(g, nfft)
-    xa = np.ascontiguousarray(np.transpose(wa, (0, 2, 1)))
-    xb = np.ascontiguousarray(np.transpose(wb, (0, 2, 1)))
-    out = 0.0
-    for ax in (slice(0, q), slice(q, 2 * q)):
-        y = np.fft.irfft(np.fft.rfft(xb[:, :, ax], nfft, axis=2) * hf, nfft, axis=2)
-        y = y[:, :, q - 1 : 2 * q - 1]  # (T_k xb)[a]
-        out = out - np.matmul(xa[:, :, ax], np.transpose(y, (0, 2, 1)))
-    return out
+    g = d[np.abs(k * q - j)]
+    f = np.arange(nfft // 2 + 1)
+    wf = np.full(f.size, 2.0)
+    wf[0] = 1.0
+    if nfft % 2 == 0:
+        wf[-1] = 1.0
+    return np.fft.rfft(g, nfft) * np.exp(2j * np.pi * f * (q - 1) / nfft) * wf / nfft
+
+
+def _weight_spectra(w: NDArray, q: int) -> NDArray:
+    """rfft of each estimator's weights on each data axis: (P, 2q, r) → (P, r, 2, F)."""
+    p, _, r = w.shape
+    x = np.transpose(w.reshape(p, 2, q, r), (0, 3, 1, 2))
+    return np.fft.rfft(x, _fft_length(q), axis=3)
+
+
+def _lag_cov(xa: NDArray, xb: NDArray, kernel: NDArray) -> NDArray:
+    """Σ over both data axes of ``-wa_i' T_k wb_i`` from weight spectra: (P, ra, rb).
+
+    ``xa[i]`` belongs to a period ``k`` periods before ``xb[i]``'s (eq. 21 in the
+    time domain, with the structure function D; see :func:`_lag_kernel`).
+    """
+    p, ra, nx, nf = xa.shape
+    a = np.conj(xa).reshape(p, ra, nx * nf) * np.tile(kernel, nx)
+    b = xb.reshape(p, xb.shape[1], nx * nf)
+    return -np.matmul(a, np.transpose(b, (0, 2, 1))).real
 
 
 # ---------------------------------------------------------------------------
@@ -639,6 +662,7 @@ class _Setup:
     d: NDArray
     r_reg: NDArray | None
     n_lags: int
+    kernels: list[NDArray] = field(default_factory=list)
 
     @property
     def u(self) -> NDArray:
@@ -735,7 +759,8 @@ def _estimate_block(st: _Setup, blk: _Block, solver: str, cache: dict) -> dict[s
         b[:, 1] /= tau
         for j, sc in enumerate(scales):
             b[:, 2 + j] /= sc
-    cov0 = _pair_products(w, w, st.d, q, 0)  # eq. 21, lag 0
+    spec = _weight_spectra(w, q)
+    cov0 = _lag_cov(spec, spec, st.kernels[0])  # eq. 21, lag 0
     unit = np.ones(2 * pa)
     if pa == 2:
         unit[[1, 3]] = 1.0 / tau  # slope = coefficient/τ (normalised time)
@@ -747,7 +772,7 @@ def _estimate_block(st: _Setup, blk: _Block, solver: str, cache: dict) -> dict[s
     t = a["time"]
     return {
         "keep": keep,
-        "w1": w[:, :, :1],
+        "spec1": spec[:, :1],
         "rd0": rd0,
         "n_masked": float(m.size - m.sum()),
         "n_samples": int(m.size),
@@ -938,6 +963,7 @@ def demodulate_stream(
     else:
         used = solver
     st.d = structure_function(psd, (st.n_lags + 2) * st.q, st.fs)
+    st.kernels = [_lag_kernel(st.d, st.q, k) for k in range(st.n_lags + 1)]
     if used == "gls-eq17":
         st.r_reg, _ = regularised_autocov(st.d, st.q)
 
@@ -945,7 +971,7 @@ def demodulate_stream(
     rows: list[dict[str, NDArray]] = []
     rd_sum = np.zeros(st.n_lags + 1)
     rd_cnt = np.zeros(st.n_lags + 1, dtype=np.int64)
-    prev_w = np.zeros((0, 2 * st.q, 1))
+    prev_w = np.zeros((0, 1, 2, _fft_length(st.q) // 2 + 1), complex)
     prev_keep = np.zeros(0, bool)
     n_masked, n_samples = 0.0, 0
     cache: dict = {}
@@ -963,7 +989,7 @@ def demodulate_stream(
         rd_cnt[0] += int(keep.sum())
         n_masked += r["n_masked"]
         n_samples += r["n_samples"]
-        w_ext = np.concatenate([prev_w, r["w1"]])
+        w_ext = np.concatenate([prev_w, r["spec1"]])
         k_ext = np.concatenate([prev_keep, keep])
         lp = prev_w.shape[0]
         for k in range(1, st.n_lags + 1):
@@ -973,7 +999,7 @@ def demodulate_stream(
             both = k_ext[i0:i1] & k_ext[i0 + k : i1 + k]
             if not both.any():
                 continue
-            ck = _pair_products(w_ext[i0:i1][both], w_ext[i0 + k : i1 + k][both], st.d, st.q, k)
+            ck = _lag_cov(w_ext[i0:i1][both], w_ext[i0 + k : i1 + k][both], st.kernels[k])
             rd_sum[k] += float(np.sum(ck[:, 0, 0]))
             rd_cnt[k] += int(both.sum())
         prev_w = w_ext[-st.n_lags :] if st.n_lags else w_ext[:0]
