@@ -2,8 +2,10 @@
 
 Simulates an 86,400-sample day (τ = 600 s, TM = 200 s), writes it as Parquet in a
 temporary directory and prints the best-of-N times of: a raw ``pyarrow.parquet``
-read (baseline), ``read_rawlog``, and the whole per-file pipeline
-(read → validate → demodulate → write) with LS and GLS.
+read (baseline), ``read_rawlog``, one streamed pass of ``open_rawlog`` (in chunks of
+2^18 rows: one chunk for a day), and the whole per-file pipeline (read twice →
+validate → demodulate → merge into ``periods.parquet`` → write) with LS and GLS.
+A year of data: ``benchmarks/bench_demod_year.py``.
 Run: ``python benchmarks/bench_demod.py``.
 """
 
@@ -15,7 +17,7 @@ from pathlib import Path
 
 import pyarrow.parquet as pq
 
-from accal.io.rawlog import read_rawlog
+from accal.io.rawlog import open_rawlog, read_rawlog
 from accal.pipeline_demod import (
     DemodOptions,
     load_psd,
@@ -43,6 +45,8 @@ def main() -> None:
         read = best_of(lambda: read_rawlog(run))
         print(f"pyarrow read_table (baseline): {base:.4f} s")
         print(f"read_rawlog:                   {read:.4f} s  ({read / base:.1f}x)")
+        stream = best_of(lambda: list(open_rawlog(run)))
+        print(f"open_rawlog (one pass):        {stream:.4f} s  ({stream / base:.1f}x)")
         for method, model in (("ls", "mean"), ("ls", "affine"), ("gls", "mean")):
             opts = DemodOptions(tau=600.0, mask=200.0, method=method, signal_model=model)
             tgt = output_paths([run], Path(d) / f"out_{method}_{model}", "parquet")[0]
