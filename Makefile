@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 OUT    ?= out
 
-.PHONY: install run test test-all lint bench bench-readers bench-archive mc-sigma clean
+.PHONY: install run test test-all lint bench bench-readers bench-archive bench-demod-year mc-sigma clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -48,6 +48,10 @@ mc-sigma: $(STAMP)
 
 bench-readers: $(STAMP)
 	$(BIN)/python benchmarks/bench_readers.py
+
+## bench-demod-year: a simulated year (and 30 days) of 1 Hz data through accal demod: wall time, peak RSS (minutes, ~1 GB temp)
+bench-demod-year: $(STAMP)
+	$(BIN)/python benchmarks/bench_demod_year.py
 
 ## bench-archive: 200 synthetic 1 Hz days, 1 and 2 workers, vs raw pyarrow parse (~2 GB in /tmp)
 bench-archive: $(STAMP)
