@@ -72,6 +72,8 @@ def test_simulate_then_demod_recovers_truth(day, tmp_path):
         )  # fmt: skip
         assert code == 0, err
         assert sorted(p.name for p in out.iterdir()) == [
+            ".accal.lock",
+            "accal.log",
             "periods.parquet",
             "summary.json",
             "summary.md",
@@ -165,7 +167,8 @@ def test_bad_input(case, tmp_path):
     assert len(lines) == 1, err
     assert lines[0].startswith(f"accal: {bad}")
     assert __import__("re").search(pattern, lines[0]), lines[0]
-    assert not out.exists() or not any(out.iterdir())
+    # nothing but the run's bookkeeping (lock, log)
+    assert not out.exists() or {p.name for p in out.iterdir()} <= {".accal.lock", "accal.log"}
 
 
 def test_resample_jitter_and_gaps(tmp_path):
@@ -211,6 +214,8 @@ def test_batch_one_bad_one_good(tmp_path):
     assert f"accal: {bad}: m_y has 1 NaN" in err
     assert "1 ok, 1 failed" in err
     assert sorted(p.name for p in out.iterdir()) == [
+        ".accal.lock",
+        "accal.log",
         "good.summary.json",
         "good.summary.md",
         "periods.csv",
@@ -387,7 +392,7 @@ def test_cumulative_periods_table(tmp_path):
     args = ("--tau", 60, "--mask", 20, "--out", out, "-q")
     assert invoke("demod", r1, r2, *args)[0] == 0
     assert sorted(p.name for p in out.iterdir()) == [
-        "periods.parquet", "r1.summary.json", "r1.summary.md", "r2.summary.json", "r2.summary.md",
+        ".accal.lock", "accal.log", "periods.parquet", "r1.summary.json", "r1.summary.md", "r2.summary.json", "r2.summary.md",
     ]  # fmt: skip
     df = pd.read_parquet(out / "periods.parquet")
     assert df.groupby("source").size().to_dict() == {"r1.parquet": 20, "r2.csv": 20}
@@ -415,7 +420,7 @@ def test_cumulative_periods_table(tmp_path):
     code, _, err = invoke("demod", bad, *args)
     assert code == 1 and "m_y has 1 NaN" in err
     assert (out / "periods.parquet").read_bytes() == before
-    assert not [p for p in out.iterdir() if p.name.startswith(".")]  # no temporary files left
+    assert not list(out.glob(".*.tmp"))  # no temporary files left
 
 
 def test_sinusoid_constant_term(day, tmp_path):
@@ -432,3 +437,21 @@ def test_sinusoid_constant_term(day, tmp_path):
     assert abs(y["alpha"]) < 4 * y["sigma_alpha"] and abs(y["beta"]) < 4 * y["sigma_beta"]
     assert y["offset"] == pytest.approx(4.6e-7, abs=4 * y["sigma_offset"])
     assert "c = " in (tmp_path / "b" / "summary.md").read_text()
+
+
+def test_demod_output_directory_is_locked_and_logged(tmp_path):
+    """A second demod (or grace-bias) on a directory in use refuses; the log records runs."""
+    from accal.batch import OutputLock
+    from accal.pipeline_demod import write_simulated_gap
+
+    run = tmp_path / "run.parquet"
+    write_simulated_gap(run, days=0.02, tau=60.0, mask=20.0, seed=1)
+    out = tmp_path / "out"
+    with OutputLock(out, "test"):
+        code, _, err = invoke("demod", run, "--tau", 60, "--mask", 20, "--out", out, "-q")
+    assert code == 1
+    assert "output directory is in use by another accal run" in err
+    assert len(err.strip().splitlines()) == 1
+    assert invoke("demod", run, "--tau", 60, "--mask", 20, "--out", out, "-q")[0] == 0
+    log = (out / "accal.log").read_text()
+    assert "start accal demod: 1 runs" in log and f"ok {run}" in log

@@ -796,6 +796,8 @@ def run_demod(
     AccalError
         Before any input is processed: unreadable ``--psd`` table, colliding output names.
     """
+    from accal.batch import OutputLock, RunLog, remove_stale_temporaries
+
     start = _time.perf_counter()
     paths = [Path(p) for p in paths]
     targets = output_paths(paths, out_dir, opts.fmt)
@@ -803,19 +805,36 @@ def run_demod(
     out_dir.mkdir(parents=True, exist_ok=True)
     outcomes: list[RunOutcome] = []
     pairs = list(zip(paths, targets, strict=True))
-    for path, tgt in progress(pairs) if progress else pairs:
+    # one writer per output directory (the cumulative periods table); a killed
+    # run's temporary files are removed under the lock
+    with OutputLock(out_dir, "accal demod"):
+        remove_stale_temporaries(out_dir)
+        log = RunLog(out_dir)
         try:
-            outcomes.append(process_run(path, tgt, opts, psd))
-        except AccalError as exc:
-            msg = str(exc).replace("\n", " ")
-            if getattr(exc, "path", None) is None:
-                msg = f"{path}: {msg}"
-            outcomes.append(RunOutcome(path, False, msg))
-        except Exception as exc:  # a bug, not bad input: keep the batch going
-            outcomes.append(
-                RunOutcome(path, False, f"{path}: internal error ({type(exc).__name__}: {exc})")
+            log(f"start accal demod: {len(paths)} runs, options={opts}")
+            for path, tgt in progress(pairs, total=len(pairs)) if progress else pairs:
+                try:
+                    outcomes.append(process_run(path, tgt, opts, psd))
+                except AccalError as exc:
+                    msg = str(exc).replace("\n", " ")
+                    if getattr(exc, "path", None) is None:
+                        msg = f"{path}: {msg}"
+                    outcomes.append(RunOutcome(path, False, msg))
+                except Exception as exc:  # a bug, not bad input: keep the batch going
+                    outcomes.append(
+                        RunOutcome(
+                            path, False, f"{path}: internal error ({type(exc).__name__}: {exc})"
+                        )
+                    )
+                o = outcomes[-1]
+                log(f"ok {path}" if o.ok else f"FAILED {o.message}")
+            summary = DemodRunSummary(outcomes, _time.perf_counter() - start)
+            log(
+                f"accal demod: {summary.n_ok} ok, {summary.n_failed} failed in {summary.seconds:.2f} s"
             )
-    return DemodRunSummary(outcomes, _time.perf_counter() - start)
+            return summary
+        finally:
+            log.close()
 
 
 # ---------------------------------------------------------------------------
