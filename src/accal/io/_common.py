@@ -66,7 +66,7 @@ def read_bytes(path: str | Path) -> bytes:
         raise FormatError(f"cannot read file: {exc.strerror or exc}", p) from None
     if raw[:2] == GZIP_MAGIC:
         raw = gunzip(raw, p)
-    if not raw.strip():
+    if not raw or raw.isspace():
         raise FormatError("empty file", p)
     return raw
 

@@ -446,7 +446,7 @@ def _parse_ascii(data: bytes, first_line: int, path: Path) -> dict[str, Any]:
     import pyarrow as pa
     import pyarrow.csv as pacsv
 
-    if not data.strip():
+    if not data or data.isspace():
         raise FormatError("header but no data records", path, first_line)
     if not data.endswith(b"\n"):
         raise FormatError(
