@@ -364,6 +364,15 @@ class Basis:
         self.rinv = rinv
         self.ident = ident
         self.rank = rank
+        # padded layout (n_seg, L_max) for batched products, when it is not wasteful
+        lmax = int(lengths.max()) if lengths.size else 0
+        self._pad = None
+        if ns > 1 and ns * lmax <= 1.5 * n:
+            pos = np.arange(n) - self.seg_start[self.sample_seg]
+            self._pad = (pos, lmax)
+            qp = np.zeros((ns, lmax, p))
+            qp[self.sample_seg, pos] = q
+            self._qp = qp
 
     def _build_extra(self) -> None:
         """QR of the extra columns after projecting the blocks out.
@@ -427,6 +436,11 @@ class Basis:
             z = z[:, None]
         if self.seg_start.size == 1:
             return (self.q.T @ z)[None]
+        if self._pad is not None:
+            pos, lmax = self._pad
+            zp = np.zeros((self.seg_start.size, lmax, z.shape[1]))
+            zp[self.sample_seg, pos] = z
+            return np.matmul(np.transpose(self._qp, (0, 2, 1)), zp)
         out = np.empty((self.seg_start.size, self.p, z.shape[1]))
         for j in range(self.p):
             out[:, j, :] = np.add.reduceat(self.q[:, j : j + 1] * z, self.seg_start, axis=0)
@@ -436,6 +450,9 @@ class Basis:
         """``Σ_j Q_bj c_bj`` on every sample: (n_seg, p, m) -> (n, m)."""
         if self.seg_start.size == 1:
             return self.q @ c[0]
+        if self._pad is not None:
+            pos, _ = self._pad
+            return np.matmul(self._qp, c)[self.sample_seg, pos]
         out = np.zeros((self.n, c.shape[2]))
         for j in range(self.p):
             out += self.q[:, j : j + 1] * c[self.sample_seg, j, :]
@@ -480,9 +497,19 @@ class Basis:
         if z.shape[1] == 0 or not np.any(norms0 > 0):
             return np.zeros((z.shape[0], 0))
         zt = z - self.project(z)
-        u, s, _ = np.linalg.svd(zt, full_matrices=False)
-        keep = s > tol * max(float(norms0.max()), 1e-300)
-        return u[:, keep]
+        scale = max(float(norms0.max()), 1e-300)
+        if z.shape[1] <= 8:
+            qz, rz = np.linalg.qr(zt)  # tall-skinny: QR, then the SVD of the small R
+            ur, s, _ = np.linalg.svd(rz)
+            keep = s > tol * scale
+            return qz @ ur[:, keep]
+        # many columns (the catch-all basis): Gram matrix + eigh, twice (CholeskyQR2-like);
+        # rank decided at 1e-6 of the largest norm (the Gram route cannot resolve 1e-8)
+        lam, v = np.linalg.eigh(zt.T @ zt)
+        keep = lam > (max(tol, 1e-6) * scale) ** 2
+        u = zt @ (v[:, keep] / np.sqrt(lam[keep]))
+        lam2, v2 = np.linalg.eigh(u.T @ u)
+        return u @ (v2 / np.sqrt(np.maximum(lam2, 1e-300)))
 
     def dense_q(self) -> NDArray[np.float64]:
         """The orthonormal basis as a dense (n, rank) matrix (small designs only)."""

@@ -664,30 +664,33 @@ def intra_period_shape(ctx: Context) -> list[Proposal]:
     taus = tuple(ctx.options.get("settle_taus", (5.0, 10.0, 20.0, 50.0, 100.0, 200.0)))
     phi = info.since_rest
     rest = np.isfinite(phi)
-    best = None
-    n_var = 0
+    shapes, keys = [], []
     for kind, sign in (("common", np.ones_like(phi)), ("direction", info.direction)):
         if ctx.has_label(f"shape:{kind}"):
             continue
         for ts in taus:
-            base = np.where(rest, np.exp(-np.where(rest, phi, 0.0) / ts), 0.0) * sign
-            cols, labs, axes = ctx.split(base[:, None], (f"shape:{kind}",))
-            if _identifiable(ctx, base) <= _IDENT_TOL:
-                continue
-            n_var += 1
-            pw = float(np.sum(ctx.power(cols[ctx.use])))
-            if best is None or pw > best[0]:
-                best = (pw, kind, ts, cols, labs, axes)
-    if best is None:
+            shapes.append(np.where(rest, np.exp(-np.where(rest, phi, 0.0) / ts), 0.0) * sign)
+            keys.append((kind, ts))
+    if not shapes:
         return []
-    _, kind, ts, cols, labs, axes = best
+    z = np.column_stack(shapes)
+    zu = z[ctx.use]
+    z2 = np.sum(zu**2, axis=0)
+    rel2 = 1.0 - ctx.basis.captured(zu) / np.maximum(z2, 1e-300)
+    ok = (z2 > 0) & (rel2 > _IDENT_TOL**2)
+    if not ok.any():
+        return []
+    pw = ctx.joint_power(zu)
+    j = int(np.argmax(np.where(ok, pw, -1.0)))
+    kind, ts = keys[j]
+    cols, labs, axes = ctx.split(z[:, j : j + 1], (f"shape:{kind}",))
     return [
         Proposal(
             "intra_period_shape",
             kind,
             cols,
             labs,
-            float(n_var),
+            float(ok.sum()),
             {"tau": ts},
             axes=axes,
         )

@@ -637,8 +637,10 @@ def close_loop(
         zt = basis.complement(cols)
         if zt.shape[1]:
             f_lo = 2.0 * catchall_knots / (grid.size * grid.step)
-            model, _ = white_plus_flicker(grid, noise, f_lo)
-            w = wald_test(grid, fit.resid, zt, lev, psd=model)
+            model, _, nu = white_plus_flicker(grid, noise, f_lo, return_dof=True)
+            # the extrapolation only below f_lo; above it the estimate is reliable
+            model = np.where(grid.freqs >= f_lo, noise.psd, model)
+            w = wald_test(grid, fit.resid, zt, lev, psd=model, psd_dof=nu)
             if w.pvalue < alpha:
                 unexplained.append(_describe_smooth(grid, t_u, zt @ w.gamma, w))
 
@@ -745,6 +747,7 @@ def _note(notes: dict, name: str, channel: str | None, text: str, params=None) -
 
 _PAIR_FACTOR = 10.0  # pairs are tested at alpha/10: per-step FWER <= 1.1 alpha
 _PAIR_ANCHORS = 3
+_PAIR_GATE = 0.2  # a masked proposal must be suggestive: corrected p < 0.2
 _REFINE_DW = 4.0
 
 
@@ -840,8 +843,8 @@ class _Search:
 
         The best significant single proposal (most explained power) is compared
         with the best significant pair anchored on a *masked* proposal: one that
-        explains more power than that single but is not significant on its own
-        (corrected p < 1).  The larger explained power wins.
+        explains more power than that single but is only suggestive on its own
+        (``alpha ≤`` corrected p ``< 0.2``).  The larger explained power wins.
         """
         basis, fit, lev = self.state(self.found)
         ctx = self.context(self.found, basis, fit, lev)
@@ -860,7 +863,8 @@ class _Search:
         sig = sorted((e for e in tested if e[0] < self.alpha), key=lambda e: -e[1])
         top_sig = sig[0][1] if sig else 0.0
         masked = sorted(
-            (e for e in tested if self.alpha <= e[0] < 1.0 and e[1] > top_sig), key=lambda e: -e[1]
+            (e for e in tested if self.alpha <= e[0] < _PAIR_GATE and e[1] > top_sig),
+            key=lambda e: -e[1],
         )[:_PAIR_ANCHORS]
         pair = self._best_pair(basis, fit, lev, masked) if masked else None
         if pair is not None and pair[-1] > top_sig and self._add_pair(pair):
