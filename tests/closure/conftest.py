@@ -63,3 +63,90 @@ def make_day(
 def sim():
     """The :func:`make_day` factory."""
     return make_day
+
+
+# --------------------------------------------------------------------------------------
+# rotating platform (accal.simulate.gap, MicroSTAR noise of eq. 1, fig2 pattern)
+
+AY, AZ = 4.6e-7, -2.3e-7  # accal.simulate.gap defaults [m/s²]
+
+
+def _four_angle_theta(n_per: int, rest: int = 100, rot: int = 50) -> np.ndarray:
+    """One period of rests at 0, π/2, π, 3π/2 (100 s each, 50 s quintic moves), tiled."""
+    from accal.estimators.design import _smoothstep
+
+    angs = [0.0, np.pi / 2, np.pi, 3 * np.pi / 2]
+    seg = []
+    for i, a in enumerate(angs):
+        seg.append(np.full(rest, a))
+        b = angs[(i + 1) % 4]
+        seg.append(a + (b - a) * _smoothstep(np.arange(1, rot + 1) / (rot + 1)))
+    return np.tile(np.concatenate(seg), n_per)
+
+
+def make_platform(
+    seed: int,
+    *,
+    days: float = 0.25,
+    pattern: str = "fig2",
+    angle_error: tuple[float, float] | None = None,
+    temp_coupling: float = 0.0,
+    temp_lag: float = 0.0,
+    step: tuple[float, float] | None = None,
+    settle: tuple[float, float, float, str] | None = None,
+) -> dict:
+    """Rotating-platform data at 1 Hz, τ = 600 s, with optional undeclared effects.
+
+    ``pattern="fig2"``: :func:`accal.simulate.gap.simulate_gap` (rests at 0 and π);
+    its temperature (kicks after each rotation) gets an orbital cycle and a random
+    walk.  ``"four"``: rests at 0, π/2, π, 3π/2, same signal, bias and noise model;
+    ``angle_error = (rest angle, δ)``: the platform really rests at angle + δ there.
+    ``temp_coupling`` [m/s²/K] on m_y (half on m_z) with ``temp_lag`` [s];
+    ``step = (epoch, size)`` on m_y; ``settle = (amp_y, amp_z, τ_s, "common"|"direction")``.
+    """
+    from accal.closure.demod import _rest_runs
+    from accal.estimators.design import rest_mask
+    from accal.estimators.noise import MicroStarPSD
+    from accal.simulate.gap import simulate_gap
+    from accal.simulate.noise import coloured_noise as shaped
+
+    rng = np.random.default_rng(seed)
+    if pattern == "fig2":
+        d, _ = simulate_gap(days=days, seed=seed)
+        t = d.time.to_numpy()
+        th = d.theta.to_numpy()
+        my, mz = d.m_y.to_numpy().copy(), d.m_z.to_numpy().copy()
+        temp = d.temperature.to_numpy().copy()
+        temp += 0.3 * np.sin(2 * np.pi * t / 5400.0 + rng.uniform(0, 2 * np.pi))
+        temp += 0.05 * np.cumsum(rng.standard_normal(t.size)) / np.sqrt(t.size)
+    else:
+        th = _four_angle_theta(int(days * 86400) // 600)
+        t = np.arange(th.size, dtype=float)
+        th_true = th.copy()
+        if angle_error is not None:
+            th_true = th + angle_error[1] * (np.abs(th - angle_error[0]) < 1e-9)
+        c, s = np.cos(th_true), np.sin(th_true)
+        nz = shaped(t.size, MicroStarPSD(), 1.0, rng, size=2)
+        my = c * AY + s * AZ + 1e-6 + 1e-6 / 86400 * t + nz[0]
+        mz = -s * AY + c * AZ - 0.7e-6 + 0.5e-6 / 86400 * t + nz[1]
+        temp = np.zeros(t.size)
+    if temp_coupling:
+        tl = np.interp(t - temp_lag, t, temp - temp.mean())
+        my += temp_coupling * tl
+        mz += 0.5 * temp_coupling * tl
+    if step is not None:
+        my += step[1] * (t >= step[0])
+    if settle is not None:
+        since, direction, _ = _rest_runs(th, rest_mask(th), 1.0)
+        sh = np.where(np.isfinite(since), np.exp(-np.nan_to_num(since) / settle[2]), 0.0)
+        if settle[3] == "direction":
+            sh = sh * direction
+        my += settle[0] * sh
+        mz += settle[1] * sh
+    return {"t": t, "m": np.column_stack([my, mz]), "theta": th, "temp": temp}
+
+
+@pytest.fixture(scope="session")
+def platform():
+    """The :func:`make_platform` factory."""
+    return make_platform

@@ -251,7 +251,10 @@ def close_loop_demod(
         rest samples per period.
     alpha, max_effects, orbit_period, catchall_knots, options
         As in :func:`accal.closure.close_loop` (``options["settle_taus"]``: time
-        constants searched by ``intra_period_shape`` [s]).
+        constants searched by ``intra_period_shape`` [s]; ``options["max_lag"]``:
+        longest auxiliary lag searched, default ``τ/2``: the per-period bias absorbs
+        a channel's slow part, and what is left repeats with the pattern, so a lag
+        is only determined modulo τ).
 
     Returns
     -------
@@ -407,7 +410,7 @@ def close_loop_demod(
         max_effects=max_effects,
         orbit_period=orbit_period,
         catchall_knots=catchall_knots,
-        options={**(options or {}), "platform": info},
+        options={"max_lag": 0.5 * float(tau), **(options or {}), "platform": info},
         channel=chan,
         channel_names=("y", "z"),
     )

@@ -53,6 +53,7 @@ from accal.closure.residual import (
     characterise,
     estimate_psd,
     make_grid,
+    projection_bias,
     wald_test,
     white_plus_flicker,
 )
@@ -355,7 +356,7 @@ def _segment_masks(t: NDArray[np.float64], k: int = 3) -> list[NDArray[np.bool_]
 
 
 def _consistency(
-    grid: Grid, basis: Basis, z: NDArray[np.float64], y: NDArray[np.float64], t
+    grid: Grid, basis: Basis, z: NDArray[np.float64], y: NDArray[np.float64], t, lev_fn
 ) -> tuple[bool, dict[str, Any]]:
     """Is the effect's coefficient the same in each third of the record?"""
     masks = _segment_masks(t)
@@ -366,7 +367,7 @@ def _consistency(
     zt = bxz.complement(extra)
     if zt.shape[1] == 0:
         return True, {}
-    w = wald_test(grid, fit.resid, zt, bxz.leverage(grid))
+    w = wald_test(grid, fit.resid, zt, lev_fn(bxz))
     full = fit.gamma[-q:]
     seg_coefs = []
     for m in masks:
@@ -553,6 +554,8 @@ def close_loop(
             "nothing is left to test"
         )
     fit0 = basis0.fit(y_u)
+    lev0_white = basis0.leverage(grid)
+    beta = projection_bias(grid, basis0, fit0.resid, lev0_white)
     search = _Search(
         t_all=t_all,
         use=use,
@@ -570,6 +573,7 @@ def close_loop(
         base_labels=frozenset(bbase.column_labels()),
         n_families=_families(builders, aux_all, orbit_period),
         alpha=alpha,
+        beta=beta,
     )
     iterations = 0
     seen = {search.model_key()}
@@ -589,7 +593,8 @@ def close_loop(
 
     # ------------------------------------------------------------------ covariances
     noise = estimate_psd(grid, fit.resid, lev)
-    noise0 = estimate_psd(grid, fit0.resid, basis0.leverage(grid))
+    nc = np.maximum(grid.counts, 1.0)[:, None]
+    noise0 = estimate_psd(grid, fit0.resid, nc - (nc - lev0_white) * beta)
     psd, psd0 = noise.psd, noise0.psd
     ns = basis.seg_start.size
     rinv = basis.rinv
@@ -779,6 +784,7 @@ class _Search:
     base_labels: frozenset[str]
     n_families: int
     alpha: float
+    beta: NDArray[np.float64]
     found: list[_Found] = field(default_factory=list)
     removed: list[_Found] = field(default_factory=list)
     unexplained: list[Effect] = field(default_factory=list)
@@ -792,7 +798,13 @@ class _Search:
             basis = self.basis0.extend(np.column_stack([f.prop.columns[self.use] for f in found]))
         else:
             basis = self.basis0
-        return basis, basis.fit(self.y_u), basis.leverage(self.grid)
+        return basis, basis.fit(self.y_u), self.leverage(basis)
+
+    def leverage(self, basis: Basis) -> NDArray[np.float64]:
+        """Leverage spectrum with the measured suppression of the base (``beta``)."""
+        lev = basis.leverage(self.grid)
+        nc = np.maximum(self.grid.counts, 1.0)[:, None]
+        return nc - (nc - lev) * self.beta
 
     def context(self, found: Sequence[_Found], basis, fit, lev) -> Context:
         return Context(
@@ -882,7 +894,12 @@ class _Search:
         if not prop.check_consistency:
             return True
         ok, cinfo = _consistency(
-            self.grid, basis, prop.columns[self.use], self.y_u, self.t_all[self.use]
+            self.grid,
+            basis,
+            prop.columns[self.use],
+            self.y_u,
+            self.t_all[self.use],
+            self.leverage,
         )
         info.update(cinfo)
         if ok:
