@@ -1,9 +1,14 @@
-"""Markdown and plots of a closure result (files only where the caller says)."""
+"""Markdown, JSON and plots of a closure result (files only where the caller says)."""
 
 from __future__ import annotations
 
+import json
+
+import numpy as np
+
 from accal.closure import close_loop
-from accal.closure.report import plot_closure, to_markdown, write_json
+from accal.closure.demod import close_loop_demod
+from accal.closure.report import plot_closure, result_to_dict, to_markdown, write_json
 
 
 def test_markdown_json_and_plots(sim, tmp_path):
@@ -11,7 +16,37 @@ def test_markdown_json_and_plots(sim, tmp_path):
     res = close_loop(d["t"], d["y"], candidates=("bias_step",))
     md = to_markdown(res, truth=d["truth"])
     assert "bias_step" in md and "true error" in md
+    epoch = res.effects[0].epoch
+    assert f"epoch {epoch:.10g} s" in md  # absolute epochs are not rounded to 3 digits
     assert write_json(res, tmp_path / "closure.json").stat().st_size > 0
     a, b = plot_closure(res, tmp_path / "res.png", tmp_path / "psd.png")
     assert a.stat().st_size > 0 and b.stat().st_size > 0
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["closure.json", "psd.png", "res.png"]
+    files = plot_closure(res, tmp_path / "r2.png", tmp_path / "p2.png", tmp_path / "e.png")
+    assert len(files) == 3 and files[2].stat().st_size > 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "closure.json",
+        "e.png",
+        "p2.png",
+        "psd.png",
+        "r2.png",
+        "res.png",
+    ]
+
+
+def test_demod_report_has_axes_notes_and_a_psd(platform, tmp_path):
+    d = platform(4, settle=(2e-10, -1e-10, 20.0, "direction"))
+    res, _ = close_loop_demod(d["t"], d["m"], d["theta"], tau=600.0)
+    out = json.loads(json.dumps(result_to_dict(res)))
+    assert out["channels"] == ["y", "z"]
+    e = out["effects"][0]
+    assert e["name"] == "intra_period_shape" and e["axis"] in ("y", "z")
+    assert set(e["details"]["axes"]) == {"y", "z"}
+    assert {n["channel"] for n in out["notes"]} == {"common", "rest@3.142"}
+    assert len(out["base"]) == 36 * 6  # a_Y, a_Z, bias and drift of both axes per period
+    md = to_markdown(res)
+    assert "not identifiable" in md and "more (closure.json)" in md
+    assert md.count("\n| a_Y[") <= 30
+    # rests of ≤ 132 s: no Welch segment, the binned gapped periodogram is used
+    assert res.stats_after.freq.size > 10 and np.all(np.isfinite(res.stats_after.psd))
+    paths = plot_closure(res, tmp_path / "r.png", tmp_path / "p.png", tmp_path / "e.png")
+    assert all(p.stat().st_size > 10_000 for p in paths)

@@ -680,8 +680,9 @@ class ResidualStats:
     freq : ndarray
         Frequencies of the Welch PSD [Hz].
     psd : ndarray
-        One-sided Welch PSD averaged over continuous segments [(m/s²)²/Hz]
-        (empty if no segment is long enough).
+        One-sided Welch PSD averaged over continuous segments [(m/s²)²/Hz]; when
+        no gap-free segment is long enough, the binned periodogram of the gapped
+        residual on its nominal grid (first entry: frequency 0, PSD 0).
     segment_edges : ndarray
         Start times of the segments used for ``segment_means`` [s].
     segment_means : ndarray
@@ -786,6 +787,18 @@ def characterise(
                 tot += 1
         if tot:
             psd = psd / tot
+    if freq.size == 0 and t.size > 16:
+        # no gap-free stretch long enough for Welch (e.g. the rests of a rotating
+        # platform): the gap-tolerant binned periodogram on the nominal grid
+        grid = make_grid(t, None if chan is None else np.asarray(chan, dtype=np.int64))
+        noise = estimate_psd(grid, r, np.zeros((grid.n_chan, grid.size // 2 + 1)), tilt=False)
+        f = grid.freqs
+        nb = noise.level.size
+        cnt = np.bincount(noise.which[1:], minlength=nb)
+        fc = np.bincount(noise.which[1:], weights=f[1:], minlength=nb) / np.maximum(cnt, 1)
+        keep = cnt > 0
+        freq = np.r_[0.0, fc[keep]]
+        psd = np.r_[0.0, 2.0 * noise.level[keep] * grid.step]  # one-sided [(m/s²)²/Hz]
     edges = np.arange(t[0], t[-1] + segment, segment)
     which = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, edges.size - 1)
     counts = np.bincount(which, minlength=edges.size)

@@ -1179,7 +1179,7 @@ def _effects(
         q = prop.columns.shape[1]
         c = gamma[j : j + q]
         cc = cov[j : j + q, j : j + q]
-        details: dict[str, Any] = {**info}
+        details: dict[str, Any] = {**info, "n_columns": q}
         axis = None
         if prop.axes is None:
             coef, sig, det = _main_coefficient(prop, c, cc, span)
