@@ -455,3 +455,74 @@ def test_demod_output_directory_is_locked_and_logged(tmp_path):
     assert invoke("demod", run, "--tau", 60, "--mask", 20, "--out", out, "-q")[0] == 0
     log = (out / "accal.log").read_text()
     assert "start accal demod: 1 runs" in log and f"ok {run}" in log
+
+
+# ---------------------------------------------------------------- --close-loop
+
+
+@pytest.fixture(scope="module")
+def undeclared_run(tmp_path_factory):
+    """Half a day with a temperature-driven bias the declared model does not have, and a
+    bias step of 5e-10 m/s^2 on m_y in the middle of a period."""
+    from accal.pipeline_demod import write_simulated_gap
+
+    tmp = tmp_path_factory.mktemp("undeclared_run")
+    run = tmp / "run.parquet"
+    _, truth = write_simulated_gap(
+        run, days=0.5, tau=600.0, mask=200.0, seed=4, temperature_coupling=1e-9
+    )
+    df = pd.read_parquet(run)
+    step_at = df["time"].iloc[0] + 30 * 600.0 + 250.0  # inside period 30
+    df.loc[df["time"] >= step_at, "m_y"] += 5e-10
+    df.to_parquet(run)
+    return run, pd.read_parquet(truth), step_at
+
+
+def test_demod_close_loop_finds_undeclared_effects_and_refits(undeclared_run, tmp_path):
+    run, truth, step_at = undeclared_run
+    out = tmp_path / "out"
+    code, _, err = invoke(
+        "demod", run, "--tau", 600, "--mask", 200, "--close-loop", "--out", out
+    )  # fmt: skip
+    assert code == 0, err
+    assert "closure:" in err
+    closure = json.loads((out / "closure.json").read_text())["sources"]["run.parquet"]
+    found = {e["name"]: e for e in closure["effects"]}
+    assert "bias_step" in found, closure["effects"]
+    assert abs(found["bias_step"]["epoch"] - step_at) <= 60.0
+    assert abs(found["bias_step"]["coefficient"] - 5e-10) < 3 * found["bias_step"]["sigma"]
+    assert "auxiliary" in found and found["auxiliary"]["channel"] == "temperature"
+    # periods: the extended model's values, the declared ones kept as *_before
+    df = pd.read_parquet(out / "periods.parquet").merge(truth, on="period", suffixes=("", "_true"))
+    assert {"a_Y_before", "change_Y", "sigma_change_Y", "model"} <= set(df.columns)
+    assert df["model"].iloc[0].startswith("declared+")
+    err_before = np.abs(df["a_Y_before"] - df["a_Y_true"])
+    err_after = np.abs(df["a_Y"] - df["a_Y_true"])
+    # the period with the step was biased by it; the extended model removes that
+    hit = df["period"] == 30
+    assert float(err_after[hit].iloc[0]) < 0.5 * float(err_before[hit].iloc[0])
+    # and overall the error does not grow, scatter/sigma stays sane
+    assert np.sqrt(np.mean(err_after**2)) <= 1.05 * np.sqrt(np.mean(err_before**2))
+    z = (df["a_Y"] - df["a_Y_true"]) / df["sigma_Y"]
+    assert 0.7 < float(np.std(z)) < 1.4
+    for name in ("run.closure.png", "run.closure-psd.png", "run.closure-effects.png"):
+        assert (out / name).stat().st_size > 5000
+    md = (out / "closure.md").read_text()
+    assert "bias_step" in md and "declared+" in md
+
+
+def test_demod_close_loop_on_clean_run_adds_nothing(tmp_path):
+    from accal.pipeline_demod import write_simulated_gap
+
+    run = tmp_path / "clean.parquet"
+    write_simulated_gap(run, days=0.25, tau=600.0, mask=200.0, seed=9)
+    out = tmp_path / "out"
+    code, _, err = invoke(
+        "demod", run, "--tau", 600, "--mask", 200, "--close-loop", "--out", out, "-q"
+    )
+    assert code == 0, err
+    closure = json.loads((out / "closure.json").read_text())["sources"]["clean.parquet"]
+    assert closure["effects"] == []
+    df = pd.read_parquet(out / "periods.parquet")
+    assert (df["model"] == "declared").all()
+    np.testing.assert_allclose(df["a_Y"], df["a_Y_before"], rtol=0, atol=3 * df["sigma_Y"].max())

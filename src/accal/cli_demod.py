@@ -94,6 +94,20 @@ PSD_HELP = "Noise PSD: 'microstar' (eq. 1 of Lenoir et al. 2013) or a CSV/Parque
     metavar="ROWS",
     help="Rows read at a time (bounds the memory; results do not depend on it).",
 )
+@click.option(
+    "--close-loop",
+    is_flag=True,
+    help="Trace the residual to effects the model lacks (steps, auxiliary channels, angle "
+    "offset, intra-period shape, ...), add them, refit: OUT/closure.json/.md and plots; "
+    "periods then hold the extended model (reads each run whole).",
+)
+@click.option(
+    "--alpha",
+    type=click.FloatRange(min=0, max=1, min_open=True, max_open=True),
+    default=0.01,
+    show_default=True,
+    help="False-detection probability per --close-loop selection step.",
+)
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar or summary lines.")
 @config_option
 def demod(
@@ -112,6 +126,8 @@ def demod(
     resample: bool,
     gap_factor: float,
     chunk_rows: int,
+    close_loop: bool,
+    alpha: float,
     quiet: bool,
 ) -> None:
     """Demodulate rotating-platform runs: unbiased a_Y, a_Z per modulation period.
@@ -138,6 +154,8 @@ def demod(
             gap_factor=gap_factor,
             integration=integration,
             chunk_rows=chunk_rows,
+            close_loop=close_loop,
+            alpha=alpha,
         )
     except AccalError as exc:
         raise click.UsageError(str(exc)) from None
@@ -160,6 +178,18 @@ def demod(
                 f"{o.outputs[0]}",
                 err=True,
             )
+            if "closure" in s:
+                c = s["closure"]
+                found = [
+                    e["name"] + (f"({e['channel']})" if e.get("channel") else "")
+                    for e in c["effects"]
+                ]
+                found += ["unexplained"] * len(c["unexplained"])
+                click.echo(
+                    f"{o.path}: closure: {', '.join(found) or 'nothing found'}; residual RMS "
+                    f"{c['rms_before']:.3g} -> {c['rms_after']:.3g} m/s^2 (closure.md)",
+                    err=True,
+                )
     if not quiet:
         click.echo(
             f"accal demod: {summary.n_ok} ok, {summary.n_failed} failed in {summary.seconds:.2f} s",

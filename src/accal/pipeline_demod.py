@@ -111,6 +111,13 @@ class DemodOptions:
         With ``resample``: an input step longer than this many grid steps is a gap.
     integration : float
         Integration time of the "standard" σ(T) in the summary [s].
+    close_loop : bool
+        Close the loop (:func:`accal.closure.demod.close_loop_demod`): trace the
+        residual of the demodulation model to effects it lacks, add them, refit;
+        ``periods`` then holds the extended model's values (and the declared
+        model's as ``*_before``).  Reads the run whole.
+    alpha : float
+        False-detection probability per selection step of the closure.
     chunk_rows : int
         Rows read at a time (memory knob; results do not depend on it).
     """
@@ -128,6 +135,8 @@ class DemodOptions:
     gap_factor: float = 2.0
     integration: float = STANDARD_INTEGRATION
     chunk_rows: int = CHUNK_ROWS
+    close_loop: bool = False
+    alpha: float = 0.01
 
     def __post_init__(self) -> None:
         check_option("method", self.method, ("ls", "gls"))
@@ -714,6 +723,14 @@ def process_run(
     res, info = estimate(path, opts, psd)
     rows, units = period_rows(res, path.name, info.units)
     summary = summarise(path, info, res, opts)
+    closure: dict[str, Any] | None = None
+    plots: list[Path] = []
+    if opts.close_loop:
+        closure, extended, plots = close_run(path, opts, targets[0].parent)
+        rows, units = apply_closure(rows, units, extended)
+        summary["closure"] = {
+            k: closure[k] for k in ("effects", "unexplained", "rms_before", "rms_after", "model")
+        }
     history = []
     if info.resample is not None:
         history.append(
@@ -756,9 +773,186 @@ def process_run(
         )
         tmp[1].write_text(json.dumps(_nan_to_none(summary), indent=2, default=_json_default) + "\n")
         tmp[2].write_text(summary_markdown(summary))
+    if closure is not None:
+        write_demod_closure(targets[0].parent, path.name, closure)
     return RunOutcome(
-        path, True, outputs=targets, summary=summary, warnings=summary_warnings(summary)
+        path,
+        True,
+        outputs=(*targets, *plots),
+        summary=summary,
+        warnings=summary_warnings(summary),
     )
+
+
+def close_run(
+    path: Path, opts: DemodOptions, out_dir: Path
+) -> tuple[dict[str, Any], Any, list[Path]]:
+    """Close the loop on one run with the demodulation model as base.
+
+    The run is read whole (:func:`accal.io.rawlog.read_rawlog`); the declared
+    model is the per-period signal (``--signal-model``) and affine bias (plus the
+    ``--bias-model`` channels, eq. 18); every other auxiliary channel is offered
+    to the ``auxiliary`` candidate, with the platform candidates (angle offset,
+    intra-period bias shape) and the generic ones (steps, periodic terms,
+    polynomial drift).  Plots go to ``out_dir/<stem>.closure*.png``.
+
+    Returns
+    -------
+    closure : dict
+        ``closure.json`` entry of the run (:meth:`ClosureResult.to_dict` plus
+        ``model`` and per-period change statistics).
+    periods : DemodPeriods
+        Per-period values before/after.
+    plots : list of Path
+    """
+    from accal.closure.demod import close_loop_demod
+    from accal.closure.report import to_markdown
+    from accal.io.rawlog import read_rawlog
+
+    series = read_rawlog(path)
+    ay = list(series.axes).index("y")
+    az = list(series.axes).index("z")
+    theta = series.aux["theta"]
+    bias_aux = {c: series.aux[c] for c in opts.aux_channels if c in series.aux}
+    missing = [c for c in opts.aux_channels if c not in series.aux]
+    if missing:
+        raise ValidationError(f"bias-model channel(s) {missing} not in the run")
+    aux = {
+        k: v
+        for k, v in series.aux.items()
+        if k != "theta" and k not in bias_aux and np.ptp(v[np.isfinite(v)]) > 0
+    }
+    dc = close_loop_demod(
+        series.time,
+        (series.acc[:, ay], series.acc[:, az]),
+        theta,
+        series.valid,
+        tau=opts.tau,
+        signal_model=opts.signal_model,
+        bias_model="affine",
+        bias_aux=bias_aux or None,
+        aux=aux or None,
+        alpha=opts.alpha,
+    )
+    res, periods = dc
+    entry = res.to_dict()
+    entry["model"] = "+".join(["declared", *periods.effects])
+    entry["periods"] = {"n": int(periods.period_index.size)}
+    for ax in ("Y", "Z"):
+        change = np.asarray(getattr(periods, f"change_{ax}"), dtype=np.float64)
+        sig = np.asarray(getattr(periods, f"sigma_change_{ax}"), dtype=np.float64)
+        ok = np.isfinite(change)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.where(sig > 0, np.abs(change) / sig, 0.0)[ok]
+        entry["periods"][f"median_abs_change_{ax}_sigmas"] = (
+            float(np.median(ratio)) if ratio.size else None
+        )
+        entry["periods"][f"rms_change_{ax}"] = (
+            float(np.sqrt(np.mean(change[ok] ** 2))) if ok.any() else None
+        )
+    entry["markdown"] = to_markdown(res, title=f"{path.name}: closing the loop")
+    stem = path.name.split(".")[0]
+    plots = _closure_plots(res, out_dir, stem)
+    return entry, periods, plots
+
+
+def _closure_plots(res: Any, out_dir: Path, stem: str) -> list[Path]:
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        return []
+    from accal.closure.report import plot_closure
+    from accal.io.writers import atomic_path
+
+    names = [out_dir / f"{stem}.closure{k}.png" for k in ("", "-psd", "-effects")]
+    with contextlib.ExitStack() as stack:
+        tmps = [stack.enter_context(atomic_path(p)) for p in names]
+        pngs = [t.with_name(t.name + ".png") for t in tmps]
+        plot_closure(res, *pngs)
+        for png, t in zip(pngs, tmps, strict=True):
+            png.replace(t)
+    return names
+
+
+def apply_closure(
+    rows: dict[str, Any], units: dict[str, str], periods: Any
+) -> tuple[dict[str, Any], dict[str, str]]:
+    """Periods rows with the extended model's ``a_Y``/``a_Z`` (declared ones as ``*_before``).
+
+    Periods the closure could not determine keep NaN in the extended columns.
+    """
+    idx = {int(k): i for i, k in enumerate(periods.period_index)}
+    where = np.array([idx.get(int(k), -1) for k in rows["period"]], dtype=np.int64)
+    have = where >= 0
+
+    def take(values: np.ndarray) -> np.ndarray:
+        out = np.full(where.size, np.nan)
+        out[have] = np.asarray(values, dtype=np.float64)[where[have]]
+        return out
+
+    rows = dict(rows)
+    for ax in ("Y", "Z"):
+        rows[f"a_{ax}_before"] = rows[f"a_{ax}"]
+        rows[f"sigma_{ax}_before"] = rows[f"sigma_{ax}"]
+        rows[f"a_{ax}"] = take(getattr(periods, f"a_{ax}_after"))
+        rows[f"sigma_{ax}"] = take(getattr(periods, f"sigma_{ax}_after"))
+        rows[f"change_{ax}"] = rows[f"a_{ax}"] - rows[f"a_{ax}_before"]
+        rows[f"sigma_change_{ax}"] = take(getattr(periods, f"sigma_change_{ax}"))
+    n = where.size
+    model = "+".join(["declared", *periods.effects])
+    rows["model"] = np.array([model] * n, dtype=object)
+    units = dict(units)
+    for ax in ("Y", "Z"):
+        units[f"a_{ax}"] = f"m/s^2 (mean a_{ax} over the period, extended model of --close-loop)"
+        units[f"sigma_{ax}"] = "m/s^2 (1 sigma, extended model, coloured-noise sandwich)"
+        units[f"a_{ax}_before"] = "m/s^2 (declared demodulation model, --method)"
+        units[f"sigma_{ax}_before"] = "m/s^2 (1 sigma, declared model)"
+        units[f"change_{ax}"] = "m/s^2 (extended - declared)"
+        units[f"sigma_change_{ax}"] = "m/s^2 (1 sigma of the change, closure's covariance)"
+    units["model"] = "declared model plus the effects --close-loop added"
+    return rows, units
+
+
+def write_demod_closure(out_dir: Path, source: str, entry: dict[str, Any]) -> tuple[Path, Path]:
+    """Merge one run's closure into ``OUT/closure.json`` / ``closure.md`` (layout: ``sources``)."""
+    from accal.io.writers import _json_default, atomic_path
+
+    jpath, mpath = out_dir / "closure.json", out_dir / "closure.md"
+    try:
+        old = json.loads(jpath.read_text())
+        sources = old.get("sources", {}) if isinstance(old, dict) else {}
+    except (OSError, ValueError):
+        sources = {}
+    sources[source] = entry
+    sources = dict(sorted(sources.items()))
+    with atomic_path(jpath) as tmp:
+        tmp.write_text(
+            json.dumps(
+                _nan_to_none({"accal_version": __version__, "sources": sources}),
+                indent=2,
+                default=_json_default,
+            )
+            + "\n"
+        )
+    lines = ["# accal demod: closing the loop", ""]
+    for src, e in sources.items():
+        lines.append(e.get("markdown", f"## {src}").rstrip())
+        per = e.get("periods") or {}
+        lines += [
+            "",
+            f"Model: `{e.get('model')}`. Per-period change of a_Y/a_Z (extended - declared): "
+            f"RMS {_g(per.get('rms_change_Y'))} / {_g(per.get('rms_change_Z'))} m/s², median "
+            f"|change|/σ {_g(per.get('median_abs_change_Y_sigmas'))} / "
+            f"{_g(per.get('median_abs_change_Z_sigmas'))} over {per.get('n', 0)} periods.",
+            "",
+        ]
+    with atomic_path(mpath) as tmp:
+        tmp.write_text("\n".join(lines) + "\n")
+    return jpath, mpath
+
+
+def _g(x: Any) -> str:
+    return "–" if x is None else f"{x:.3g}"
 
 
 def _nan_to_none(obj: Any) -> Any:
