@@ -222,7 +222,8 @@ class OutputLock:
 def remove_stale_temporaries(out_dir: Path) -> int:
     """Delete temporary files left by a killed run (``.NAME.XXXX.tmp``); call under the lock."""
     n = 0
-    for q in Path(out_dir).glob(".*.tmp"):
+    stale = {*Path(out_dir).glob(".*.tmp"), *Path(out_dir).glob(".*.tmp.*")}
+    for q in stale:
         with contextlib.suppress(OSError):
             q.unlink()
             n += 1

@@ -8,6 +8,7 @@ reported as a :class:`FileOutcome` with a one-line message.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import time as _time
@@ -637,13 +638,16 @@ def _plot_closure(res: Any, prefix: Path, ax: str) -> list[Path]:
     from accal.closure.report import plot_closure
     from accal.io.writers import atomic_path
 
-    a = prefix.with_name(f"{prefix.name}.closure.{ax}.png")
-    b = prefix.with_name(f"{prefix.name}.closure-psd.{ax}.png")
-    with atomic_path(a) as ta, atomic_path(b) as tb:
-        plot_closure(res, ta.with_suffix(".png"), tb.with_suffix(".png"))
-        ta.with_suffix(".png").replace(ta)
-        tb.with_suffix(".png").replace(tb)
-    return [a, b]
+    names = [
+        prefix.with_name(f"{prefix.name}.closure{k}.{ax}.png") for k in ("", "-psd", "-effects")
+    ]
+    with contextlib.ExitStack() as stack:
+        tmps = [stack.enter_context(atomic_path(p)) for p in names]
+        pngs = [t.with_name(t.name + ".png") for t in tmps]  # matplotlib wants the suffix
+        plot_closure(res, *pngs)
+        for png, t in zip(pngs, tmps, strict=True):
+            png.replace(t)
+    return names
 
 
 def _before_after(
