@@ -526,3 +526,18 @@ def test_demod_close_loop_on_clean_run_adds_nothing(tmp_path):
     df = pd.read_parquet(out / "periods.parquet")
     assert (df["model"] == "declared").all()
     np.testing.assert_allclose(df["a_Y"], df["a_Y_before"], rtol=0, atol=3 * df["sigma_Y"].max())
+
+
+def test_diagnose_demod_directory(undeclared_run, tmp_path):
+    run, _, step_at = undeclared_run
+    out = tmp_path / "out"
+    assert invoke("demod", run, "--tau", 600, "--mask", 200, "--out", out, "-q")[0] == 0
+    before = (out / "periods.parquet").read_bytes()
+    code, text, err = invoke("diagnose", out)
+    assert code == 0, err
+    assert "bias_step" in text and "auxiliary" in text
+    assert (out / "periods.parquet").read_bytes() == before  # diagnose reports only
+    closure = json.loads((out / "closure.json").read_text())["sources"]["run.parquet"]
+    assert any(
+        abs(e["epoch"] - step_at) <= 60 for e in closure["effects"] if e["name"] == "bias_step"
+    )

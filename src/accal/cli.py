@@ -401,7 +401,11 @@ def _is_date(s: str) -> bool:
 def diagnose(
     directory: Path, out: Path | None, aux: Path | None, alpha: float, quiet: bool
 ) -> None:
-    """Close the loop on the calibrated outputs of an earlier grace-bias run.
+    """Close the loop on the outputs of an earlier grace-bias or demod run.
+
+    For an accal demod directory (periods.<fmt>), every run named by its summaries
+    is re-read and analysed with the same declared model (closure.json/.md, plots);
+    the periods table is not changed.
 
     Reads every DIRECTORY/*.calibrated.{parquet,csv}, analyses each axis' residual
     of the model that run fitted (the calibrated series is scale*(raw - trend)),
@@ -412,6 +416,26 @@ def diagnose(
     from accal.pipeline import diagnose_dir, write_closure_reports
 
     out = out or directory
+    if any(directory.glob("periods.*")):  # an accal demod output directory
+        from accal.pipeline_demod import diagnose_demod_dir
+
+        results = diagnose_demod_dir(directory, out, alpha=alpha)
+        if not results:
+            _err(f"{directory}: no accal demod summary naming a run file")
+            sys.exit(1)
+        for src, entry, msg in results:
+            if entry is None:
+                _err(msg)
+            elif not quiet:
+                found = [e["name"] for e in entry["effects"]]
+                found += ["unexplained"] * len(entry["unexplained"])
+                click.echo(
+                    f"{src.name}: {', '.join(found) or 'nothing found'}; RMS "
+                    f"{entry['rms_before']:.3g} -> {entry['rms_after']:.3g} m/s^2"
+                )
+        if not quiet:
+            click.echo(f"reports: {out / 'closure.json'}, {out / 'closure.md'}", err=True)
+        sys.exit(1 if any(e is None for _, e, _ in results) else 0)
     outcomes = diagnose_dir(
         directory, out, aux=aux, alpha=alpha, progress=_progress(quiet, "diagnose")
     )

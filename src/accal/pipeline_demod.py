@@ -1238,3 +1238,51 @@ def write_simulated_gap(out: Path, **params: Any) -> tuple[Path, Path]:
             w_run.write(data)
             w_truth.write(truth)
     return out, truth_path
+
+
+def diagnose_demod_dir(
+    directory: Path, out_dir: Path, *, alpha: float = 0.01
+) -> list[tuple[Path, dict[str, Any] | None, str]]:
+    """Close the loop on the runs of an earlier ``accal demod`` output directory.
+
+    Each ``summary.json``/``<stem>.summary.json`` names its run file and options;
+    the run is re-read (it must still exist) and analysed with the same declared
+    model.  The periods table is not changed (re-run ``demod --close-loop`` for
+    that); ``closure.json``/``closure.md`` and plots go to ``out_dir``.
+
+    Returns
+    -------
+    list of (Path, dict or None, str)
+        Per run: its path, its ``closure.json`` entry (None on failure) and a
+        one-line error message (empty on success).
+    """
+    directory, out_dir = Path(directory), Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    results: list[tuple[Path, dict[str, Any] | None, str]] = []
+    for sp in sorted(directory.glob("*summary.json")):
+        try:
+            s = json.loads(sp.read_text())
+            src = Path(s["source"])
+            o = s["options"]
+        except (OSError, ValueError, KeyError, TypeError):
+            continue  # not a demod summary
+        try:
+            if not src.exists():
+                raise ValidationError(f"{src}: run file of {sp.name} not found (moved?)")
+            opts = DemodOptions(
+                tau=float(o["tau"]),
+                mask=float(o["mask"]),
+                signal_model=o.get("signal_model", "mean"),
+                bias_model=o.get("bias_model", "affine"),
+                close_loop=True,
+                alpha=alpha,
+            )
+            entry, _, _ = close_run(src, opts, out_dir)
+            write_demod_closure(out_dir, src.name, entry)
+            results.append((src, entry, ""))
+        except AccalError as exc:
+            msg = str(exc).replace("\n", " ")
+            if getattr(exc, "path", None) is None and not msg.startswith(str(src)):
+                msg = f"{src}: {msg}"
+            results.append((src, None, msg))
+    return results
