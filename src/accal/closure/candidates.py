@@ -460,11 +460,14 @@ def auxiliary(ctx: Context) -> list[Proposal]:
     """
     out: list[Proposal] = []
     t_all = ctx.t_all
+    t_u = ctx.t
     # filter and shift on the distinct sample times (channels share them)
-    tu, first, inverse = np.unique(t_all, return_index=True, return_inverse=True)
+    tu, first = np.unique(t_all, return_index=True)
     max_lag = float(ctx.options.get("max_lag", min(ctx.span / 20.0, 3600.0)))
     lags = np.linspace(0.0, max_lag, int(ctx.options.get("n_lags", 31)))
     taus = tuple(ctx.options.get("aux_taus", (0.0, 300.0, 1000.0, 3000.0)))
+    masks = ctx.channel_masks()
+    z = np.empty((lags.size, t_u.size))  # lagged regressors on the used samples, row by row
     for name, x in ctx.aux.items():
         if ctx.has_label(f"aux:{name}"):
             continue
@@ -474,17 +477,16 @@ def auxiliary(ctx: Context) -> list[Proposal]:
             continue
         xf = np.interp(tu, tu[good], x[good])
         best = (-1.0, 0.0, 0.0)
-        cols = {}
         for tc in taus:
             h = _first_order(xf, tu, tc)
-            zs = np.column_stack([np.interp(tu - lag, tu, h) for lag in lags])[inverse]
-            pw = ctx.joint_power(zs[ctx.use])
+            for j, lag in enumerate(lags):
+                z[j] = np.interp(t_u - lag, tu, h)
+            pw = sum(_row_power(ctx, z * m if len(masks) > 1 else z) for m in masks)
             j = int(np.argmax(pw))
             if pw[j] > best[0]:
                 best = (float(pw[j]), float(lags[j]), float(tc))
-                cols[(best[1], best[2])] = zs[:, j]
         _, lag, tc = best
-        col = cols[(lag, tc)]
+        col = np.interp(t_all - lag, tu, _first_order(xf, tu, tc))
         col = col - col[ctx.use].mean()
         cc, labs, axes = ctx.split(col[:, None], (f"aux:{name}",))
         out.append(
@@ -500,6 +502,14 @@ def auxiliary(ctx: Context) -> list[Proposal]:
             )
         )
     return out
+
+
+def _row_power(ctx: Context, z: NDArray[np.float64]) -> NDArray[np.float64]:
+    """:meth:`Context.power` of the rows of ``z`` (m, n) (used samples)."""
+    z2 = np.einsum("ij,ij->i", z, z)
+    nrm = z2 - ctx.basis.captured(z.T)
+    num = (z @ ctx.residual) ** 2
+    return np.where(nrm > 1e-9 * np.maximum(z2, 1e-300), num / np.maximum(nrm, 1e-300), 0.0)
 
 
 # --------------------------------------------------------------------------------------

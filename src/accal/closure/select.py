@@ -754,6 +754,7 @@ _PAIR_FACTOR = 10.0  # pairs are tested at alpha/10: per-step FWER <= 1.1 alpha
 _PAIR_ANCHORS = 3
 _PAIR_GATE = 0.2  # a masked proposal must be suggestive: corrected p < 0.2
 _REFINE_DW = 4.0
+_NO_SEARCH = ("quadratic_drift", "cubic_drift")  # nothing to refine
 
 
 @dataclass
@@ -790,15 +791,24 @@ class _Search:
     unexplained: list[Effect] = field(default_factory=list)
     notes: dict[tuple, dict[str, Any]] = field(default_factory=dict)
     excluded: list[float] = field(default_factory=list)
+    _states: dict = field(default_factory=dict, repr=False)
 
     # ------------------------------------------------------------------
     def state(self, found: Sequence[_Found]) -> tuple[Basis, FitResult, NDArray[np.float64]]:
-        """Basis, fit and leverage spectrum of the base plus the effects ``found``."""
+        """Basis, fit and leverage spectrum of the base plus the effects ``found`` (cached)."""
+        key = tuple((f.prop.name, f.prop.channel, f.prop.labels, _key(f.prop)) for f in found)
+        hit = self._states.get(key)
+        if hit is not None:
+            return hit
         if found:
             basis = self.basis0.extend(np.column_stack([f.prop.columns[self.use] for f in found]))
         else:
             basis = self.basis0
-        return basis, basis.fit(self.y_u), self.leverage(basis)
+        out = (basis, basis.fit(self.y_u), self.leverage(basis))
+        if len(self._states) >= 24:
+            self._states.pop(next(iter(self._states)))
+        self._states[key] = out
+        return out
 
     def leverage(self, basis: Basis) -> NDArray[np.float64]:
         """Leverage spectrum with the measured suppression of the base (``beta``)."""
@@ -986,6 +996,8 @@ class _Search:
         changed = False
         for i in range(len(self.found)):
             cur = self.found[i]
+            if cur.prop.name in _NO_SEARCH:
+                continue
             rest = [f for j, f in enumerate(self.found) if j != i]
             b_r, f_r, l_r = self.state(rest)
             ctx = self.context(rest, b_r, f_r, l_r)
