@@ -432,38 +432,11 @@ def fit_trend(
     ValidationError
         Bad method/order, mismatched lengths, or too few usable samples.
     """
-    check_option("method", method, tuple(METHODS))
     t = np.asarray(t, dtype=np.float64)
     a = np.asarray(a, dtype=np.float64)
     if t.shape != a.shape or t.ndim != 1:
         raise ValidationError(f"t and a must be 1-D of equal length, got {t.shape} and {a.shape}")
-    use = np.isfinite(a) & np.isfinite(t)
-    if valid is not None:
-        valid = np.asarray(valid, dtype=bool)
-        if valid.shape != t.shape:
-            raise ValidationError(f"valid must have shape {t.shape}, got {valid.shape}")
-        use &= valid
-    tu = t[use]
-    au = a[use]
-    if tu.size < order + 2:
-        raise ValidationError(
-            f"only {tu.size} usable samples; an order-{order} trend needs at least {order + 2}"
-        )
-    if np.any(np.diff(tu) <= 0):
-        raise ValidationError("sample times must be strictly increasing")
-    g = METHODS[method](tu, order)
-    coef = g @ au
-    resid = au - np.polynomial.polynomial.polyval(tu - tu[0], coef)
-    cov = linear_estimator_covariance(tu, resid, g, order=order)
-    return TrendFit(
-        method=method,
-        order=order,
-        t0=float(tu[0]),
-        coef=coef,
-        cov=cov,
-        n_used=int(tu.size),
-        rms=float(np.sqrt(np.mean(resid**2))),
-    )
+    return fit_trends(t, a[:, None], method=method, order=order, valid=valid)[0]
 
 
 def fit_trends(
@@ -492,10 +465,47 @@ def fit_trends(
             raise ValidationError(f"valid must have shape {t.shape}, got {valid.shape}")
         use &= valid
     finite = np.isfinite(a)
-    if not finite[use].all():
-        return [
-            fit_trend(t, a[:, j], method=method, order=order, valid=use) for j in range(a.shape[1])
-        ]
+    if finite[use].all():
+        return _fit_columns(t, a, use, method, order)
+    # columns with their own non-finite samples: each its own mask
+    return [
+        _fit_columns(t, a[:, j : j + 1], use & finite[:, j], method, order)[0]
+        for j in range(a.shape[1])
+    ]
+
+
+def _fit_columns(
+    t: NDArray[np.float64],
+    a: NDArray[np.float64],
+    use: NDArray[np.bool_],
+    method: str,
+    order: int,
+) -> list[TrendFit]:
+    """Trend fits of the columns of ``a`` on the samples ``use`` (finite there)."""
+    tu = t[use]
+    au = a[use]
+    if tu.size < order + 2:
+        raise ValidationError(
+            f"only {tu.size} usable samples; an order-{order} trend needs at least {order + 2}"
+        )
+    if np.any(np.diff(tu) <= 0):
+        raise ValidationError("sample times must be strictly increasing")
+    g = METHODS[method](tu, order)
+    coef = g @ au  # (p, k)
+    resid = au - np.vander(tu - tu[0], order + 1, increasing=True) @ coef
+    covs = _CovarianceKernel(tu, g, order).covariances(np.ascontiguousarray(resid.T))
+    return [
+        TrendFit(
+            method=method,
+            order=order,
+            t0=float(tu[0]),
+            coef=coef[:, j].copy(),
+            cov=covs[j],
+            n_used=int(tu.size),
+            rms=float(np.sqrt(np.mean(resid[:, j] ** 2))),
+        )
+        for j in range(a.shape[1])
+    ]
     tu = t[use]
     au = a[use]
     if tu.size < order + 2:
