@@ -24,7 +24,9 @@
 5. finally test a generic smooth basis (piecewise-linear, ``catchall_knots`` knots) on
    top of the final model against the white + 1/f noise model fitted above twice the
    basis' frequencies and extrapolated down (the residual itself cannot tell slow
-   structure from slow noise): if it is significant, whatever it captures is
+   structure from slow noise).  If it is significant, several effects may be
+   masking one another: the best member of every family is added at once, refined
+   and backward-eliminated (:meth:`_Search.backward`); what is still left is
    reported as ``unexplained`` with its dominant frequency, never as a named effect.
 
 The base may be block-diagonal (:class:`~accal.closure.basis.BlockBase`, e.g. the
@@ -582,6 +584,25 @@ def close_loop(
         if not search.step() or search.model_key() in seen:
             break
         seen.add(search.model_key())
+
+    def smooth_test(state):
+        """The catch-all test of the model ``state`` (None if disabled or nothing left)."""
+        if not catchall_knots or catchall_knots < 3:
+            return None, None
+        b, f, lv = state
+        zt = b.complement(_split_cols(_catchall(t_u, catchall_knots), chan_u, names))
+        if zt.shape[1] == 0:
+            return None, None
+        nz = estimate_psd(grid, f.resid, lv)
+        f_lo = 2.0 * catchall_knots / (grid.size * grid.step)
+        model, _, nu = white_plus_flicker(grid, nz, f_lo, return_dof=True)
+        # the extrapolation only below f_lo; above it the estimate is reliable
+        model = np.where(grid.freqs >= f_lo, nz.psd, model)
+        return wald_test(grid, f.resid, zt, lv, psd=model, psd_dof=nu), zt
+
+    w_smooth, zt_smooth = smooth_test(search.state(search.found))
+    if w_smooth is not None and w_smooth.pvalue < alpha and search.backward(max_effects):
+        w_smooth, zt_smooth = smooth_test(search.state(search.found))
     found = [
         (f.prop, p, {**f.info, "p_accept": f.p_adj})
         for f, p in zip(search.found, search.final_p(), strict=True)
@@ -637,17 +658,8 @@ def close_loop(
         arr[~ident] = np.nan
 
     # ------------------------------------------------------------------ unexplained
-    if catchall_knots and catchall_knots >= 3:
-        cols = _split_cols(_catchall(t_u, catchall_knots), chan_u, names)
-        zt = basis.complement(cols)
-        if zt.shape[1]:
-            f_lo = 2.0 * catchall_knots / (grid.size * grid.step)
-            model, _, nu = white_plus_flicker(grid, noise, f_lo, return_dof=True)
-            # the extrapolation only below f_lo; above it the estimate is reliable
-            model = np.where(grid.freqs >= f_lo, noise.psd, model)
-            w = wald_test(grid, fit.resid, zt, lev, psd=model, psd_dof=nu)
-            if w.pvalue < alpha:
-                unexplained.append(_describe_smooth(grid, t_u, zt @ w.gamma, w))
+    if w_smooth is not None and w_smooth.pvalue < alpha:
+        unexplained.append(_describe_smooth(grid, t_u, zt_smooth @ w_smooth.gamma, w_smooth))
 
     coef = np.concatenate([fit.beta, fit.gamma])
     eff_cols = (
@@ -1036,6 +1048,62 @@ class _Search:
     def model_key(self) -> frozenset:
         """The current set of effects (to stop when a model comes back)."""
         return frozenset((f.prop.name, f.prop.channel, _key(f.prop)) for f in self.found)
+
+    def backward(self, max_effects: int) -> bool:
+        """Effects that mask one another: start from every family's best member.
+
+        Run when forward selection leaves structure ``unexplained``.  The best member
+        of every family (given the effects found) is added at once, their lags,
+        epochs and frequencies are refined given each other, and backward
+        elimination keeps those significant given all the others (periodic and
+        auxiliary survivors must also pass the consistency check).  Kept only if a
+        new effect survives; otherwise the forward result stands.
+        """
+        before = list(self.found)
+        n_removed, n_unexpl, excluded = (
+            len(self.removed),
+            len(self.unexplained),
+            list(self.excluded),
+        )
+        basis, fit, lev = self.state(before)
+        ctx = self.context(before, basis, fit, lev)
+        trial = list(before)
+        for prop, bi in self.propose(ctx):
+            b, *_ = self.state(trial)
+            if b.complement(prop.columns[self.use]).shape[1] == 0:
+                continue
+            trial.append(_Found(_independent(b, prop, self.use), 1.0, {"stage": "backward"}, bi))
+        if len(trial) == len(before):
+            return False
+        self.found = trial
+        self._settle(protect_last=False)
+        while self.found:  # elimination stops at one effect: test that one too
+            p = self.final_p()
+            worst = int(np.argmax(p))
+            if p[worst] < self.alpha:
+                break
+            self._drop(worst)
+        for f in list(self.found):
+            if f in before or not f.prop.check_consistency:
+                continue
+            b_o, *_ = self.state([g for g in self.found if g is not f])
+            if not self._consistent(b_o, f.prop, 1.0, f.info):
+                self.found.remove(f)
+        if len(self.found) > max_effects:
+            p = self.final_p()
+            keep = sorted(np.argsort(p)[:max_effects])
+            self.found = [self.found[i] for i in keep]
+        before_keys = {(f.prop.name, f.prop.channel) for f in before}
+        if not any((f.prop.name, f.prop.channel) not in before_keys for f in self.found):
+            self.found = before
+            del self.removed[n_removed:]
+            del self.unexplained[n_unexpl:]
+            self.excluded = excluded
+            return False
+        # report as "removed" only forward effects the joint fit made redundant
+        ids = {id(f) for f in before}
+        self.removed[n_removed:] = [f for f in self.removed[n_removed:] if id(f) in ids]
+        return True
 
     def final_p(self) -> list[float]:
         """Corrected p-value of every effect given all the others (the reported one)."""
