@@ -193,6 +193,9 @@ def test_two_effects_with_orbit_candidate(sim):
     assert abs(aux.coefficient - 3e-9) < 3 * aux.sigma  # measured 2.998e-9 ± 1.7e-12
     assert aux.lag == 600.0
     assert abs(step.coefficient - 1.5e-9) < 3 * step.sigma  # measured 1.507e-9 ± 4.9e-12
+    parts = res.effect_models()
+    assert [e.name for e, _ in parts] == _names(res)
+    np.testing.assert_allclose(sum(m for _, m in parts), res.effects_model(), rtol=1e-12, atol=0)
     err = _err(res, d)
     # measured: drift error 7.6e-14 -> 1.5e-16 (the coupling's mean stays in the bias)
     assert abs(err["drift"]["after"]) < 0.05 * abs(err["drift"]["before"])

@@ -681,8 +681,9 @@ class ResidualStats:
         Frequencies of the Welch PSD [Hz].
     psd : ndarray
         One-sided Welch PSD averaged over continuous segments [(m/s²)²/Hz]; when
-        no gap-free segment is long enough, the binned periodogram of the gapped
-        residual on its nominal grid (first entry: frequency 0, PSD 0).
+        no gap-free segment reaches ``nperseg``, Welch with the longest power-of-two
+        window that fits one (≥ 256 samples), else the binned periodogram of the
+        gapped residual on its nominal grid (first entry: frequency 0, PSD 0).
     segment_edges : ndarray
         Start times of the segments used for ``segment_means`` [s].
     segment_means : ndarray
@@ -787,6 +788,12 @@ def characterise(
                 tot += 1
         if tot:
             psd = psd / tot
+    if freq.size == 0 and t.size > 16 and (chan is None or int(np.max(chan, initial=0)) == 0):
+        # no gap-free stretch of span/8: Welch with the longest window that fits
+        segs = continuous_segments(t, step)
+        longest = max((sl.stop - sl.start for sl in segs), default=0)
+        if longest >= 256:
+            freq, psd = welch_segments(t, r, int(2 ** np.floor(np.log2(longest))))
     if freq.size == 0 and t.size > 16:
         # no gap-free stretch long enough for Welch (e.g. the rests of a rotating
         # platform): the gap-tolerant binned periodogram on the nominal grid

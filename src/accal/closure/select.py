@@ -268,6 +268,23 @@ class ClosureResult:
         """The effects alone (what to subtract to correct the data) on all samples [m/s²]."""
         return self.effect_columns @ self.coef[self.n_base :]
 
+    def effect_models(self) -> list[tuple[Effect, NDArray[np.float64]]]:
+        """Each effect with its fitted contribution on all samples [m/s²] (sums to
+        :meth:`effects_model`)."""
+        out = []
+        j = 0
+        for e in self.effects:
+            q = int(e.details.get("n_columns", 1))
+            out.append(
+                (
+                    e,
+                    self.effect_columns[:, j : j + q]
+                    @ self.coef[self.n_base + j : self.n_base + j + q],
+                )
+            )
+            j += q
+        return out
+
     def base_coefficient(self, name: str) -> BaseCoefficient:
         """The :class:`BaseCoefficient` called ``name``."""
         for b in self.base:
