@@ -320,8 +320,14 @@ def test_table_time_utc(tmp_path):
         ("gps_time\n1\n2\n", "no numeric channel besides 'gps_time'; columns are gps_time", None),
         ("gps_time,x\n1,2\n,3\n", "gps_time: missing or non-finite time", 3),
         ("gps_time,x\n", "header but no data rows", 2),
+        # found by the housekeeping fuzz property (properties/test_fuzz_readers.py)
+        ("gps_time,x\n1,2\n1e308,3\n", "gps_time 1e\\+308 s is outside 1980-01-06", 3),
+        ("time_utc,x\n2003-09-14T00:00:00Z,2\n2600-01-01T00:00:00Z,3\n",
+         "time_utc 2600-01-01T00:00:00 is outside 1980-01-06 ... 2100-01-01", 3),
+        ("gps_time,x,x\n1,2,3\n", r"duplicated column name\(s\) x", 1),
+        ('# units: {"x": 5}\ngps_time,x\n1,2\n', "unit of 'x' is a number, not a string", 1),
     ],
-)
+)  # fmt: skip
 def test_table_bad(tmp_path, text, match, line):
     p = tmp_path / "bad.csv"
     p.write_text(text)

@@ -9,7 +9,8 @@ import pytest
 import accal.io as aio
 from accal.errors import FormatError, ValidationError
 from accal.io.grace_l1b import read_grace_acc1b
-from accal.io.tables import read_table_series, sniff_table, write_series
+from accal.io.rawlog import open_rawlog, read_rawlog
+from accal.io.tables import open_table, read_table_series, sniff_table, write_series
 from accal.io.writers import write_table
 from accal.series import AccSeries
 
@@ -187,3 +188,171 @@ def test_parquet_holding_grace_meta_is_a_table(samples, tmp_path):
     p = write_series(s, tmp_path / "a.parquet")
     assert aio.detect_format(p) == "table"
     assert aio.detect_format(write_series(s, tmp_path / "a.csv")) == "table"
+
+
+# ---------------------------------------------------------------- bad input found by fuzzing
+# (properties/test_fuzz_readers.py; T2-T7 are pinned there)
+
+
+def _w(tmp_path: Path, name: str, content: bytes) -> Path:
+    p = tmp_path / name
+    p.write_bytes(content)
+    return p
+
+
+def _stream(path: Path, rows: int = 2) -> list:
+    return list(open_table(path, rows=rows))
+
+
+RUN_CSV = b"time,m_y,m_z,theta\n" + b"".join(b"%d,1e-7,2e-7,0.1\n" % i for i in range(200))
+
+
+@pytest.mark.parametrize(
+    ("content", "match"),
+    [
+        (gzip.compress(RUN_CSV)[:150], r"corrupt gzip stream \(truncated"),
+        (gzip.compress(RUN_CSV)[:10] + b"garbage" * 10, "corrupt gzip stream .*invalid block type"),
+        (gzip.compress(RUN_CSV) + b"junk", r"corrupt gzip stream \(garbage after the compressed"),
+    ],
+    ids=["truncated", "deflate_garbage", "trailing_garbage"],
+)
+def test_stream_corrupt_gzip(tmp_path, content, match):
+    # EOFError, zlib.error and gzip.BadGzipFile escaped the chunked reader (accal demod)
+    p = _w(tmp_path, "run.csv.gz", content)
+    with pytest.raises(FormatError, match=match) as e:
+        _stream(p)
+    assert str(e.value).startswith(f"{p}: ")
+    with pytest.raises(FormatError, match=match):
+        list(open_rawlog(p, rows=50))
+    with pytest.raises(FormatError, match="corrupt gzip stream"):  # the whole-file readers
+        read_rawlog(p)
+
+
+def test_stream_gzip_padding_is_fine(tmp_path):
+    p = _w(tmp_path, "run.csv.gz", gzip.compress(RUN_CSV) + b"\x00" * 9)
+    assert sum(t.num_rows for _, t in _stream(p, 64)) == 200
+
+
+def test_duplicated_columns_everywhere(tmp_path):
+    # pyarrow's KeyError ('Field "m_y" exists 2 times in schema') escaped every reader
+    p = _w(tmp_path, "dup.csv", b"time,m_y,m_z,theta,m_y\n1,2,3,4,5\n2,3,4,5,6\n")
+    for read in (open_table, lambda q: open_rawlog(q, rows=1), read_rawlog, read_table_series):
+        with pytest.raises(FormatError, match=r"duplicated column name\(s\) m_y$") as e:
+            read(p)
+        assert e.value.line == 1
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    q = tmp_path / "dup.parquet"
+    pq.write_table(pa.Table.from_arrays([pa.array([1.0])] * 3, names=["time", "m_y", "m_y"]), q)
+    for read in (open_table, read_rawlog, read_table_series):
+        with pytest.raises(FormatError, match=r"duplicated column name\(s\) m_y$") as e:
+            read(q)
+        assert e.value.line is None
+
+
+def test_units_must_be_strings(tmp_path):
+    # a number went into RawlogStream.units["acc"] and AccSeries.units
+    p = _w(tmp_path, "u.csv", b'# units: {"m_y": 5}\ntime,m_y,m_z,theta\n1,2,3,4\n2,3,4,5\n')
+    for read in (open_table, open_rawlog, read_rawlog):
+        with pytest.raises(FormatError, match="comment 'units:': unit of 'm_y' is a number"):
+            read(p)
+    q = write_table({"gps_time": [1.0, 2.0], "lin_accl_x": [1.0, 2.0]}, tmp_path / "u.parquet")
+    import pyarrow.parquet as pq
+
+    t = pq.read_table(q)
+    pq.write_table(t.replace_schema_metadata({b"accal.units": b'{"lin_accl_x": null}'}), q)
+    for read in (open_table, read_table_series):
+        with pytest.raises(FormatError, match="accal metadata: unit of 'lin_accl_x' is null"):
+            read(q)
+
+
+def test_column_name_not_utf8(tmp_path):
+    # a Parquet field name that is not UTF-8 raised UnicodeDecodeError from pyarrow
+    import io
+
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    buf = io.BytesIO()
+    t = pa.table({"gps_time": [1.0, 2.0], "lin_accl_x": [1.0, 2.0], "zzzz": [1.0, 2.0]})
+    pq.write_table(t, buf, store_schema=False)
+    p = _w(tmp_path, "n.parquet", buf.getvalue().replace(b"zzzz", b"\xff\xfezz"))
+    with pytest.raises(FormatError, match="a column name is not UTF-8"):
+        read_table_series(p)
+    with pytest.raises(FormatError, match="corrupt Parquet file"):
+        open_table(p)
+
+
+def test_time_utc_beyond_nanosecond_range(tmp_path):
+    # 2600-01-01 wrapped around int64 nanoseconds into 2015 and was accepted
+    p = _w(
+        tmp_path, "u.csv", b"time_utc,lin_accl_x\n2003-09-14T00:00:00Z,1\n2600-01-01T00:00:00Z,2\n"
+    )
+    with pytest.raises(FormatError, match="time_utc 2600-01-01T00:00:00 is outside 1980") as e:
+        read_table_series(p)
+    assert e.value.line == 3
+
+
+def test_stream_blank_first_line(tmp_path):
+    p = _w(tmp_path, "b.csv", b"    \ntime,m_y,m_z,theta\n1,2,3,4\n")
+    with pytest.raises(FormatError, match=r"blank first line \(expected the CSV header\)") as e:
+        open_table(p)
+    assert e.value.line == 1
+    with pytest.raises(FormatError, match="empty file"):
+        open_table(_w(tmp_path, "e.csv", b"  \n\n \n"))
+
+
+def test_stream_parquet_short_column_is_not_silently_truncated(tmp_path):
+    # Found by the stream fuzz property: one flipped byte in a data page header (its
+    # num_values, 120 -> 56) made pyarrow's iter_batches(batch_size=1) stop after 56
+    # rows without an error, so `accal demod` would have used half the file.
+    import io
+
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    n = 120
+    t = pa.table({"time": np.arange(n, dtype=float), "m_y": np.zeros(n), "m_z": np.zeros(n),
+                  "theta": np.zeros(n)})  # fmt: skip
+    buf = io.BytesIO()
+    pq.write_table(t, buf, compression="NONE", use_dictionary=False, write_statistics=False)
+    raw = buf.getvalue()
+    # compact Thrift: data_page_header (field 5, struct ","), num_values (i32) zigzag 240
+    head = b",\x15\xf0\x01"
+    assert raw.count(head) == 4, "page header layout changed: update this test"
+    p = _w(tmp_path, "short.parquet", raw.replace(head, b",\x15\xf0\x00", 1))
+    with pytest.raises(FormatError, match=r"corrupt Parquet file \(.*"):
+        read_rawlog(p)
+    with pytest.raises(FormatError, match=r"read 56 rows, the footer says 120"):
+        list(open_table(p, rows=1))
+    with pytest.raises(FormatError, match="corrupt Parquet file"):
+        list(open_rawlog(p, rows=1))
+
+
+def test_stray_quote_does_not_swallow_the_rest_of_the_file(tmp_path):
+    # Found by the stream fuzz property (whole file vs chunks): pyarrow read from a
+    # lone '"' to the end of the file as one text value, so read_table_series gave
+    # 1 sample of 3 (the text column ignored as non-numeric) without an error.
+    text = b'gps_time,lin_accl_x,note\n116769600,1e-7,"\n116769601,2e-7,a\n116769602,3e-7,b\n'
+    p = _w(tmp_path, "q.csv", text)
+    match = r"column 'note': a quoted value runs over several lines \(a stray '\"'\?\)"
+    with pytest.raises(FormatError, match=match) as e:
+        read_table_series(p)
+    assert e.value.line == 2
+    from accal.io.housekeeping import read_housekeeping
+
+    with pytest.raises(FormatError, match=match):
+        read_housekeeping(p)
+    for rows in (1, 2, 100):
+        with pytest.raises(FormatError, match=match) as e:
+            _stream(p, rows)
+        assert e.value.line == 2
+    run = _w(tmp_path, "r.csv", b'time,m_y,m_z,theta\n1,2,3,4\n2,3,4,"5\n3,4,5,6\n')
+    for read in (read_rawlog, lambda q: list(open_rawlog(q, rows=2))):
+        with pytest.raises(FormatError, match="column 'theta': a quoted value runs") as e:
+            read(run)
+        assert e.value.line == 3
+    # a quoted value on one line (with the separator inside) is fine
+    ok = _w(tmp_path, "ok.csv", b'gps_time,lin_accl_x,note\n1,1e-7,"a,b"\n2,2e-7,c\n')
+    assert len(read_table_series(ok)) == 2

@@ -74,7 +74,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from accal.errors import AccalError, FormatError, UnsupportedFormatError, ValidationError
-from accal.io._common import PARQUET_MAGIC, check_binary, read_bytes
+from accal.io._common import PARQUET_MAGIC, check_binary, check_gps_time, read_bytes
 from accal.io.grace_l1b import (
     _GRACE_END_RE,
     _GRACE_KEY_RE,
@@ -850,10 +850,12 @@ def _to_si(values: NDArray[np.float64], unit: str) -> tuple[NDArray[np.float64],
 
 
 def _read_table(raw: bytes, path: Path) -> Housekeeping:
-    import pyarrow as pa
-
-    from accal.io.tables import numeric_column, read_csv_table, read_parquet_table
-    from accal.timescale import utc_to_gps
+    from accal.io.tables import (
+        numeric_column,
+        read_csv_table,
+        read_parquet_table,
+        utc_column_to_gps,
+    )
 
     reader = read_parquet_table if raw.startswith(PARQUET_MAGIC) else read_csv_table
     try:
@@ -872,21 +874,17 @@ def _read_table(raw: bytes, path: Path) -> Housekeeping:
             f"columns are {_listing(names)}",
             path,
         )
+    line_of = (lambda i: first_line + i) if first_line else None
     tcol = table.column(tname)
     if tname == "time_utc":
-        if tcol.null_count:
-            raise FormatError("time_utc has empty values", path)
-        vals = tcol.to_numpy() if pa.types.is_timestamp(tcol.type) else np.asarray(tcol.to_pylist())
-        try:
-            time = utc_to_gps(vals)
-        except (ValueError, TypeError) as exc:
-            raise FormatError(f"time_utc: {str(exc)[:200]}", path) from None
+        time = utc_column_to_gps(tcol, tname, path, line_of)
     else:
         time = numeric_column(tcol, tname, path).astype(np.float64)
     bad = np.flatnonzero(~np.isfinite(time))
     if bad.size:
         line = first_line + int(bad[0]) if first_line else None
         raise FormatError(f"{tname}: missing or non-finite time", path, line)
+    check_gps_time(time, path, line_of, name=tname, unit="row")
     units = units if isinstance(units, dict) else {}
     channels: dict[str, NDArray[np.float64]] = {}
     col_units = {"time": UNITS["time"]}
@@ -949,7 +947,8 @@ def read_housekeeping(path: str | Path) -> Housekeeping:
     FormatError
         Missing, unreadable, empty, truncated or corrupt file, header without data,
         bad records (``.line`` is the 1-based line where known), a table without a
-        time column or channels.
+        time column or channels, with duplicated column names or with times outside
+        1980-01-06 ... 2100-01-01.
     UnsupportedFormatError
         A recognised file of another kind: an ACC1B/ACT1B accelerometer file,
         binary AHK1B, a GRACE-FO header with an unknown ``prod_flag`` layout.

@@ -18,10 +18,13 @@ history and meta (``accal.meta`` / ``# meta:``), so reading them gives back the 
 
 from __future__ import annotations
 
+import contextlib
+import gzip
 import io
 import json
 import re
-from collections.abc import Iterator
+import zlib
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +36,7 @@ from accal.io._common import (
     arrow_to_numpy,
     bits_from_strings,
     check_binary,
+    check_gps_time,
     peek,
     read_bytes,
     tidy,
@@ -52,6 +56,20 @@ VALID_COLUMN, FLAG_COLUMN, QUALITY_COLUMNS = "valid", "flag_val", ("quality", "q
 META_KEY = "accal_series"
 #: File-name patterns that name the satellite when the file does not.
 SATELLITE_PATTERNS = ((re.compile(r"(?:^|[_/])SW_(?:OPER_\w*?_)?([ABC])_"), "Swarm-{}"),)
+#: Deepest nesting of lists/objects accepted in the JSON metadata (deeper is corrupt,
+#: and would overflow the stack of whatever serialises ``meta`` again).
+MAX_META_DEPTH = 64
+#: Largest value of a ``quality``/``qualflg``/``flag_val`` bitmask (stored as uint32).
+FLAG_MAX = 0xFFFFFFFF
+#: Fields of the ``accal_series`` metadata and the JSON type each must have.
+SERIES_META_TYPES = {
+    "satellite": (str, "a string"),
+    "frame": (str, "a string"),
+    "history": (list, "a list of strings"),
+    "units": (dict, "an object of strings"),
+    "aux_dtypes": (dict, "an object of strings"),
+    "meta": (dict, "an object"),
+}
 
 _FMTS = ("parquet", "csv")
 
@@ -62,6 +80,11 @@ def one_line(text: str, limit: int = 200) -> str:
     if not text.isprintable():
         text = repr(text)[1:-1]
     return text[:limit]
+
+
+def _exc_text(exc: BaseException, limit: int = 200) -> str:
+    """The first line of an exception's message (its type if empty), for a one-line error."""
+    return one_line((str(exc).splitlines() or [type(exc).__name__])[0], limit)
 
 
 def column_list(names: Any, limit: int = 160) -> str:
@@ -107,15 +130,137 @@ def _guess_satellite(path: Path) -> str:
     return ""
 
 
+def _too_deep(obj: Any, limit: int) -> bool:
+    """True if the JSON value ``obj`` nests lists/objects more than ``limit`` levels deep."""
+    stack = [(obj, 1)]
+    while stack:
+        value, depth = stack.pop()
+        if isinstance(value, dict):
+            children: Any = value.values()
+        elif isinstance(value, list):
+            children = value
+        else:
+            continue
+        if depth > limit:
+            return True
+        stack.extend((c, depth + 1) for c in children)
+    return False
+
+
 def _json_object(raw: bytes | str, path: Path, line: int | None, what: str) -> dict:
     """Parse metadata JSON that must be an object; FormatError otherwise."""
+    deep = False
     try:
         obj = json.loads(raw)
     except (json.JSONDecodeError, UnicodeDecodeError):
         raise FormatError(f"{what} is not valid JSON", path, line) from None
+    except RecursionError:
+        deep = True
+    if deep or _too_deep(obj, MAX_META_DEPTH):
+        raise FormatError(f"{what} is nested more than {MAX_META_DEPTH} levels deep", path, line)
     if not isinstance(obj, dict):
         raise FormatError(f"{what} is not a JSON object", path, line)
     return obj
+
+
+def _json_type(value: Any) -> str:
+    """The JSON name of the type of ``value``, for messages ("a number", "a list", ...)."""
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return "a boolean"
+    if isinstance(value, int | float):
+        return "a number"
+    if isinstance(value, str):
+        return "a string"
+    return "a list" if isinstance(value, list) else "an object"
+
+
+def _units_object(raw: bytes | str, path: Path, line: int | None, what: str) -> dict[str, str]:
+    """Parse a units JSON object (column name -> unit string); FormatError otherwise."""
+    units = _json_object(raw, path, line, what)
+    for k, v in units.items():
+        if not isinstance(v, str):
+            raise FormatError(
+                f"{what}: unit of {one_line(k, 40)!r} is {_json_type(v)}, not a string", path, line
+            )
+    return units
+
+
+def _column_names(schema: Any, path: Path) -> list[str]:
+    """The field names of an Arrow schema; FormatError if one is not UTF-8."""
+    try:
+        return list(schema.names)
+    except UnicodeDecodeError:
+        raise FormatError("corrupt Parquet file (a column name is not UTF-8)", path) from None
+
+
+def check_unique_names(names: list[str], path: Path, line: int | None = None) -> None:
+    """Raise FormatError if a column name occurs more than once.
+
+    Parameters
+    ----------
+    names : list of str
+        Column names in file order.
+    path : Path
+        The file (for the message).
+    line : int, optional
+        1-based line of the CSV header.
+
+    Raises
+    ------
+    FormatError
+        ``duplicated column name(s) ...`` (pyarrow cannot select such a column).
+    """
+    if len(set(names)) == len(names):
+        return
+    seen: set[str] = set()
+    dups: list[str] = []
+    for n in names:
+        if n in seen and n not in dups:
+            dups.append(n)
+        seen.add(n)
+    shown = column_list(d or "''" for d in dups)  # an empty name as ''
+    raise FormatError(f"duplicated column name(s) {shown}", path, line)
+
+
+def check_single_line_values(table: Any, path: Path, first_line: int) -> None:
+    """Raise FormatError if a CSV text value spans lines: a stray double quote.
+
+    pyarrow reads from an unmatched ``"`` to the next one, or to the end of the
+    buffer, as one value: the rows in between would silently vanish into a text
+    column (which accal then ignores as non-numeric).
+
+    Parameters
+    ----------
+    table : pyarrow.Table
+        A table parsed from CSV.
+    path : Path
+        The file (for the message).
+    first_line : int
+        1-based line of the table's first data row.
+
+    Raises
+    ------
+    FormatError
+        Naming the column and the line where the value starts.
+    """
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    for name, col in zip(table.column_names, table.columns, strict=True):
+        if not (pa.types.is_string(col.type) or pa.types.is_large_string(col.type)):
+            continue
+        for eol in ("\n", "\r"):
+            hit = pc.match_substring(col, eol)
+            if pc.any(hit).as_py():
+                row = int(pc.index(hit, True).as_py())
+                raise FormatError(
+                    f"column {one_line(name, 40)!r}: a quoted value runs over several lines "
+                    "(a stray '\"'?)",
+                    path,
+                    first_line + row,
+                )
 
 
 def _comment(line: bytes, path: Path, lineno: int, units: dict, meta: dict) -> None:
@@ -124,7 +269,12 @@ def _comment(line: bytes, path: Path, lineno: int, units: dict, meta: dict) -> N
     key, _, rest = text[1:].partition(":")
     key = key.strip()
     if key in ("units", "meta"):
-        obj = _json_object(rest, path, lineno, f"comment '{key}:'")
+        what = f"comment '{key}:'"
+        obj = (
+            _units_object(rest, path, lineno, what)
+            if key == "units"
+            else _json_object(rest, path, lineno, what)
+        )
         target = units if key == "units" else meta
         target.clear()
         target.update(obj)
@@ -189,12 +339,14 @@ def read_csv_table(raw: bytes, path: Path) -> tuple[Any, dict, dict, int]:
             ),
         )
     except (pa.ArrowException, ValueError) as exc:
-        msg = str(exc).splitlines()[0]
+        msg = _exc_text(exc)
         line = None
         m = re.search(r"Row #(\d+)", msg)
         if m:
             line = n_comment + int(m.group(1)) + 1
         raise FormatError(f"CSV: {msg[:200]}", path, line) from None
+    check_unique_names(table.column_names, path, n_comment + 1)
+    check_single_line_values(table, path, n_comment + 2)
     return table, units, meta, n_comment + 2
 
 
@@ -227,12 +379,16 @@ def read_parquet_table(raw: bytes, path: Path) -> tuple[Any, dict, dict, int]:
     try:
         table = pq.read_table(io.BytesIO(raw))
     except (pa.ArrowException, OSError, ValueError) as exc:
-        raise FormatError(
-            f"corrupt Parquet file ({str(exc).splitlines()[0][:200]})", path
-        ) from None
+        try:  # pyarrow refuses duplicated names with "Multiple matches for FieldRef"
+            names = pq.read_schema(io.BytesIO(raw)).names
+        except (pa.ArrowException, OSError, ValueError):  # incl. UnicodeDecodeError
+            names = []
+        check_unique_names(names, path)
+        raise FormatError(f"corrupt Parquet file ({_exc_text(exc)})", path) from None
     md = table.schema.metadata or {}
-    units = _json_object(md.get(b"accal.units", b"{}"), path, None, "accal metadata")
+    units = _units_object(md.get(b"accal.units", b"{}"), path, None, "accal metadata")
     meta = _json_object(md.get(b"accal.meta", b"{}"), path, None, "accal metadata")
+    check_unique_names(_column_names(table.schema, path), path)
     return table, units, meta, 0
 
 
@@ -253,6 +409,197 @@ def numeric_column(col: Any, name: str, path: Path) -> np.ndarray:
     if col.null_count:
         arr = np.asarray(col.cast(pa.float64()).fill_null(np.nan).to_numpy(), float)
     return arr
+
+
+#: UTC instants accepted in a ``time_utc`` column: the GPS epoch to 2100 (as
+#: :data:`accal.io._common.GPS_TIME_RANGE`).
+UTC_RANGE = (np.datetime64("1980-01-06T00:00:00", "s"), np.datetime64("2100-01-01T00:00:00", "s"))
+
+
+def utc_column_to_gps(
+    col: Any, name: str, path: Path, line_of: Callable[[int], int] | None = None
+) -> np.ndarray:
+    """GPS seconds of a UTC column: Arrow timestamps or ISO-8601 strings.
+
+    Parameters
+    ----------
+    col : pyarrow.ChunkedArray
+        The column (naive timestamps are UTC).
+    name : str
+        Its name, for messages.
+    path : Path
+        The file, for messages.
+    line_of : callable, optional
+        Row index -> 1-based file line (CSV); without it messages name the row.
+
+    Returns
+    -------
+    ndarray of float64
+        [s, GPS since 2000-01-01 12:00:00], converted by :func:`accal.timescale.utc_to_gps`.
+
+    Raises
+    ------
+    FormatError
+        Empty values, a timestamp outside 1980-01-06 ... 2100-01-01 (checked before
+        the conversion, whose int64 nanoseconds would wrap a year like 2600 into the
+        GPS era), values that are not ISO-8601 UTC.
+    """
+    import pyarrow as pa
+
+    if col.null_count:
+        raise FormatError(f"{name} has empty values", path)
+    if pa.types.is_timestamp(col.type):
+        vals = col.to_numpy()
+        bad = np.flatnonzero((vals < UTC_RANGE[0]) | (vals > UTC_RANGE[1]))
+        if bad.size:
+            i = int(bad[0])
+            raise _row_error(
+                f"{name} {vals[i]} is outside 1980-01-06 ... 2100-01-01", path, i, line_of
+            )
+    else:
+        vals = np.asarray(col.to_pylist())
+    try:
+        return utc_to_gps(vals)
+    except (ValueError, TypeError) as exc:
+        raise FormatError(f"{name}: {one_line(str(exc))}", path) from None
+
+
+def _row_error(msg: str, path: Path, row: int, line_of: Callable[[int], int] | None) -> FormatError:
+    """FormatError about data row ``row`` (0-based): its line (CSV) or ``row N:`` (Parquet)."""
+    if line_of is None:
+        return FormatError(f"row {row + 1}: {msg}", path)
+    return FormatError(msg, path, line_of(row))
+
+
+def _bitmask(
+    values: np.ndarray,
+    name: str,
+    path: Path,
+    line_of: Callable[[int], int] | None,
+    *,
+    allow_nan: bool = False,
+) -> np.ndarray:
+    """Check that a flag column holds integers 0 ... :data:`FLAG_MAX`; return it as uint32.
+
+    ``astype(np.uint32)`` alone would wrap a negative or too large value (1e30 -> 0,
+    a flagged sample would look valid).  With ``allow_nan`` NaN passes (as 0; the
+    caller decides what a missing flag means).
+
+    Raises
+    ------
+    FormatError
+        The first offending value, with its line (CSV) or row (Parquet).
+    """
+    if values.dtype.kind == "b":
+        return values.astype(np.uint32)
+    if values.dtype.kind in "iu":
+        bad = (values < 0) | (values > FLAG_MAX)
+    else:
+        with np.errstate(invalid="ignore"):
+            bad = ~((values >= 0) & (values <= FLAG_MAX) & (values == np.floor(values)))
+        if allow_nan:
+            bad &= ~np.isnan(values)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise _row_error(
+            f"column {name!r} must hold integers 0 ... {FLAG_MAX} (a bitmask), "
+            f"got {values[i].item()!r}",
+            path,
+            i,
+            line_of,
+        )
+    if allow_nan and values.dtype.kind == "f":
+        values = np.where(np.isnan(values), 0, values)
+    return values.astype(np.uint32)
+
+
+def _series_meta(fmeta: dict, path: Path) -> dict[str, Any] | None:
+    """The ``accal_series`` description in ``fmeta``, type-checked; None if there is none.
+
+    Fields that are null are dropped (the reader's defaults apply).
+
+    Raises
+    ------
+    FormatError
+        A field of the wrong JSON type (see :data:`SERIES_META_TYPES`).
+    """
+    sm = fmeta.get(META_KEY)
+    if not isinstance(sm, dict):
+        return None
+    out: dict[str, Any] = {}
+    for key, value in sm.items():
+        if value is None or key not in SERIES_META_TYPES:
+            continue
+        typ, expected = SERIES_META_TYPES[key]
+        got = _json_type(value)
+        if isinstance(value, typ):
+            items = value.items() if isinstance(value, dict) else enumerate(value)
+            strings = key in ("history", "units", "aux_dtypes")
+            bad = next((k for k, v in items if strings and not isinstance(v, str)), None)
+            if bad is None:
+                out[key] = value
+                continue
+            which = f"{one_line(bad, 40)!r}" if isinstance(value, dict) else str(bad)
+            got = f"{got} whose item {which} is {_json_type(value[bad])}"
+        raise FormatError(
+            f"accal metadata: {META_KEY} field {key!r} must be {expected}, got {got}", path
+        )
+    return out
+
+
+_DTYPE_NAME = re.compile(r"[<>=|]?(?:\?|[A-Za-z][A-Za-z0-9]*)")
+
+
+def _aux_dtype(name: str, spec: str, path: Path) -> np.dtype:
+    """The numpy dtype ``spec`` recorded for auxiliary column ``name``, if it is numeric.
+
+    Raises
+    ------
+    FormatError
+        ``spec`` is not a numpy dtype, or not a bool, integer or float scalar of at
+        most 64 bits (what a table column can hold).
+    """
+    dt: np.dtype | None = None
+    # A plain type code or name only: np.dtype parses "(2,)f8" or "f8,i4" into
+    # subarray/record types, and some strings ("000000002") into a SyntaxError.
+    if _DTYPE_NAME.fullmatch(spec):
+        with contextlib.suppress(TypeError, ValueError):
+            dt = np.dtype(spec)
+    if dt is None or dt.kind not in "biuf" or dt.itemsize > 8 or dt.shape:
+        raise FormatError(
+            f"accal metadata: aux_dtypes of {one_line(name, 40)!r} is {one_line(spec, 40)!r}, "
+            "not a bool, integer or float dtype of at most 64 bits",
+            path,
+        )
+    return dt.newbyteorder("=")
+
+
+def _cast_aux(
+    values: np.ndarray,
+    dt: np.dtype,
+    name: str,
+    path: Path,
+    line_of: Callable[[int], int] | None,
+) -> np.ndarray:
+    """``values`` cast to the recorded dtype ``dt``, refusing a cast that changes a value.
+
+    An integer cast must be exact (a NaN, a fraction or an out-of-range value would be
+    silently replaced); a float cast may round but not overflow.
+    """
+    if values.dtype == dt:
+        return values
+    with np.errstate(invalid="ignore", over="ignore"):
+        out = values.astype(dt)
+        lost = np.isfinite(out) != np.isfinite(values) if dt.kind == "f" else out != values
+    if lost.any():
+        i = int(np.flatnonzero(lost)[0])
+        raise _row_error(
+            f"column {name!r}: {values[i].item()!r} does not fit its recorded dtype {dt.name}",
+            path,
+            i,
+            line_of,
+        )
+    return out
 
 
 def read_table_series(path: str | Path, *, columns: dict[str, str] | None = None) -> AccSeries:
@@ -278,8 +625,15 @@ def read_table_series(path: str | Path, *, columns: dict[str, str] | None = None
     Raises
     ------
     FormatError
-        Unreadable, corrupt or empty file, no time or axis column, non-numeric
-        values, bad times.
+        Unreadable, corrupt or empty file, duplicated column names, no time or
+        axis column, non-numeric values, missing or non-finite times, times
+        outside 1980-01-06 ... 2100-01-01, quality/flag values that are not
+        integers 0 ... 2³²−1, file metadata of the wrong type (units that are not
+        strings, ``accal_series`` fields, ``aux_dtypes`` that are not numeric
+        dtypes or would change a value).  The message gives the CSV line, or the
+        Parquet row, of the first bad value.
+    ValidationError
+        A ``columns`` key that is not an axis.
     """
     path = Path(path)
     columns = dict(columns or {})
@@ -293,7 +647,12 @@ def read_table_series(path: str | Path, *, columns: dict[str, str] | None = None
     names = list(table.column_names)
     if table.num_rows == 0:
         raise FormatError("header but no data rows", path, first_line or None)
-    series_meta = fmeta.get(META_KEY) if isinstance(fmeta.get(META_KEY), dict) else None
+    series_meta = _series_meta(fmeta, path)
+    aux_dtypes = {
+        k: _aux_dtype(k, v, path) for k, v in (series_meta or {}).get("aux_dtypes", {}).items()
+    }
+    # 1-based CSV line of data row i (blank lines aside); Parquet rows have no line
+    line_of = (lambda i: first_line + i) if first_line else None
 
     tname = next((c for c in TIME_COLUMNS if c in names), None)
     if tname is None:
@@ -303,15 +662,7 @@ def read_table_series(path: str | Path, *, columns: dict[str, str] | None = None
         )
     tcol = table.column(tname)
     if tname == "time_utc":
-        import pyarrow as pa
-
-        if tcol.null_count:
-            raise FormatError("time_utc has empty values", path)
-        vals = tcol.to_numpy() if pa.types.is_timestamp(tcol.type) else np.asarray(tcol.to_pylist())
-        try:
-            time = utc_to_gps(vals)
-        except (ValueError, TypeError) as exc:
-            raise FormatError(f"time_utc: {one_line(str(exc))}", path) from None
+        time = utc_column_to_gps(tcol, tname, path, line_of)
     else:
         time = numeric_column(tcol, tname, path).astype(np.float64)
     bad = np.flatnonzero(~np.isfinite(time))
@@ -319,6 +670,7 @@ def read_table_series(path: str | Path, *, columns: dict[str, str] | None = None
         raise FormatError(
             f"{tname}: missing or non-finite time", path, (first_line + int(bad[0])) or None
         )
+    check_gps_time(time, path, line_of, name=tname, unit="row")
 
     axes, acc_cols = [], []
     for ax, default in AXIS_COLUMNS.items():
@@ -355,22 +707,21 @@ def read_table_series(path: str | Path, *, columns: dict[str, str] | None = None
                 quality = bits_from_strings(qcol, path, first_line or 1)
             except FormatError:
                 try:  # an integer bitmask read as text
-                    quality = numeric_column(qcol.cast(pa.int64()), qname, path).astype(np.uint32)
+                    q = numeric_column(qcol.cast(pa.int64()), qname, path)
                 except (pa.ArrowException, FormatError):
                     raise FormatError(
                         f"column {qname!r} is neither 8-character 0/1 flags nor integers", path
                     ) from None
+                quality = _bitmask(q, qname, path, line_of)
         else:
-            q = numeric_column(qcol, qname, path)
-            if not np.all(np.isfinite(q)) or np.any(q < 0) or np.any(q != np.round(q)):
-                raise FormatError(f"column {qname!r} must hold non-negative integers", path)
-            quality = q.astype(np.uint32)
+            quality = _bitmask(numeric_column(qcol, qname, path), qname, path, line_of)
         valid = (quality & np.uint32(DEFAULT_INVALID_BITS)) == 0
         used.add(qname)
     if FLAG_COLUMN in names:
         f = numeric_column(table.column(FLAG_COLUMN), FLAG_COLUMN, path)
-        if qname is None:
-            quality = np.where(np.isfinite(f), f, 1).astype(np.uint32)
+        flag = _bitmask(f, FLAG_COLUMN, path, line_of, allow_nan=True)
+        if qname is None:  # a missing flag counts as invalid
+            quality = np.where(np.isnan(f), np.uint32(1), flag) if f.dtype.kind == "f" else flag
         valid = f == 0
         used.add(FLAG_COLUMN)
     if VALID_COLUMN in names:
@@ -393,10 +744,9 @@ def read_table_series(path: str | Path, *, columns: dict[str, str] | None = None
             aux[name] = numeric_column(table.column(name), name, path)
         except FormatError:
             skipped.append(name)
-    if series_meta is not None:
-        for k, dt in (series_meta.get("aux_dtypes") or {}).items():
-            if k in aux:
-                aux[k] = aux[k].astype(dt)
+    for k, dt in aux_dtypes.items():
+        if k in aux:
+            aux[k] = _cast_aux(aux[k], dt, k, path, line_of)
     if skipped:
         warn.append(f"non-numeric columns ignored: {', '.join(skipped)}")
 
@@ -415,7 +765,7 @@ def read_table_series(path: str | Path, *, columns: dict[str, str] | None = None
         "acc": units.get(acc_cols[0], UNITS["acc"]),
     }
     col_units.update({k: units.get(k, "unknown") for k in aux})
-    if series_meta is not None:
+    if series_meta is not None:  # types checked by _series_meta
         satellite = series_meta.get("satellite", "")
         frame = series_meta.get("frame", "SRF")
         meta = series_meta.get("meta", {})
@@ -537,10 +887,27 @@ def read_table_arrow(path: str | Path) -> tuple[Any, dict, dict, int]:
     return read_csv_table(raw, path)
 
 
+#: What reading an open file can raise besides FormatError: a corrupt or truncated
+#: gzip stream (``gzip.BadGzipFile``, an OSError; ``zlib.error``; ``EOFError``) or an
+#: I/O error.
+_READ_ERRORS = (OSError, EOFError, zlib.error)
+
+
+def _read_failed(exc: BaseException, path: Path) -> FormatError:
+    """The FormatError for an exception of :data:`_READ_ERRORS` raised while reading ``path``."""
+    if isinstance(exc, EOFError):
+        return FormatError("corrupt gzip stream (truncated: no end-of-stream marker)", path)
+    if isinstance(exc, gzip.BadGzipFile) and str(exc).startswith("Not a gzipped file"):
+        # the magic was checked on opening: this is a second "member" that is not one
+        return FormatError("corrupt gzip stream (garbage after the compressed data)", path)
+    if isinstance(exc, zlib.error | gzip.BadGzipFile):
+        return FormatError(f"corrupt gzip stream ({one_line(str(exc), 100)})", path)
+    reason = getattr(exc, "strerror", None) or str(exc)
+    return FormatError(f"cannot read file: {one_line(reason, 100)}", path)
+
+
 def _open_binary(path: Path) -> Any:
     """Open ``path`` for reading bytes, decompressing gzip (by magic); FormatError on failure."""
-    import gzip
-
     if path.is_dir():
         raise FormatError("is a directory, not a file", path)
     try:
@@ -551,10 +918,14 @@ def _open_binary(path: Path) -> Any:
         raise FormatError("permission denied (file not readable)", path) from None
     except OSError as exc:
         raise FormatError(f"cannot read file: {exc.strerror or exc}", path) from None
-    if fh.read(2) == b"\x1f\x8b":
+    try:
+        magic = fh.read(2)
         fh.seek(0)
+    except OSError as exc:
+        fh.close()
+        raise _read_failed(exc, path) from None
+    if magic == b"\x1f\x8b":
         return gzip.GzipFile(fileobj=fh, mode="rb")
-    fh.seek(0)
     return fh
 
 
@@ -591,9 +962,10 @@ class TableStream:
         if self.rows < 1:
             raise ValidationError(f"rows per chunk must be >= 1, got {rows}")
         with _open_binary(self.path) as fh:
-            head = fh.read(4)
+            head = self._read(fh.read, 4)
             gz = not isinstance(fh, io.BufferedReader)
-        if not head.strip():
+            blank = not head.strip() and not self._read(fh.read, 1 << 16).strip()
+        if blank:
             raise FormatError("empty file", self.path)
         self.units: dict[str, str] = {}
         self.meta: dict[str, Any] = {}
@@ -603,6 +975,13 @@ class TableStream:
         else:
             self.kind = "csv"
             self._open_csv_header()
+
+    def _read(self, fn: Callable[..., Any], *args: Any) -> Any:
+        """``fn(*args)``, a read of the open file, with read errors as FormatError."""
+        try:
+            return fn(*args)
+        except _READ_ERRORS as exc:
+            raise _read_failed(exc, self.path) from None
 
     # -- Parquet ------------------------------------------------------------
 
@@ -617,17 +996,16 @@ class TableStream:
             # end of a pass: 0.67 GB for a year of 1 Hz data)
             return pq.ParquetFile(self.path, pre_buffer=False)
         except (pa.ArrowException, OSError, ValueError) as exc:
-            raise FormatError(
-                f"corrupt Parquet file ({str(exc).splitlines()[0][:200]})", self.path
-            ) from None
+            raise FormatError(f"corrupt Parquet file ({_exc_text(exc)})", self.path) from None
 
     def _open_parquet_header(self) -> None:
         pf = self._parquet_file()
         schema = pf.schema_arrow
         md = schema.metadata or {}
-        self.units = _json_object(md.get(b"accal.units", b"{}"), self.path, None, "accal metadata")
+        self.units = _units_object(md.get(b"accal.units", b"{}"), self.path, None, "accal metadata")
         self.meta = _json_object(md.get(b"accal.meta", b"{}"), self.path, None, "accal metadata")
-        self.names = list(schema.names)
+        self.names = _column_names(schema, self.path)
+        check_unique_names(self.names, self.path)
         self.first_line = 0
         self.num_rows: int | None = pf.metadata.num_rows
 
@@ -642,23 +1020,27 @@ class TableStream:
                     yield row, pa.Table.from_batches([batch])
                     row += batch.num_rows
         except (pa.ArrowException, OSError) as exc:
+            raise FormatError(f"corrupt Parquet file ({_exc_text(exc)})", self.path) from None
+        expected = pf.metadata.num_rows
+        if row != expected:  # a corrupt page can end a column early without an error
             raise FormatError(
-                f"corrupt Parquet file ({str(exc).splitlines()[0][:200]})", self.path
-            ) from None
+                f"corrupt Parquet file (read {row} rows, the footer says {expected})", self.path
+            )
 
     # -- CSV ----------------------------------------------------------------
 
     def _read_csv_header(self, fh: Any) -> tuple[bytes, int]:
         lineno = 0
         while True:
-            line = fh.readline()
+            line = self._read(fh.readline)
             lineno += 1
             if not line.startswith(b"#"):
                 break
             _comment(line, self.path, lineno, self.units, self.meta)
         check_binary(line, self.path, lineno)
         if not line.strip():
-            raise FormatError("no table after the comment lines", self.path, lineno)
+            what = "no table after the comment lines" if lineno > 1 else "blank first line"
+            raise FormatError(f"{what} (expected the CSV header)", self.path, lineno)
         if not line.endswith(b"\n"):
             raise FormatError("header but no data rows", self.path, lineno + 1)
         return line, lineno
@@ -672,8 +1054,9 @@ class TableStream:
         try:
             self.names = pacsv.read_csv(pa.py_buffer(header)).column_names
         except (pa.ArrowException, ValueError) as exc:
-            msg = str(exc).splitlines()[0][:200]
+            msg = _exc_text(exc)
             raise FormatError(f"CSV header: {msg}", self.path, lineno) from None
+        check_unique_names(self.names, self.path, lineno)
         self.first_line = lineno + 1
         self.num_rows = None
 
@@ -690,7 +1073,7 @@ class TableStream:
             header, lineno = self._read_csv_header(fh)
             line = lineno + 1
             while True:
-                lines = list(itertools.islice(fh, self.rows))
+                lines = self._read(lambda: list(itertools.islice(fh, self.rows)))
                 if not lines:
                     break
                 if not lines[-1].endswith(b"\n"):
@@ -712,10 +1095,11 @@ class TableStream:
                         ),
                     )
                 except (pa.ArrowException, ValueError) as exc:
-                    msg = str(exc).splitlines()[0][:200]
+                    msg = _exc_text(exc)
                     raise FormatError(
                         f"CSV: {msg} (in lines {line}-{line + len(lines) - 1})", self.path
                     ) from None
+                check_single_line_values(table, self.path, line)
                 if not fixed:
                     for f in table.schema:
                         if pa.types.is_integer(f.type) or pa.types.is_null(f.type):
@@ -766,6 +1150,9 @@ def open_table(path: str | Path, *, rows: int = STREAM_ROWS) -> TableStream:
     Raises
     ------
     FormatError
-        Missing, unreadable, empty or corrupt file, bad comment header.
+        Missing, unreadable, empty or corrupt file (also a corrupt gzip stream),
+        bad comment header or metadata, duplicated column names.  While
+        iterating: a corrupt gzip stream or Parquet page (also one that silently
+        ends a column early), CSV parse errors.
     """
     return TableStream(path, rows=rows)

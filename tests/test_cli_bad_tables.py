@@ -1,0 +1,66 @@
+"""End to end: `accal grace-bias` on a batch of broken tables and one good L1B file.
+
+Each broken table once escaped the table reader as a Python exception or went
+through unnoticed: a ``gps_time`` of 1e300 s gave "internal error (OverflowError
+...)" when the pipeline computed its date, a duplicated column name gave pyarrow's
+KeyError, and a ``quality`` of 1e30 wrapped around to 0 (a flagged sample looked
+valid).  Now each is one line ``accal: FILE[:LINE]: what is wrong`` and the batch
+goes on with the good file.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pyarrow as pa
+import pyarrow.parquet as pq
+from click.testing import CliRunner
+
+from accal.cli import main
+
+SAMPLES = Path(__file__).resolve().parents[1] / "data" / "samples"
+GRACE_A = SAMPLES / "ACC1B_2003-09-14_A_00.asc"
+
+
+def _bad_tables(d: Path) -> dict[Path, str]:
+    """Write the broken tables; map each to how its stderr line goes on after the path."""
+    d.mkdir()
+    huge = d / "huge_time.parquet"
+    table = pa.table(
+        {"gps_time": [116769600.0, 1e300, 116769602.0], "lin_accl_x": [1e-7, 2e-7, 3e-7]}
+    )
+    pq.write_table(table, huge)
+    dup = d / "dup_columns.csv"
+    dup.write_text("gps_time,lin_accl_x,lin_accl_x\n116769600,1e-7,1e-7\n116769601,2e-7,2e-7\n")
+    quality = d / "quality_1e30.csv"
+    quality.write_text(
+        "gps_time,lin_accl_x,quality\n116769600,1e-7,0\n116769601,2e-7,1e30\n116769602,3e-7,0\n"
+    )
+    return {
+        huge: ": row 2: gps_time 1e+300 s is outside 1980-01-06 ... 2100-01-01",
+        dup: ":1: duplicated column name(s) lin_accl_x",
+        quality: ":3: column 'quality' must hold integers 0 ... 4294967295 (a bitmask), got 1e+30",
+    }
+
+
+def test_bad_tables_fail_one_line_each_and_the_good_file_is_processed(tmp_path):
+    bad = _bad_tables(tmp_path / "in")
+    out = tmp_path / "out"
+    args = ["grace-bias", *map(str, bad), str(GRACE_A), "--out", str(out), "-q"]
+    res = CliRunner().invoke(main, args, catch_exceptions=False)
+
+    assert res.exit_code == 1, res.output
+    err = res.stderr
+    assert "internal error" not in err and "Traceback" not in err and 'File "' not in err
+    lines = err.strip().splitlines()
+    assert len(lines) == len(bad), err
+    for path, rest in bad.items():
+        mine = [ln for ln in lines if ln.startswith(f"accal: {path}")]
+        assert len(mine) == 1 and mine[0].startswith(f"accal: {path}{rest}"), err
+    # the good file is processed and is the only one recorded as done
+    assert (out / "ACC1B_2003-09-14_A_00.calibrated.parquet").is_file()
+    assert (out / "ACC1B_2003-09-14_A_00.report.json").is_file()
+    manifest = json.loads((out / "manifest.json").read_text())["entries"]
+    assert [Path(k).name for k in manifest] == [GRACE_A.name]
+    assert not any(out.glob("huge_time*") or out.glob("dup_columns*") or out.glob("quality*"))
