@@ -1100,12 +1100,12 @@ class _Search:
             if p[worst] < self.alpha:
                 break
             self._drop(worst)
-        for f in list(self.found):
-            if f in before or not f.prop.check_consistency:
+        for f in list(self.found):  # identity, not ==: _Found holds arrays
+            if any(f is g for g in before) or not f.prop.check_consistency:
                 continue
             b_o, *_ = self.state([g for g in self.found if g is not f])
             if not self._consistent(b_o, f.prop, 1.0, f.info):
-                self.found.remove(f)
+                self.found = [g for g in self.found if g is not f]
         if len(self.found) > max_effects:
             p = self.final_p()
             keep = sorted(np.argsort(p)[:max_effects])
