@@ -786,7 +786,7 @@ _REFINE_DW = 4.0
 _NO_SEARCH = ("quadratic_drift", "cubic_drift")  # nothing to refine
 
 
-@dataclass
+@dataclass(eq=False)  # compared by identity: the proposal holds arrays
 class _Found:
     prop: Proposal
     p_adj: float
