@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 OUT    ?= out
 
-.PHONY: install run test test-all lint bench bench-readers bench-archive bench-demod-year mc-sigma clean
+.PHONY: install run demo test test-all lint bench bench-readers bench-archive bench-demod-year mc-sigma clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -25,6 +25,19 @@ run: $(STAMP)
 	    --format csv --out $(OUT)/grace-bias
 	@echo "--- $(OUT)/grace-bias/bias_drift.csv (accal table $(OUT)/grace-bias)"
 	@$(BIN)/accal table $(OUT)/grace-bias
+
+## demo: close the loop on measured data (real Swarm-A storm day with injected effects), then the
+##       CLI on the real day and on a simulated rotating-platform run with an undeclared coupling
+demo: $(STAMP)
+	$(BIN)/python benchmarks/closure_demo.py --out $(OUT)/demo
+	$(BIN)/accal grace-bias data/samples/SW_A_ACCACAL_20240511_a_cal_x.csv.gz --column x=a_cal_x \
+	    --close-loop --force --format csv --out $(OUT)/demo/swarm-cli
+	$(BIN)/accal simulate gap --days 0.5 --tau 600 --mask 200 --temperature-coupling 1e-9 \
+	    --out $(OUT)/demo/gap/run.parquet
+	$(BIN)/accal demod $(OUT)/demo/gap/run.parquet --tau 600 --mask 200 --close-loop \
+	    --out $(OUT)/demo/gap/res
+	@echo "--- reports: $(OUT)/demo/closure.md, $(OUT)/demo/swarm-cli/closure.md, $(OUT)/demo/gap/res/closure.md"
+	@echo "--- plots:   $(OUT)/demo/*.png, $(OUT)/demo/swarm-cli/*.png, $(OUT)/demo/gap/res/*.png"
 
 ## test: the full default test suite (what CI runs)
 test: $(STAMP)

@@ -1037,7 +1037,7 @@ def run(
                 _time.perf_counter() - start,
                 n_inputs=len(paths),
                 log_path=rlog.path if log else None,
-                workers=1 if scheduler is None and workers <= 1 else workers,
+                workers=max(1, min(workers, len(todo))) if scheduler is None else workers,
             )
             rlog(summary.line())
             return summary
