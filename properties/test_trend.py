@@ -55,9 +55,13 @@ def test_pure_quadratic_trend_is_exact_with_order2(t, c, method):
     a = c[0] + c[1] * x + c[2] * x * x
     fit = fit_trend(t, a, method=method, order=2)
     scale = sum(abs(v) for v in c) + 1e-300
-    assert abs(fit.bias - c[0]) <= 1e-10 * scale
-    assert abs(fit.drift * span - c[1]) <= 1e-9 * scale
-    assert abs(fit.quadratic * span**2 - c[2]) <= 1e-9 * scale
+    # "exact" means to rounding times the conditioning of the layout: e.g. 4 samples in two
+    # tight clusters at the ends of a long gap barely determine a quadratic (cond ~ 1e7)
+    cond = float(np.linalg.cond(np.vander(x, 3, increasing=True)))
+    tol = max(1.0, 1e-6 * cond)
+    assert abs(fit.bias - c[0]) <= 1e-10 * tol * scale
+    assert abs(fit.drift * span - c[1]) <= 1e-9 * tol * scale
+    assert abs(fit.quadratic * span**2 - c[2]) <= 1e-9 * tol * scale
 
 
 @settings(max_examples=80, deadline=None)
