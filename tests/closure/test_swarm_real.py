@@ -64,9 +64,9 @@ def test_injected_step_coupling_and_quadratic_found_together(swarm):
     """The ``make demo`` case: three slow effects at once on the storm day.
 
     Each masks the others (forward selection alone only reports ``unexplained``);
-    the backward stage finds all three.  Measured: step 3.07e-6 ± 5e-8 (injected
-    3e-6, epoch within 7 s), coupling 8.9e-7 ± 3e-8 (1e-6; the day's own part along
-    the regressor −1.1e-7), quadratic 5.7e-16 ± 4.5e-17 (3e-16; the day's own
+    the backward stage finds all three.  Measured: step 3.07e-6 ± 1.0e-7 (injected
+    3e-6, epoch within 7 s), coupling 8.9e-7 ± 6e-8 (1e-6; the day's own part along
+    the regressor −1.1e-7), quadratic 5.7e-16 ± 9e-17 (3e-16; the day's own
     curvature 2.6e-16); the true drift error 5.5e-11 -> −4e-13 m/s³.
     """
     t, y, valid, temp, ref = swarm
