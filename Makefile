@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 OUT    ?= out
 
-.PHONY: install run demo test test-all lint bench bench-readers bench-archive bench-demod-year mc-sigma clean
+.PHONY: install run demo test test-all lint bench bench-readers bench-archive bench-demod-year bench-closure closure-detection mc-sigma clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -65,6 +65,14 @@ bench-readers: $(STAMP)
 ## bench-demod-year: a simulated year (and 30 days) of 1 Hz data through accal demod: wall time, peak RSS (minutes, ~1 GB temp)
 bench-demod-year: $(STAMP)
 	$(BIN)/python benchmarks/bench_demod_year.py
+
+## bench-closure: closure speed on a 1 Hz day x 3 axes, all candidates (target <= 5 s)
+bench-closure: $(STAMP)
+	$(BIN)/python benchmarks/bench_closure.py
+
+## closure-detection: detection rate vs effect size, simulated noise and the real Swarm day (~30 min)
+closure-detection: $(STAMP)
+	$(BIN)/python benchmarks/closure_detection.py
 
 ## bench-archive: 200 synthetic 1 Hz days, 1 and 2 workers, vs raw pyarrow parse (~2 GB in /tmp)
 bench-archive: $(STAMP)

@@ -467,13 +467,7 @@ INSTRUMENT_EFFECTS = ("quadratic_drift", "cubic_drift", "bias_step", "auxiliary"
 
 def effect_models(result: Any) -> list[tuple[Any, np.ndarray]]:
     """Each effect of a :class:`~accal.closure.ClosureResult` and its model on all samples."""
-    out = []
-    j = result.n_base
-    for e in result.effects:
-        q = len(e.details.get("coefficients", [e.coefficient]))
-        out.append((e, result.design[:, j : j + q] @ result.coef[j : j + q]))
-        j += q
-    return out
+    return list(result.effect_models())
 
 
 def _effect_label(e: Any) -> str:
