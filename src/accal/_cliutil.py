@@ -81,3 +81,24 @@ def fail(msg: str) -> None:
     """Print the one-line error and exit with status 1."""
     err(msg)
     sys.exit(1)
+
+
+def alpha_option(f: Any) -> Any:
+    """``--alpha``: false-detection probability per closure selection step (shared)."""
+    return click.option(
+        "--alpha",
+        type=click.FloatRange(min=0, max=1, min_open=True, max_open=True),
+        default=0.01,
+        show_default=True,
+        help="False-detection probability per --close-loop selection step.",
+    )(f)
+
+
+def aux_option(f: Any) -> Any:
+    """``--aux FILE``: housekeeping channels offered to the closure (shared)."""
+    return click.option(
+        "--aux",
+        type=click.Path(dir_okay=False, path_type=Path),
+        default=None,
+        help="Housekeeping (AHK1B or a table with 'time'): candidate channels for --close-loop.",
+    )(f)

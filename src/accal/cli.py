@@ -14,7 +14,7 @@ import click
 import numpy as np
 
 from accal import __version__
-from accal._cliutil import config_option
+from accal._cliutil import alpha_option, aux_option, config_option
 from accal._cliutil import err as _err
 from accal._cliutil import progress as _progress
 
@@ -137,25 +137,14 @@ def main(debug: bool) -> None:
     is_flag=True,
     help="Analyse the residual, add the effects the model lacks, refit (closure.json/md).",
 )
-@click.option(
-    "--aux",
-    type=click.Path(dir_okay=False, path_type=Path),
-    default=None,
-    help="Housekeeping (AHK1B or a table with 'time'): candidate channels for --close-loop.",
-)
+@aux_option
 @click.option(
     "--truth",
     type=click.Path(dir_okay=False, path_type=Path),
     default=None,
     help="Truth JSON of a simulation: --close-loop reports the true error before/after.",
 )
-@click.option(
-    "--alpha",
-    type=click.FloatRange(min=0, max=1, min_open=True, max_open=True),
-    default=0.01,
-    show_default=True,
-    help="False-detection probability per --close-loop selection step.",
-)
+@alpha_option
 @click.option(
     "--degraded-days",
     type=click.Path(dir_okay=False, exists=True, path_type=Path),
@@ -384,19 +373,8 @@ def _is_date(s: str) -> bool:
     default=None,
     help="Where closure.json/closure.md/plots go [default: DIRECTORY].",
 )
-@click.option(
-    "--aux",
-    type=click.Path(dir_okay=False, path_type=Path),
-    default=None,
-    help="Housekeeping (AHK1B or a table with 'time'): candidate auxiliary channels.",
-)
-@click.option(
-    "--alpha",
-    type=click.FloatRange(min=0, max=1, min_open=True, max_open=True),
-    default=0.01,
-    show_default=True,
-    help="False-detection probability per selection step.",
-)
+@aux_option
+@alpha_option
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar or summary.")
 def diagnose(
     directory: Path, out: Path | None, aux: Path | None, alpha: float, quiet: bool

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import click
 
-from accal._cliutil import config_option
+from accal._cliutil import alpha_option, config_option
 from accal._cliutil import err as _err
 from accal._cliutil import fail as _fail
 from accal._cliutil import progress as _progress
@@ -101,13 +101,7 @@ PSD_HELP = "Noise PSD: 'microstar' (eq. 1 of Lenoir et al. 2013) or a CSV/Parque
     "offset, intra-period shape, ...), add them, refit: OUT/closure.json/.md and plots; "
     "periods then hold the extended model (reads each run whole).",
 )
-@click.option(
-    "--alpha",
-    type=click.FloatRange(min=0, max=1, min_open=True, max_open=True),
-    default=0.01,
-    show_default=True,
-    help="False-detection probability per --close-loop selection step.",
-)
+@alpha_option
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar or summary lines.")
 @config_option
 def demod(

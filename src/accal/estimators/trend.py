@@ -506,28 +506,3 @@ def _fit_columns(
         )
         for j in range(a.shape[1])
     ]
-    tu = t[use]
-    au = a[use]
-    if tu.size < order + 2:
-        raise ValidationError(
-            f"only {tu.size} usable samples; an order-{order} trend needs at least {order + 2}"
-        )
-    if np.any(np.diff(tu) <= 0):
-        raise ValidationError("sample times must be strictly increasing")
-    g = METHODS[method](tu, order)
-    coef = g @ au  # (p, k)
-    vander = np.vander(tu - tu[0], order + 1, increasing=True)
-    resid = au - vander @ coef
-    covs = _CovarianceKernel(tu, g, order).covariances(np.ascontiguousarray(resid.T))
-    return [
-        TrendFit(
-            method=method,
-            order=order,
-            t0=float(tu[0]),
-            coef=coef[:, j].copy(),
-            cov=covs[j],
-            n_used=int(tu.size),
-            rms=float(np.sqrt(np.mean(resid[:, j] ** 2))),
-        )
-        for j in range(a.shape[1])
-    ]
