@@ -403,7 +403,9 @@ def execute(
 
     # forkserver: no fork of a process that may hold threads (tqdm, BLAS)
     ctx = mp.get_context("forkserver")
-    with ProcessPoolExecutor(max_workers=min(workers, len(paths)), mp_context=ctx) as pool:
+    with ProcessPoolExecutor(
+        max_workers=min(workers, len(paths)), mp_context=ctx, initializer=_worker_init
+    ) as pool:
         futures = {pool.submit(task, p): i for i, p in enumerate(paths)}
         for fut in as_completed(futures):
             i = futures[fut]
@@ -411,6 +413,22 @@ def execute(
                 yield i, fut.result()
             except Exception as exc:  # BrokenProcessPool, pickling errors, bugs
                 yield i, on_error(paths[i], exc)
+
+
+def _worker_init() -> None:
+    """One compute thread per worker process (the processes are the parallelism).
+
+    BLAS threads are already 1 through the environment the workers inherit
+    (:func:`accal._runtime.single_threaded_blas`); the allocator is tuned here,
+    in each process (:func:`accal._runtime.tune_allocator`).
+    """
+    import pyarrow as pa
+
+    from accal._runtime import tune_allocator
+
+    tune_allocator()
+    pa.set_cpu_count(1)
+    pa.set_io_thread_count(1)
 
 
 def _execute_dask(

@@ -38,6 +38,9 @@ def main(debug: bool) -> None:
     """
     import os
 
+    from accal._runtime import tune_allocator
+
+    tune_allocator()
     if debug:
         os.environ["ACCAL_DEBUG"] = "1"  # inherited by worker processes
 

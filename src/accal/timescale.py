@@ -245,3 +245,24 @@ def gps_to_gps_calendar(seconds: ArrayLike) -> NDArray[np.datetime64]:
     whole = np.floor(g)
     ns = whole.astype(np.int64) * _NS + np.round((g - whole) * _NS).astype(np.int64)
     return (ns + _EPOCH_NS).astype("datetime64[ns]")
+
+
+def nominal_step(steps: NDArray[np.float64]) -> float:
+    """Nominal sampling step [s]: the median of the steps between epochs.
+
+    Parameters
+    ----------
+    steps : ndarray of float64
+        ``np.diff(time)`` [s].
+
+    Returns
+    -------
+    float
+        The median step; NaN for no steps.  A uniform grid (every step equal,
+        the usual case) returns the common step without computing the median.
+    """
+    if steps.size == 0:
+        return float("nan")
+    if steps[0] == steps[-1] and steps.min() == steps.max():
+        return float(steps[0])
+    return float(np.median(steps))

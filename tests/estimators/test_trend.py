@@ -250,3 +250,83 @@ def test_fit_trends_exact_on_pure_linear_trends_and_falls_back_on_nan():
     a[10, 1] = np.nan  # one column with a NaN: per-column masks
     fits = fit_trends(t, a)
     assert fits[1].n_used == t.size - 1 and fits[0].n_used == t.size
+
+
+def _wavelet_weights_by_definition(t, order):
+    """Slow reference: per-sample segment membership and moment sums in loops."""
+    t = np.asarray(t, float)
+    n, p = t.size, order + 1
+    centre, half = 0.5 * (t[0] + t[-1]), 0.5 * (t[-1] - t[0])
+    u = (t - centre) / half
+    d = np.diff(t)
+    w = np.append(np.minimum(d, 1.5 * np.median(d)), np.median(d))
+    edges = np.linspace(-1, 1, p + 1)
+    seg = np.array([min(max(np.sum(edges <= x) - 1, 0), p - 1) for x in u])
+    if any(np.sum(seg == k) == 0 for k in range(p)):
+        seg = np.array([min(i * p // n, p - 1) for i in range(n)])
+    m = np.array([[np.sum(w[seg == k] * u[seg == k] ** j) for j in range(p)] for k in range(p)])
+    wsum = np.array([np.sum(w[seg == k]) for k in range(p)])
+    minv = np.linalg.inv(m / wsum[:, None])
+    g_u = np.array([[minv[j, seg[i]] * w[i] / wsum[seg[i]] for i in range(n)] for j in range(p)])
+    # powers of u -> powers of (t - t0): a = sum_j c_j u^j evaluated with u = (t-t0)/half + s
+    s = (t[0] - centre) / half
+    from math import comb
+
+    tm = np.array(
+        [
+            [comb(j, k) * s ** (j - k) / half**k if j >= k else 0.0 for j in range(p)]
+            for k in range(p)
+        ]
+    )
+    return tm @ g_u
+
+
+@pytest.mark.parametrize("order", [1, 2])
+@pytest.mark.parametrize(
+    "layout",
+    ["uniform", "odd", "gaps", "jitter", "huge_gap_empties_a_segment", "last_step_large"],
+)
+def test_wavelet_weights_equal_the_segment_definition(order, layout):
+    """The vectorised weights (slices of sorted segments) equal a per-sample loop."""
+    rng = np.random.default_rng(11)
+    t = 1.2e8 + np.arange(400.0)
+    if layout == "odd":
+        t = t[:399]
+    elif layout == "gaps":
+        t = np.delete(t, np.r_[50:80, 200:210, 333])
+    elif layout == "jitter":
+        t = t + rng.uniform(-0.2, 0.2, t.size)
+    elif layout == "huge_gap_empties_a_segment":
+        t = np.concatenate([t[:100], t[:100] + 1e6])
+    elif layout == "last_step_large":
+        t = np.append(t, t[-1] + 50.0)
+    g = wavelet_weights(t, order)
+    ref = _wavelet_weights_by_definition(t, order)
+    scale = np.abs(ref).max(axis=1, keepdims=True)
+    assert np.max(np.abs(g - ref) / scale) < 1e-10
+
+
+def test_grid_placement_and_orthonormal_basis():
+    """Samples go to their grid index (runs copied or scattered alike); uniform
+    grids skip the copy; the polynomial basis is orthonormal and spans the same space."""
+    from accal.estimators.trend import _grid_index, _on_grid, _orthonormal_columns
+
+    rng = np.random.default_rng(5)
+    t = np.arange(2000.0)
+    assert _grid_index(t)[0] is None and _grid_index(t)[1] == 2000
+    for n_gaps in (1, 5, 200):  # runs path (<= 64 breaks) and scatter path
+        keep = np.ones(t.size, bool)
+        for a in rng.choice(np.arange(1, 1990), n_gaps, replace=False):
+            keep[a : a + rng.integers(1, 5)] = False
+        idx, ngrid = _grid_index(t[keep])
+        assert np.array_equal(idx, np.flatnonzero(keep)) and ngrid == 2000
+        rows = rng.standard_normal((3, keep.sum()))
+        naive = np.zeros((3, ngrid))
+        naive[:, idx] = rows
+        assert np.array_equal(_on_grid(rows, idx, ngrid), naive)
+    u = np.linspace(-1, 1, 1001)
+    for p in (1, 2, 3):
+        x = np.vander(u, p, increasing=True)
+        q = _orthonormal_columns(x)
+        assert np.allclose(q.T @ q, np.eye(p), atol=1e-14)
+        assert np.allclose(q @ (q.T @ x), x, atol=1e-13)

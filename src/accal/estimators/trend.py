@@ -31,6 +31,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from accal.errors import ValidationError, check_option
+from accal.timescale import nominal_step
 
 __all__ = [
     "METHODS",
@@ -128,10 +129,10 @@ def _cell_widths(t: NDArray[np.float64]) -> NDArray[np.float64]:
     if t.size < 2:
         return np.ones_like(t)
     d = np.diff(t)
-    nominal = float(np.median(d))
+    nominal = nominal_step(d)
     cap = 1.5 * nominal
     w = np.empty_like(t)
-    w[:-1] = np.minimum(d, cap)
+    np.minimum(d, cap, out=w[:-1])
     w[-1] = nominal
     return w
 
@@ -189,23 +190,28 @@ def wavelet_weights(t: ArrayLike, order: int = 1) -> NDArray[np.float64]:
         raise ValidationError(f"need at least {p} samples for an order-{order} trend, got {n}")
     u, centre, half = _scaled_time(t)
     w = _cell_widths(t)
-    # segment boundaries at equal fractions of the time span
+    # segment boundaries at equal fractions of the time span: u is increasing, so
+    # segment k is the slice bounds[k]:bounds[k+1] (u in [edge_k, edge_k+1))
     edges = np.linspace(-1.0, 1.0, p + 1)
-    seg = np.clip(np.searchsorted(edges, u, side="right") - 1, 0, p - 1)
-    counts = np.bincount(seg, minlength=p)
-    if np.any(counts == 0):
+    bounds = np.concatenate(([0], np.searchsorted(u, edges[1:-1], side="left"), [n]))
+    if np.any(np.diff(bounds) == 0):
         # fall back to equal-count segments (e.g. a huge gap covering a segment)
-        seg = np.minimum((np.arange(n) * p) // n, p - 1)
-    wsum = np.bincount(seg, weights=w, minlength=p)
-    # S: (p, n) segment-averaging operator; M: (p, p) segment moments of u^j
-    powers = np.vander(u, p, increasing=True)  # (n, p)
+        bounds = np.array([-((-k * n) // p) for k in range(p + 1)])
+    seg = [slice(int(bounds[k]), int(bounds[k + 1])) for k in range(p)]
+    wsum = np.array([w[s].sum() for s in seg])
+    # M: (p, p) quadrature-weighted segment moments of u^j
     moments = np.empty((p, p))
-    for j in range(p):
-        moments[:, j] = np.bincount(seg, weights=w * powers[:, j], minlength=p) / wsum
+    for k, s in enumerate(seg):
+        uk, wk = u[s], w[s]
+        for j in range(p):
+            moments[k, j] = np.dot(wk, uk**j) / wsum[k]
     minv = np.linalg.inv(moments)  # (p coeffs, p segments)
-    # G_u[j, i] = minv[j, seg_i] * w_i / wsum[seg_i]  -> coefficients in powers of u
-    g_u = minv[:, seg] * (w / wsum[seg])[None, :]
-    return _u_to_t0_basis(g_u, t[0], centre, half)
+    # coefficients in powers of (t - t0); G[:, i] = C[:, seg_i] * w_i / wsum[seg_i]
+    c = _u_to_t0_basis(minv, t[0], centre, half) / wsum[None, :]
+    g = np.empty((p, n))
+    for k, s in enumerate(seg):
+        np.multiply(c[:, k : k + 1], w[None, s], out=g[:, s])
+    return g
 
 
 def lsq_weights(t: ArrayLike, order: int = 1) -> NDArray[np.float64]:
@@ -263,15 +269,52 @@ METHODS = {"wavelet": wavelet_weights, "lsq": lsq_weights}
 # --------------------------------------------------------------------------------------
 
 
-def _grid_index(t: NDArray[np.float64]) -> tuple[NDArray[np.int64], int]:
-    """Index of each sample on the nominal uniform grid starting at ``t[0]``."""
+def _grid_index(t: NDArray[np.float64]) -> tuple[NDArray[np.int64] | None, int]:
+    """Index of each sample on the nominal uniform grid starting at ``t[0]``.
+
+    Returns ``(None, n)`` when the samples are that grid (every step equal).
+    """
     if t.size < 2:
         return np.zeros(t.size, dtype=np.int64), 1
-    step = float(np.median(np.diff(t)))
+    d = np.diff(t)
+    step = nominal_step(d)
+    if d.min() == d.max():
+        return None, t.size
     idx = np.rint((t - t[0]) / step).astype(np.int64)
     # keep indices strictly increasing even for jittered sampling
     idx = np.maximum.accumulate(np.maximum(idx, np.arange(idx.size)))
     return idx, int(idx[-1]) + 1
+
+
+def _on_grid(rows: NDArray[np.float64], idx: NDArray[np.int64] | None, ngrid: int) -> NDArray:
+    """Place ``rows`` (shape (k, n)) on the uniform grid, zeros in the gaps."""
+    if idx is None:
+        return rows
+    grid = np.zeros((rows.shape[0], ngrid))
+    breaks = np.flatnonzero(np.diff(idx) != 1) + 1
+    if breaks.size > 64:
+        grid[:, idx] = rows
+        return grid
+    # few gaps: copy the contiguous runs (a scatter is several times slower)
+    for a, b in zip((0, *breaks.tolist()), (*breaks.tolist(), idx.size), strict=True):
+        grid[:, idx[a] : idx[a] + b - a] = rows[:, a:b]
+    return grid
+
+
+def _orthonormal_columns(x: NDArray[np.float64]) -> NDArray[np.float64]:
+    """An orthonormal basis of the columns of ``x`` (shape (n, p), p small).
+
+    Gram–Schmidt applied twice ("twice is enough"), as accurate as a Householder
+    QR for these few well-scaled columns and several times faster.
+    """
+    q = np.array(x, dtype=np.float64, order="F")
+    for j in range(q.shape[1]):
+        v = q[:, j]
+        for _ in range(2):
+            if j:
+                v -= q[:, :j] @ (q[:, :j].T @ v)
+        v /= np.linalg.norm(v)
+    return q
 
 
 def linear_estimator_covariance(
@@ -342,16 +385,18 @@ class _CovarianceKernel:
     """
 
     def __init__(self, t: ArrayLike, g: NDArray[np.float64], order: int, min_bin: int = 3) -> None:
+        from scipy import fft as sfft
+
         t = np.asarray(t, dtype=np.float64)
         self.n = t.size
         self.order = order
         self.idx, self.ngrid = _grid_index(t)
         u, _, _ = _scaled_time(t)
-        q, _ = np.linalg.qr(np.vander(u, order + 1, increasing=True))
-        grid = np.zeros((order + 1 + g.shape[0], self.ngrid))
-        grid[: order + 1, self.idx] = q.T
-        grid[order + 1 :, self.idx] = g
-        spec = np.fft.rfft(grid, axis=1)
+        q = _orthonormal_columns(np.vander(u, order + 1, increasing=True))
+        rows = np.empty((order + 1 + g.shape[0], self.n))
+        rows[: order + 1] = q.T
+        rows[order + 1 :] = g
+        spec = sfft.rfft(_on_grid(rows, self.idx, self.ngrid), axis=1)
         nf = spec.shape[1]
         suppress = 1.0 - np.sum(np.abs(spec[: order + 1]) ** 2, axis=0) / self.n
         self.inv_suppress = 1.0 / np.clip(suppress, 0.2, None)
@@ -362,9 +407,10 @@ class _CovarianceKernel:
             edges.append(edges[-1] + max(min_bin, int(0.25 * edges[-1])))
         edges[-1] = nf
         edges_arr = np.asarray(edges)
-        self.which = np.searchsorted(edges_arr, np.arange(1, nf), side="right") - 1
         self.nbins = edges_arr.size - 1
-        self.counts = np.maximum(np.bincount(self.which, minlength=self.nbins), 1)
+        widths = np.diff(edges_arr)
+        self.which = np.repeat(np.arange(self.nbins), widths)
+        self.counts = np.maximum(widths, 1)
         two_sided = np.full(nf, 2.0)
         two_sided[0] = 1.0
         if self.ngrid % 2 == 0:
@@ -373,9 +419,9 @@ class _CovarianceKernel:
 
     def covariances(self, residuals: NDArray[np.float64]) -> NDArray[np.float64]:
         """``G C Gᵀ`` for each row of ``residuals`` (shape (k, n)) -> (k, p, p)."""
-        grid = np.zeros((residuals.shape[0], self.ngrid))
-        grid[:, self.idx] = residuals
-        rspec = np.fft.rfft(grid, axis=1)
+        from scipy import fft as sfft
+
+        rspec = sfft.rfft(_on_grid(residuals, self.idx, self.ngrid), axis=1)
         out = []
         for row in rspec:
             pgram = np.abs(row) ** 2 / self.n * self.inv_suppress
@@ -465,7 +511,7 @@ def fit_trends(
             raise ValidationError(f"valid must have shape {t.shape}, got {valid.shape}")
         use &= valid
     finite = np.isfinite(a)
-    if finite[use].all():
+    if finite.all() or finite[use].all():
         return _fit_columns(t, a, use, method, order)
     # columns with their own non-finite samples: each its own mask
     return [
@@ -482,8 +528,7 @@ def _fit_columns(
     order: int,
 ) -> list[TrendFit]:
     """Trend fits of the columns of ``a`` on the samples ``use`` (finite there)."""
-    tu = t[use]
-    au = a[use]
+    tu, au = (t, a) if use.all() else (np.compress(use, t), np.compress(use, a, axis=0))
     if tu.size < order + 2:
         raise ValidationError(
             f"only {tu.size} usable samples; an order-{order} trend needs at least {order + 2}"
@@ -492,8 +537,15 @@ def _fit_columns(
         raise ValidationError("sample times must be strictly increasing")
     g = METHODS[method](tu, order)
     coef = g @ au  # (p, k)
-    resid = au - np.vander(tu - tu[0], order + 1, increasing=True) @ coef
-    covs = _CovarianceKernel(tu, g, order).covariances(np.ascontiguousarray(resid.T))
+    # residual rows (k, n), C-ordered for the row FFTs: a - Σ_j coef_j (t - t0)^j
+    dt = tu - tu[0]
+    resid = np.empty((au.shape[1], tu.size))
+    resid[:] = coef[-1][:, None]
+    for j in range(order - 1, -1, -1):  # Horner
+        resid *= dt
+        resid += coef[j][:, None]
+    np.subtract(au.T, resid, out=resid)
+    covs = _CovarianceKernel(tu, g, order).covariances(resid)
     return [
         TrendFit(
             method=method,
@@ -502,7 +554,7 @@ def _fit_columns(
             coef=coef[:, j].copy(),
             cov=covs[j],
             n_used=int(tu.size),
-            rms=float(np.sqrt(np.mean(resid[:, j] ** 2))),
+            rms=float(np.sqrt(np.dot(resid[j], resid[j]) / tu.size)),
         )
         for j in range(a.shape[1])
     ]

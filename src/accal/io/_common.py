@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from accal.errors import FormatError
+from accal.timescale import nominal_step
 
 GZIP_MAGIC = b"\x1f\x8b"
 PARQUET_MAGIC = b"PAR1"
@@ -241,18 +242,23 @@ def bits_from_strings(
             path,
             where(i),
         )
-    chars = np.frombuffer(data_buf, dtype=np.uint8, count=n * width, offset=int(offsets[0]))
-    digits = chars.reshape(n, width) - ord("0")
-    bad = np.flatnonzero((digits > 1).any(axis=1))
-    if bad.size:
-        i = int(bad[0])
+    chars = np.frombuffer(
+        data_buf, dtype=np.uint8, count=n * width, offset=int(offsets[0])
+    ).reshape(n, width)
+    ones = chars == ord("1")
+    if not np.all(ones | (chars == ord("0"))):
+        i = int(np.flatnonzero(~(ones | (chars == ord("0"))).all(axis=1))[0])
         raise FormatError(
             f"quality flag {_short(arr[i].as_py())} is not {width} characters of 0/1",
             path,
             where(i),
         )
-    weights = (1 << np.arange(width - 1, -1, -1)).astype(np.uint32)
-    return digits.astype(np.uint32) @ weights
+    # first character = most significant bit; packbits pads the last byte on the right
+    packed = np.packbits(ones, axis=1).astype(np.uint32)
+    bits = np.zeros(n, dtype=np.uint32)
+    for k in range(packed.shape[1]):
+        bits = (bits << np.uint32(8)) | packed[:, k]
+    return bits >> np.uint32(8 * packed.shape[1] - width)
 
 
 @dataclass
@@ -307,7 +313,7 @@ def tidy(time: NDArray[np.float64], arrays: dict[str, NDArray]) -> Tidied:
         arrays = {k: v[keep] for k, v in arrays.items()}
         warnings.append(f"{n_dup} duplicated epochs dropped (first kept)")
         d = np.diff(time)
-    step = float(np.median(d)) if d.size else float("nan")
+    step = nominal_step(d)
     if d.size:
         gaps = d > GAP_FACTOR * step
         n_gaps = int(np.count_nonzero(gaps))

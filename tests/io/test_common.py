@@ -1,0 +1,35 @@
+"""Tests of the shared reader helpers (accal.io._common)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pyarrow as pa
+import pytest
+
+from accal.errors import FormatError
+from accal.io._common import bits_from_strings
+
+
+@pytest.mark.parametrize("width", [1, 3, 8, 12, 32])
+def test_bits_from_strings_round_trips_every_pattern(width):
+    """'0'/'1' strings of any width come back as their integer (first char = MSB)."""
+    rng = np.random.default_rng(width)
+    values = np.arange(256) if width == 8 else rng.integers(0, 2**width, 300, dtype=np.int64)
+    strings = [format(int(v), f"0{width}b") for v in values]
+    arr = pa.chunked_array([pa.array(strings[:100]), pa.array(strings[100:])])
+    bits = bits_from_strings(arr, "f.txt", 1, width=width)
+    assert bits.dtype == np.uint32
+    assert np.array_equal(bits, values.astype(np.uint32))
+    # an array slice (non-zero offset into the buffers)
+    sliced = bits_from_strings(pa.array(strings).slice(7), "f", 1, width=width)
+    assert np.array_equal(sliced, values[7:])
+
+
+@pytest.mark.parametrize(
+    ("bad", "why"), [("0000x000", "characters"), ("0000000", "characters"), ("00000/00", "0/1")]
+)
+def test_bits_from_strings_names_the_bad_line(bad, why):
+    values = ["00000000"] * 5 + [bad] + ["00000001"] * 3
+    with pytest.raises(FormatError, match=why) as info:
+        bits_from_strings(pa.array(values), "f.txt", 10)
+    assert info.value.line == 15
