@@ -428,6 +428,7 @@ def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutco
         fmt=opts.fmt,
         units=CALIBRATED_UNITS,
         meta=meta,
+        sync=False,  # made durable with the batch commit (sync_files)
     )
     report = {
         "source": str(path),
@@ -440,7 +441,7 @@ def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutco
     if closure:
         report["closure"] = {ax: c["summary"] for ax, c in closure.items()}
     rep_path = out_dir / f"{stem}.report.json"
-    _write_json(rep_path, report)
+    _write_json(rep_path, report, sync=False)
     return FileOutcome(
         path,
         True,
@@ -636,7 +637,7 @@ def _plot_closure(res: Any, prefix: Path, ax: str) -> list[Path]:
         prefix.with_name(f"{prefix.name}.closure{k}.{ax}.png") for k in ("", "-psd", "-effects")
     ]
     with contextlib.ExitStack() as stack:
-        tmps = [stack.enter_context(atomic_path(p)) for p in names]
+        tmps = [stack.enter_context(atomic_path(p, sync=False)) for p in names]
         pngs = [t.with_name(t.name + ".png") for t in tmps]  # matplotlib wants the suffix
         plot_closure(res, *pngs)
         for png, t in zip(pngs, tmps, strict=True):
@@ -686,10 +687,10 @@ def _with_effects_removed(series: AccSeries, closure: dict[str, Any]) -> AccSeri
     return series.replace(acc=np.column_stack(cols))
 
 
-def _write_json(path: Path, obj: Any) -> None:
+def _write_json(path: Path, obj: Any, *, sync: bool = True) -> None:
     from accal.io.writers import _json_default, atomic_path
 
-    with atomic_path(path) as tmp:
+    with atomic_path(path, sync=sync) as tmp:
         tmp.write_text(json.dumps(_nan_to_none(obj), indent=2, default=_json_default) + "\n")
 
 
@@ -1054,12 +1055,16 @@ def _commit(
 ) -> Path | None:
     """Merge the rows of ``outcomes`` into the table, then record them in the manifest.
 
-    The order matters for crash safety: an input is recorded only once its rows
-    are in the table; an input with rows but no record is redone (and its rows
-    replaced, never duplicated).
+    The order matters for crash safety: an input is recorded only once its
+    outputs are on disk (one ``syncfs`` for the whole commit, see
+    :func:`accal.io.writers.sync_files`) and its rows are in the table; an input
+    with rows but no record is redone (and its rows replaced, never duplicated).
     """
+    from accal.io.writers import sync_files
+
     if not outcomes:
         return None
+    sync_files(p for o in outcomes if o.ok for p in o.outputs)
     rows = [r for o in outcomes if o.ok for r in o.rows]
     table = merge_bias_drift(out_dir, rows, opts.fmt) if rows else None
     for o in outcomes:

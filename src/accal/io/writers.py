@@ -11,7 +11,7 @@ import contextlib
 import json
 import os
 import tempfile
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -23,11 +23,15 @@ FORMATS = ("parquet", "csv")
 
 
 @contextlib.contextmanager
-def atomic_path(path: str | Path) -> Iterator[Path]:
+def atomic_path(path: str | Path, *, sync: bool = True) -> Iterator[Path]:
     """Yield a temporary path next to ``path``; rename it to ``path`` on success.
 
     The temporary file is removed if the body raises, so the target is either the
-    complete new file or untouched.
+    complete new file or untouched (also when the process is killed: the rename
+    is atomic).  With ``sync`` (default) the data is flushed to disk (``fsync``)
+    before the rename, so it also survives a power loss; a batch that writes many
+    files passes ``sync=False`` and makes them durable together with
+    :func:`sync_files` before it records them.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -39,13 +43,72 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     os.chmod(tmp_path, 0o666 & ~umask)  # mkstemp creates 0600; outputs follow the umask
     try:
         yield tmp_path
-        with open(tmp_path, "rb+") as fh:
-            os.fsync(fh.fileno())
+        if sync:
+            with open(tmp_path, "rb+") as fh:
+                os.fsync(fh.fileno())
         os.replace(tmp_path, path)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
             tmp_path.unlink()
         raise
+
+
+def sync_files(paths: Iterable[str | Path]) -> None:
+    """Make files written with ``atomic_path(..., sync=False)`` durable.
+
+    On Linux one ``syncfs`` per file system flushes them all at once (the cost of
+    one ``fsync`` instead of one per file, which on a spinning disk is ~10 ms
+    each); elsewhere each file and its directory is ``fsync``-ed.  Files that no
+    longer exist are skipped.
+    """
+    paths = [Path(p) for p in paths]
+    syncfs = _libc_syncfs()
+    done: set[int] = set()
+    dirs: set[Path] = set()
+    for p in paths:
+        try:
+            st = p.stat()
+        except OSError:
+            continue
+        if syncfs is not None:
+            if st.st_dev in done:
+                continue
+            fd = os.open(p, os.O_RDONLY)
+            try:
+                if syncfs(fd) == 0:
+                    done.add(st.st_dev)
+                    continue
+            finally:
+                os.close(fd)
+        fd = os.open(p, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        dirs.add(p.parent)
+    for d in dirs:
+        with contextlib.suppress(OSError):
+            fd = os.open(d, os.O_RDONLY)
+            try:
+                os.fsync(fd)
+            finally:
+                os.close(fd)
+
+
+def _libc_syncfs() -> Any:
+    """``syncfs(2)`` from the C library, or None where it is not available."""
+    import ctypes
+    import sys
+
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        fn = ctypes.CDLL("libc.so.6", use_errno=True).syncfs
+    except (OSError, AttributeError):
+        return None
+    fn.argtypes = (ctypes.c_int,)
+    fn.restype = ctypes.c_int
+    return fn
 
 
 def _json_default(obj: Any) -> Any:
@@ -109,6 +172,7 @@ def write_table(
     fmt: str | None = None,
     units: Mapping[str, str] | None = None,
     meta: Mapping[str, Any] | None = None,
+    sync: bool = True,
 ) -> Path:
     """Write a table atomically as Parquet or CSV.
 
@@ -127,6 +191,8 @@ def write_table(
     meta : mapping, optional
         Free metadata, stored as JSON under ``accal.meta`` (Parquet) or a
         ``# meta: {...}`` comment line (CSV).
+    sync : bool
+        ``fsync`` before the rename (see :func:`atomic_path`).
 
     Returns
     -------
@@ -148,7 +214,7 @@ def write_table(
     meta_json = json.dumps(dict(meta or {}), default=_json_default, sort_keys=True)
     units_json = json.dumps(units, sort_keys=True)
     table = _as_arrow(data)
-    with atomic_path(path) as tmp:
+    with atomic_path(path, sync=sync) as tmp:
         if fmt == "parquet":
             import pyarrow.parquet as pq
 
