@@ -68,6 +68,49 @@ class LockedError(AccalError):
 
 
 @dataclass(frozen=True)
+class Outcome:
+    """What happened to one input of a batch (the part every command shares).
+
+    Attributes
+    ----------
+    path : Path
+        The input.
+    ok : bool
+        True if processed and written.
+    message : str
+        One-line error (``FILE[:LINE]: what is wrong``) when not ok.
+    outputs : tuple of Path
+        Files written for this input.
+    """
+
+    path: Path
+    ok: bool
+    message: str = ""
+    outputs: tuple[Path, ...] = ()
+
+
+def failure_message(path: Path | str, exc: AccalError) -> str:
+    """One line ``FILE[:LINE]: what is wrong`` for an input error."""
+    msg = str(exc).replace("\n", " ")
+    if getattr(exc, "path", None) is None:
+        msg = f"{path}: {msg}"
+    return msg
+
+
+def internal_error_message(path: Path | str, exc: BaseException) -> str:
+    """One line for a bug (not bad input); with ``ACCAL_DEBUG`` set, the traceback."""
+    msg = (
+        f"{path}: internal error ({type(exc).__name__}: {exc}); "
+        "please report it with the output of 'accal --debug ...'"
+    )
+    if os.environ.get("ACCAL_DEBUG"):
+        import traceback
+
+        msg += "\n" + "".join(traceback.format_exception(exc))
+    return msg
+
+
+@dataclass(frozen=True)
 class InputGroup:
     """Inputs of one satellite and day (``key`` is ``("?", "?")`` when unknown)."""
 

@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from accal import __version__
+from accal.batch import Outcome, failure_message, internal_error_message
 from accal.errors import AccalError, ValidationError, check_option
 from accal.series import AccSeries
 
@@ -134,23 +135,15 @@ class GraceBiasOptions:
 
 
 @dataclass(frozen=True)
-class FileOutcome:
-    """What happened to one input.
+class FileOutcome(Outcome):
+    """What happened to one input (:class:`accal.batch.Outcome` plus grace-bias results).
 
     Attributes
     ----------
-    path : Path
-        The input.
-    ok : bool
-        True if processed and written.
-    message : str
-        One-line error (``FILE[:LINE]: what is wrong``) when not ok.
     rows : list of dict
         Rows for ``bias_drift`` (one per axis and method).
     n_samples : int
         Samples read.
-    outputs : tuple of Path
-        Files written for this input.
     skipped : bool
         True when the manifest says the outputs are current (nothing was done).
     n_bytes : int
@@ -159,12 +152,8 @@ class FileOutcome:
         ``{axis: closure summary}`` of a ``--close-loop`` run (see ``closure.json``).
     """
 
-    path: Path
-    ok: bool
-    message: str = ""
     rows: list[dict[str, Any]] = field(default_factory=list)
     n_samples: int = 0
-    outputs: tuple[Path, ...] = ()
     skipped: bool = False
     n_bytes: int = 0
     closure: dict[str, Any] = field(default_factory=dict)
@@ -895,7 +884,7 @@ def process_one(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutcom
             raise ValidationError("is a directory (use --recursive to process the files in it)")
         return process_file(path, Path(out_dir), opts)
     except AccalError as exc:
-        return FileOutcome(path, False, _one_line(path, exc))
+        return FileOutcome(path, False, failure_message(path, exc))
     except MemoryError:
         return FileOutcome(path, False, f"{path}: out of memory")
     except Exception as exc:  # a bug, not bad input: still keep the batch going
@@ -903,15 +892,7 @@ def process_one(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutcom
 
 
 def _internal_error(path: Path, exc: BaseException) -> FileOutcome:
-    msg = (
-        f"{path}: internal error ({type(exc).__name__}: {exc}); "
-        "please report it with the output of 'accal --debug ...'"
-    )
-    if os.environ.get("ACCAL_DEBUG"):
-        import traceback
-
-        msg += "\n" + "".join(traceback.format_exception(exc))
-    return FileOutcome(Path(path), False, msg)
+    return FileOutcome(Path(path), False, internal_error_message(path, exc))
 
 
 def run(
@@ -1076,14 +1057,6 @@ def _commit(
     return table
 
 
-def _one_line(path: Path | str, exc: AccalError) -> str:
-    msg = str(exc).replace("\n", " ")
-    file_path = getattr(exc, "path", None)
-    if file_path is None:
-        msg = f"{path}: {msg}"
-    return msg
-
-
 def write_closure_reports(out_dir: Path, outcomes: Sequence[FileOutcome]) -> tuple[Path, Path]:
     """Merge this run's closure results into ``OUT/closure.json`` and ``OUT/closure.md``.
 
@@ -1216,7 +1189,7 @@ def diagnose_dir(
                 )
             )
         except AccalError as exc:
-            outcomes.append(FileOutcome(p, False, _one_line(p, exc)))
+            outcomes.append(FileOutcome(p, False, failure_message(p, exc)))
         except Exception as exc:
             outcomes.append(_internal_error(p, exc))
     return outcomes

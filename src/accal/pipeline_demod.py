@@ -41,6 +41,7 @@ from typing import Any
 import numpy as np
 
 from accal import __version__
+from accal.batch import Outcome, failure_message, internal_error_message
 from accal.errors import AccalError, ValidationError, check_option
 
 #: Standard integration time for σ(T) in the summary: 3 h, as in the paper (Fig. 5) [s].
@@ -166,29 +167,19 @@ class DemodOptions:
 
 
 @dataclass(frozen=True)
-class RunOutcome:
-    """What happened to one run file.
+class RunOutcome(Outcome):
+    """What happened to one run file (:class:`accal.batch.Outcome` plus demod results).
+
+    ``outputs`` are the cumulative periods table, the summary JSON and Markdown.
 
     Attributes
     ----------
-    path : Path
-        The input.
-    ok : bool
-        True if processed and written.
-    message : str
-        One-line error ``FILE[:LINE]: what is wrong`` when not ok.
-    outputs : tuple of Path
-        Files written (the cumulative periods table, summary JSON, summary Markdown).
     summary : dict
         The JSON summary (empty on failure).
     warnings : tuple of str
         Findings worth telling the user (mask mismatch, dropped periods, ...).
     """
 
-    path: Path
-    ok: bool
-    message: str = ""
-    outputs: tuple[Path, ...] = ()
     summary: dict[str, Any] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
 
@@ -1010,16 +1001,9 @@ def run_demod(
                 try:
                     outcomes.append(process_run(path, tgt, opts, psd))
                 except AccalError as exc:
-                    msg = str(exc).replace("\n", " ")
-                    if getattr(exc, "path", None) is None:
-                        msg = f"{path}: {msg}"
-                    outcomes.append(RunOutcome(path, False, msg))
+                    outcomes.append(RunOutcome(path, False, failure_message(path, exc)))
                 except Exception as exc:  # a bug, not bad input: keep the batch going
-                    outcomes.append(
-                        RunOutcome(
-                            path, False, f"{path}: internal error ({type(exc).__name__}: {exc})"
-                        )
-                    )
+                    outcomes.append(RunOutcome(path, False, internal_error_message(path, exc)))
                 o = outcomes[-1]
                 log(f"ok {path}" if o.ok else f"FAILED {o.message}")
             summary = DemodRunSummary(outcomes, _time.perf_counter() - start)

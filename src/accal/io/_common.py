@@ -254,9 +254,12 @@ def bits_from_strings(
             where(i),
         )
     # first character = most significant bit; packbits pads the last byte on the right
-    packed = np.packbits(ones, axis=1).astype(np.uint32)
-    bits = np.zeros(n, dtype=np.uint32)
-    for k in range(packed.shape[1]):
+    if width % 8 == 0:  # whole bytes: a flat packbits is ~100x faster than per row
+        packed = np.packbits(ones.ravel()).reshape(n, width // 8)
+    else:
+        packed = np.packbits(ones, axis=1)
+    bits = packed[:, 0].astype(np.uint32)
+    for k in range(1, packed.shape[1]):
         bits = (bits << np.uint32(8)) | packed[:, k]
     return bits >> np.uint32(8 * packed.shape[1] - width)
 
