@@ -82,7 +82,7 @@ from accal.io.grace_l1b import (
     _grace_int,
     _parse_grace_header,
     _split_header,
-    _yaml,
+    load_yaml_header,
 )
 from accal.series import UNITS
 
@@ -462,17 +462,7 @@ def _bit_meanings(prod_flag: Any, path: Path) -> dict[int, str]:
 
 
 def _interpret_gracefo(header: bytes, path: Path) -> dict[str, Any]:
-    yaml, str_loader, _ = _yaml()
-    try:
-        doc = yaml.load(header.decode("utf-8"), Loader=str_loader)  # noqa: S506 (safe loader)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        line = None if mark is None else mark.line + 1
-        problem = getattr(exc, "problem", None) or "invalid YAML"
-        raise FormatError(f"YAML header: {problem}", path, line) from None
-    if not isinstance(doc, dict) or not isinstance(doc.get("header"), dict):
-        raise FormatError("YAML header has no 'header:' mapping", path, 1)
-    hdr = doc["header"]
+    hdr = load_yaml_header(header, path)
     try:
         n_header = int(hdr["dimensions"]["num_records"])
     except (KeyError, TypeError, ValueError):
