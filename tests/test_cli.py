@@ -311,3 +311,71 @@ def test_version_and_python_m_in_a_real_process(tmp_path):
     assert "Traceback" not in res.stderr
     assert f"accal: {tmp_path / 'nope.asc'}" in res.stderr
     assert (tmp_path / "o" / "bias_drift.csv").exists()
+
+
+def test_column_option_applies_to_tables_and_leaves_l1b_files_alone(tmp_path):
+    """--column maps table columns; a GRACE file in the same batch is read as usual."""
+    code, _, err = invoke("grace-bias", GRACE_A, SWARM, "--column", "x=a_cal_x", "--out", tmp_path)
+    assert code == 0, err
+    assert set(table(tmp_path)["satellite"]) == {"GRACE-A", "Swarm-A"}
+
+
+def test_inputs_writing_the_same_outputs_are_refused_not_mixed(tmp_path):
+    """Two copies of a day, or x.asc and x.dat: the second fails, nothing is duplicated."""
+    for d in ("a", "b"):
+        (tmp_path / d).mkdir()
+        (tmp_path / d / GRACE_A.name).write_bytes(GRACE_A.read_bytes())
+    dat = GRACE_A.with_suffix(".dat")
+    out = tmp_path / "out"
+    code, _, err = invoke(
+        "grace-bias", tmp_path / "a" / GRACE_A.name, tmp_path / "b" / GRACE_A.name, dat,
+        "-j", "1", "--out", out,
+    )  # fmt: skip
+    assert code == 1
+    lines = [ln for ln in err.splitlines() if "same outputs" in ln]
+    assert len(lines) == 2 and all(str(tmp_path / "a" / GRACE_A.name) in ln for ln in lines)
+    df = table(out)
+    assert len(df) == 3 and not df.duplicated(["source", "axis", "method"]).any()
+    assert "same outputs" in (out / "accal.log").read_text()
+
+
+def test_reader_warnings_and_name_mismatch_reach_the_user(tmp_path):
+    """A file named for another satellite and day: processed, one warning line, logged."""
+    renamed = tmp_path / "ACC1B_2005-01-01_B_00.asc"
+    renamed.write_bytes(GRACE_A.read_bytes())
+    code, _, err = invoke("grace-bias", renamed, "--out", tmp_path / "out")
+    assert code == 0
+    warn = [ln for ln in err.splitlines() if ": warning:" in ln]
+    assert len(warn) == 1
+    assert "satellite B, the data are GRACE-A" in warn[0] and "2003-09-14" in warn[0]
+    assert "file name says 2005-01-01" in (tmp_path / "out" / "accal.log").read_text()
+    code, _, err = invoke("grace-bias", renamed, "--out", tmp_path / "out2", "-q")
+    assert code == 0 and ": warning:" not in err
+    # a correctly named file has nothing to say
+    code, _, err = invoke("grace-bias", GRACE_A, "--out", tmp_path / "out3")
+    assert code == 0 and ": warning:" not in err
+
+
+def test_output_directory_problems_are_one_line(tmp_path):
+    out = tmp_path / "out"
+    assert invoke("grace-bias", GRACE_A, "--out", out)[0] == 0
+    code, _, err = invoke("grace-bias", GRACE_A, "--out", out, "--format", "csv")
+    assert code == 1 and "holds bias_drift.parquet" in err and "Traceback" not in err
+    assert not (out / "bias_drift.csv").exists()
+    code, _, err = invoke("grace-bias", GRACE_A, "--out", out / "bias_drift.parquet" / "sub")
+    assert code == 2 and "cannot write the output directory" in err
+    assert len(err.strip().splitlines()) == 1
+
+
+def test_bad_scale_is_a_usage_error_said_once(tmp_path):
+    code, _, err = invoke("grace-bias", GRACE_A, GRACE_B, "--scale", "1,2", "--out", tmp_path)
+    assert code == 2 and err.count("--scale expects") == 1
+    assert not any(tmp_path.iterdir())
+
+
+def test_table_filters_ignore_case_and_check_the_date_range(tmp_path):
+    assert invoke("grace-bias", GRACE_A, "--method", "both", "--out", tmp_path)[0] == 0
+    code, out, _ = invoke("table", tmp_path, "--method", "WAVELET", "--axis", "Y")
+    assert code == 0 and len(out.strip().splitlines()) == 2  # header + one row
+    code, _, err = invoke("table", tmp_path, "--start", "2004-01-01", "--end", "2003-01-01")
+    assert code == 2 and "after --end" in err

@@ -244,9 +244,14 @@ def grace_bias(
     except (LockedError, AccalError) as exc:
         _err(str(exc))
         sys.exit(1)
+    except OSError as exc:  # the output directory cannot be made or written
+        _err(f"{exc.filename or out}: cannot write the output directory: {exc.strerror or exc}")
+        sys.exit(2)
     for o in summary.outcomes:
         if not o.ok:
             _err(o.message)
+        elif o.warnings and not quiet:
+            _err(f"{o.path}: warning: {'; '.join(o.warnings)}")
     if opts.close_loop:
         write_closure_reports(out, summary.outcomes)
     if not quiet:
@@ -262,8 +267,20 @@ def grace_bias(
 )
 @click.option("--start", default=None, metavar="YYYY-MM-DD", help="First date kept.")
 @click.option("--end", default=None, metavar="YYYY-MM-DD", help="Last date kept.")
-@click.option("--method", "methods", multiple=True, help="Keep these methods (repeatable).")
-@click.option("--axis", "axes", multiple=True, help="Keep these axes (repeatable).")
+@click.option(
+    "--method",
+    "methods",
+    multiple=True,
+    type=click.Choice(["wavelet", "lsq"], case_sensitive=False),
+    help="Keep these methods (repeatable).",
+)
+@click.option(
+    "--axis",
+    "axes",
+    multiple=True,
+    type=click.Choice(["x", "y", "z"], case_sensitive=False),
+    help="Keep these axes (repeatable).",
+)
 @click.option(
     "--status",
     "statuses",
@@ -305,6 +322,8 @@ def table_cmd(
         for d in (start, end):
             if d is not None and not _is_date(d):
                 raise click.BadParameter(f"expected YYYY-MM-DD, got {d!r}")
+        if start and end and start > end:
+            raise click.BadParameter(f"--start {start} is after --end {end}")
         keep = np.ones(len(df), dtype=bool)
         if satellites:
             want = {s.upper().removeprefix("GRACE-FO-").removeprefix("GRACE-") for s in satellites}
@@ -315,9 +334,9 @@ def table_cmd(
         if end:
             keep &= (df["date"] <= end).to_numpy()
         if methods:
-            keep &= df["method"].isin(methods).to_numpy()
+            keep &= df["method"].isin([m.lower() for m in methods]).to_numpy()
         if axes:
-            keep &= df["axis"].isin(axes).to_numpy()
+            keep &= df["axis"].isin([a.lower() for a in axes]).to_numpy()
         if statuses:
             keep &= df["day_status"].isin(statuses).to_numpy()
         df = df[keep]

@@ -9,6 +9,7 @@ reported as a :class:`FileOutcome` with a one-line message.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import os
 import time as _time
@@ -28,7 +29,7 @@ from accal.series import AccSeries
 BIAS_DRIFT_UNITS = {
     "source": "input file name",
     "satellite": "satellite identifier",
-    "date": "UTC date of t0 (YYYY-MM-DD)",
+    "date": "GPS-calendar date of t0 (YYYY-MM-DD; the L1B file day)",
     "axis": "accelerometer axis (x|y|z), frame in 'frame'",
     "frame": "reference frame of the axes",
     "method": "estimator (wavelet|lsq)",
@@ -132,6 +133,10 @@ class GraceBiasOptions:
             check_option("method", m, tuple(METHODS))
         check_option("order", self.order, (1, 2))
         check_option("format", self.fmt, ("parquet", "csv"))
+        if self.scale is not None and str(self.scale).lower() != "tn02":
+            from accal.calibration import parse_scale
+
+            parse_scale(self.scale, "")  # a numeric --scale is checked once, up front
 
 
 @dataclass(frozen=True)
@@ -150,6 +155,9 @@ class FileOutcome(Outcome):
         Size of the input [bytes].
     closure : dict
         ``{axis: closure summary}`` of a ``--close-loop`` run (see ``closure.json``).
+    warnings : tuple of str
+        What the reader and the pipeline found worth telling (duplicated or
+        out-of-order records, gaps, header/record/file-name disagreements, ...).
     """
 
     rows: list[dict[str, Any]] = field(default_factory=list)
@@ -157,6 +165,7 @@ class FileOutcome(Outcome):
     skipped: bool = False
     n_bytes: int = 0
     closure: dict[str, Any] = field(default_factory=dict)
+    warnings: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -231,12 +240,13 @@ def output_stem(path: Path) -> str:
 
 def read_input(path: Path, opts: GraceBiasOptions) -> AccSeries:
     """Read one input with the registry (format sniffed unless forced)."""
-    from accal.io import read
+    from accal.io import detect_format, read
 
+    fmt = opts.input_format or detect_format(path)
     kwargs: dict[str, Any] = {}
-    if opts.columns:
+    if opts.columns and fmt == "table":  # --column maps table columns; L1B files have fixed ones
         kwargs["columns"] = dict(opts.columns)
-    return read(path, format=opts.input_format, **kwargs)
+    return read(path, format=fmt, **kwargs)
 
 
 def subtract_reference(series: AccSeries, reference: AccSeries, ref_path: Path) -> AccSeries:
@@ -374,6 +384,12 @@ def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutco
     series = read_input(path, opts)
     if len(series) == 0:
         raise ValidationError("no data records")
+    mismatch = name_mismatch(path, series)
+    if mismatch:
+        rep = series.report
+        series = series.replace(
+            report=dataclasses.replace(rep, warnings=(*rep.warnings, *mismatch))
+        )
     fit_series = series
     if opts.reference is not None:
         ref = read_input(opts.reference, GraceBiasOptions(columns=opts.columns))
@@ -439,7 +455,32 @@ def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutco
         outputs=(cal_path, rep_path, *extra_outputs),
         n_bytes=_size(path),
         closure={ax: c["summary"] for ax, c in closure.items()},
+        warnings=tuple(report["read_report"]["warnings"]),
     )
+
+
+def name_mismatch(path: Path, series: AccSeries) -> list[str]:
+    """Disagreements between an L1B file name and its content (satellite, day).
+
+    ``ACC1B_2005-01-01_A_02.asc`` names GRACE-A data of GPS day 2005-01-01; a
+    file that holds another satellite or day was probably renamed or mixed up.
+    Names that do not follow the L1B pattern are not checked.
+    """
+    from accal.batch import _L1B_NAME
+    from accal.timescale import gps_to_date
+
+    m = _L1B_NAME.search(path.name)
+    if m is None or len(series) == 0:
+        return []
+    out = []
+    letter = series.satellite[-1:] if series.satellite.startswith("GRACE") else ""
+    if letter and m["sat"] != letter:
+        out.append(f"file name says satellite {m['sat']}, the data are {series.satellite}")
+    t = series.time
+    days = {gps_to_date(float(t[0])), gps_to_date(float(t[len(t) // 2]))}
+    if m["date"] not in days:
+        out.append(f"file name says {m['date']}, the data are of {min(days)}")
+    return out
 
 
 def _size(path: Path) -> int:
@@ -887,6 +928,11 @@ def process_one(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutcom
         return FileOutcome(path, False, failure_message(path, exc))
     except MemoryError:
         return FileOutcome(path, False, f"{path}: out of memory")
+    except OSError as exc:  # writing the outputs (disk full, permissions, ...)
+        where = f" ({exc.filename})" if exc.filename else ""
+        return FileOutcome(
+            path, False, f"{path}: cannot write outputs{where}: {exc.strerror or exc}"
+        )
     except Exception as exc:  # a bug, not bad input: still keep the batch going
         return _internal_error(path, exc)
 
@@ -958,6 +1004,12 @@ def run(
     paths = [Path(p) for p in paths]
     if fail_fast:
         workers, scheduler = 1, None
+    other = "csv" if opts.fmt == "parquet" else "parquet"
+    if (out_dir / f"bias_drift.{other}").exists():
+        raise AccalError(
+            f"{out_dir} holds bias_drift.{other} of --format {other} runs; use --format "
+            f"{other} there, or another --out for {opts.fmt}"
+        )
     with OutputLock(out_dir, "accal grace-bias"):
         remove_stale_temporaries(out_dir)
         rlog = RunLog(out_dir, enabled=log)
@@ -971,8 +1023,18 @@ def run(
             manifest = Manifest.load(out_dir)
             results: dict[int, FileOutcome] = {}
             todo: list[int] = []
+            owners: dict[str, Path] = {}
             for i, p in enumerate(paths):
-                if not force and manifest.is_current(p, key, checksum=checksum):
+                stem = output_stem(p)
+                if owners.setdefault(stem, p) is not p:
+                    results[i] = FileOutcome(
+                        p,
+                        False,
+                        f"{p}: would write the same outputs ({stem}.*) as {owners[stem]} "
+                        "in this run; rename one or give it another --out",
+                    )
+                    rlog(f"FAILED {results[i].message}")
+                elif not force and manifest.is_current(p, key, checksum=checksum):
                     results[i] = FileOutcome(p, True, skipped=True)
                     rlog(f"skip {p}: outputs current")
                 else:
@@ -998,6 +1060,8 @@ def run(
                     if outcome.ok
                     else f"FAILED {outcome.message}"
                 )
+                for w in outcome.warnings:
+                    rlog(f"warning {outcome.path}: {w}")
                 if fail_fast and not outcome.ok:
                     break
                 if _time.monotonic() - last > commit_seconds:
