@@ -379,3 +379,15 @@ def test_table_filters_ignore_case_and_check_the_date_range(tmp_path):
     assert code == 0 and len(out.strip().splitlines()) == 2  # header + one row
     code, _, err = invoke("table", tmp_path, "--start", "2004-01-01", "--end", "2003-01-01")
     assert code == 2 and "after --end" in err
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="ru_maxrss units")
+def test_summary_reports_the_workers_peak_memory(tmp_path):
+    """The summary (stderr and accal.log) gives the peak RSS of the worker processes."""
+    import re
+
+    code, _, err = invoke("grace-bias", GRACE_A, GRACE_B, "-j", "2", "--out", tmp_path)
+    assert code == 0
+    for text in (err, (tmp_path / "accal.log").read_text()):
+        m = re.search(r"peak RSS (\d+) MB per worker", text)
+        assert m and 30 < int(m.group(1)) < 4000

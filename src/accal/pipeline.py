@@ -12,6 +12,7 @@ import contextlib
 import dataclasses
 import json
 import os
+import sys
 import time as _time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
@@ -158,6 +159,9 @@ class FileOutcome(Outcome):
     warnings : tuple of str
         What the reader and the pipeline found worth telling (duplicated or
         out-of-order records, gaps, header/record/file-name disagreements, ...).
+    peak_rss : float
+        Peak resident memory of the process that ran the input, when it finished
+        [MB] (0 where unknown).
     """
 
     rows: list[dict[str, Any]] = field(default_factory=list)
@@ -166,6 +170,7 @@ class FileOutcome(Outcome):
     n_bytes: int = 0
     closure: dict[str, Any] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
+    peak_rss: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -212,6 +217,11 @@ class RunSummary:
         """Bytes read (inputs processed now)."""
         return sum(o.n_bytes for o in self.outcomes if not o.skipped)
 
+    @property
+    def peak_rss(self) -> float:
+        """Largest peak resident memory of a process that ran inputs [MB]."""
+        return max((o.peak_rss for o in self.outcomes), default=0.0)
+
     def line(self, command: str = "accal grace-bias") -> str:
         """The one-line end-of-run summary."""
         done = self.n_ok + self.n_failed
@@ -224,7 +234,8 @@ class RunSummary:
             f"{command}: {self.n_ok} ok, {self.n_skipped} skipped (current), {self.n_failed} "
             f"failed, {self.n_not_run} not run; {self.n_samples:,} samples, "
             f"{self.n_bytes / 1e6:.1f} MB in {self.seconds:.2f} s ({rate}, {self.workers} "
-            f"worker{'s' if self.workers != 1 else ''}); table: {self.table_path}"
+            f"worker{'s' if self.workers != 1 else ''}, peak RSS {self.peak_rss:.0f} MB per "
+            f"worker); table: {self.table_path}"
         )
 
 
@@ -923,7 +934,8 @@ def process_one(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutcom
     try:
         if path.is_dir():
             raise ValidationError("is a directory (use --recursive to process the files in it)")
-        return process_file(path, Path(out_dir), opts)
+        outcome = process_file(path, Path(out_dir), opts)
+        return dataclasses.replace(outcome, peak_rss=_peak_rss_mb())
     except AccalError as exc:
         return FileOutcome(path, False, failure_message(path, exc))
     except MemoryError:
@@ -935,6 +947,16 @@ def process_one(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutcom
         )
     except Exception as exc:  # a bug, not bad input: still keep the batch going
         return _internal_error(path, exc)
+
+
+def _peak_rss_mb() -> float:
+    """Peak resident memory of this process [MB] (0 where ``resource`` is missing)."""
+    try:
+        import resource
+    except ImportError:  # pragma: no cover - not POSIX
+        return 0.0
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return peak / (1 << 20) if sys.platform == "darwin" else peak / 1024.0
 
 
 def _internal_error(path: Path, exc: BaseException) -> FileOutcome:
