@@ -330,3 +330,32 @@ def test_grid_placement_and_orthonormal_basis():
         q = _orthonormal_columns(x)
         assert np.allclose(q.T @ q, np.eye(p), atol=1e-14)
         assert np.allclose(q @ (q.T @ x), x, atol=1e-13)
+
+
+@pytest.mark.parametrize("method", ["wavelet", "lsq"])
+def test_uniform_layouts_share_a_design_that_matches_the_direct_one(method):
+    """Complete days use cached weights/kernel from the canonical grid: same result as the
+    direct computation on the day's own epochs, for any t0, and the cache is read-only."""
+    from accal.estimators.trend import _CovarianceKernel, _fit_columns, _uniform_design
+
+    rng = np.random.default_rng(3)
+    n = 5000
+    a = 1e-7 + 1e-12 * np.arange(n)[:, None] + 1e-9 * rng.standard_normal((n, 2))
+    fits = []
+    for t0 in (116769600.0, 7.3e8 + 0.5, 0.0):
+        t = t0 + 2.0 * np.arange(n)
+        fits.append(fit_trend(t, a[:, 0], method=method))
+        g_direct = (wavelet_weights if method == "wavelet" else lsq_weights)(t, 1)
+        g_cached, kernel = _uniform_design(n, 2.0, method, 1)
+        np.testing.assert_allclose(g_cached, g_direct, rtol=1e-9, atol=1e-12 * abs(g_direct).max())
+        resid = np.ascontiguousarray((a - a.mean(axis=0)).T)
+        np.testing.assert_allclose(
+            kernel.covariances(resid), _CovarianceKernel(t, g_direct, 1).covariances(resid),
+            rtol=1e-8,
+        )  # fmt: skip
+        assert not g_cached.flags.writeable
+        uncached = _fit_columns(t, a, np.ones(n, bool) & (np.arange(n) != 17), method, 1)
+        assert np.isfinite(uncached[0].cov).all()
+    for f in fits[1:]:
+        np.testing.assert_allclose(f.coef, fits[0].coef, rtol=1e-12)
+        np.testing.assert_allclose(f.cov, fits[0].cov, rtol=1e-12)

@@ -25,6 +25,7 @@ References
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -520,6 +521,23 @@ def fit_trends(
     ]
 
 
+@functools.lru_cache(maxsize=8)
+def _uniform_design(
+    n: int, step: float, method: str, order: int
+) -> tuple[NDArray[np.float64], _CovarianceKernel]:
+    """Weights and covariance kernel of ``n`` samples ``step`` apart (read-only, cached).
+
+    Computed on ``t = k·step``; the coefficients are in powers of ``t − t0``, so
+    they hold for any ``t0``, and a uniform layout gives the same result whether
+    or not it was cached.
+    """
+    t = np.arange(n) * step
+    g = METHODS[method](t, order)
+    kernel = _CovarianceKernel(t, g, order)
+    g.setflags(write=False)
+    return g, kernel
+
+
 def _fit_columns(
     t: NDArray[np.float64],
     a: NDArray[np.float64],
@@ -533,9 +551,15 @@ def _fit_columns(
         raise ValidationError(
             f"only {tu.size} usable samples; an order-{order} trend needs at least {order + 2}"
         )
-    if np.any(np.diff(tu) <= 0):
+    d = np.diff(tu)
+    if np.any(d <= 0):
         raise ValidationError("sample times must be strictly increasing")
-    g = METHODS[method](tu, order)
+    if d[0] == d[-1] and d.min() == d.max():
+        # every step equal (a complete day): weights and kernel depend only on
+        # (n, step), so they come from the canonical grid k·step, shared by all such days
+        g, kernel = _uniform_design(tu.size, float(d[0]), method, order)
+    else:
+        g, kernel = METHODS[method](tu, order), None
     coef = g @ au  # (p, k)
     # residual rows (k, n), C-ordered for the row FFTs: a - Σ_j coef_j (t - t0)^j
     dt = tu - tu[0]
@@ -545,7 +569,7 @@ def _fit_columns(
         resid *= dt
         resid += coef[j][:, None]
     np.subtract(au.T, resid, out=resid)
-    covs = _CovarianceKernel(tu, g, order).covariances(resid)
+    covs = (kernel or _CovarianceKernel(tu, g, order)).covariances(resid)
     return [
         TrendFit(
             method=method,
