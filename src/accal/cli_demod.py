@@ -131,9 +131,10 @@ def demod(
     and OUT/summary.md with one RUN, OUT/<stem>.summary.json/.md with several.
     """
     from accal.errors import AccalError
-    from accal.pipeline_demod import DemodOptions, run_demod
+    from accal.pipeline_demod import DemodOptions, check_distinct_runs, run_demod
 
     try:
+        check_distinct_runs(runs)
         opts = DemodOptions(
             tau=tau,
             mask=mask,

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import os
 import time as _time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
@@ -149,10 +150,16 @@ class DemodOptions:
                 f"Invalid value for the 'bias_model' parameter: expected 'affine' or "
                 f"'affine+CHANNEL[+CHANNEL]', got {self.bias_model!r}"
             )
-        if not self.tau > 0:
-            raise ValidationError(f"tau must be positive, got {self.tau} s")
-        if self.sinusoid_period is not None and not self.sinusoid_period > 0:
-            raise ValidationError(f"sinusoid period must be positive, got {self.sinusoid_period}")
+        if not 0 < self.tau < np.inf:
+            raise ValidationError(f"tau must be positive and finite, got {self.tau} s")
+        if self.sinusoid_period is not None and not 0 < self.sinusoid_period < np.inf:
+            raise ValidationError(
+                f"sinusoid period must be positive and finite, got {self.sinusoid_period} s"
+            )
+        if not 0 < self.integration < np.inf:
+            raise ValidationError(
+                f"integration time must be positive and finite, got {self.integration} s"
+            )
         if not self.gap_factor > 1:
             raise ValidationError(f"gap factor must be > 1 step, got {self.gap_factor}")
         if int(self.chunk_rows) < MIN_CHUNK_ROWS:
@@ -463,8 +470,17 @@ def period_rows(
     return data, units
 
 
-def summarise(path: Path, info: RunInfo, res: Any, opts: DemodOptions) -> dict[str, Any]:
-    """The run summary (JSON-ready): Rd, σ(T), leakage, masking, drops, sinusoid fit."""
+def summarise(
+    path: Path, info: RunInfo, res: Any, opts: DemodOptions, *, out_dir: Path | None = None
+) -> dict[str, Any]:
+    """The run summary (JSON-ready): Rd, σ(T), leakage, masking, drops, sinusoid fit.
+
+    ``source`` is the run's path as given; ``source_path`` the resolved absolute
+    path and, with ``out_dir`` (where the summary goes), ``source_relpath`` the
+    path relative to it, so that the run is found again from any working
+    directory, and after the run and the output directory moved together
+    (:func:`find_run`).
+    """
     from accal.estimators.demod import fit_sinusoid, sigma_mean
 
     n = res.a_Y.size
@@ -485,6 +501,8 @@ def summarise(path: Path, info: RunInfo, res: Any, opts: DemodOptions) -> dict[s
         }
     out: dict[str, Any] = {
         "source": str(path),
+        "source_path": str(Path(path).resolve()),
+        "source_relpath": _relpath(path, out_dir) if out_dir is not None else None,
         "accal_version": __version__,
         "input": {
             "n_rows": info.n_input,
@@ -571,6 +589,60 @@ def summarise(path: Path, info: RunInfo, res: Any, opts: DemodOptions) -> dict[s
             **fits,
         }
     return out
+
+
+def _relpath(path: Path, start: Path) -> str | None:
+    """``path`` relative to the directory ``start`` (None if there is no such path)."""
+    try:
+        return os.path.relpath(Path(path).resolve(), Path(start).resolve())
+    except ValueError:  # another drive (Windows)
+        return None
+
+
+def find_run(summary: dict[str, Any], summary_path: Path) -> Path:
+    """The run file a demod summary names, wherever the current directory is.
+
+    Tried in order: ``source_path`` (absolute), ``source_relpath`` relative to the
+    summary's directory, ``source`` as given (relative to the current directory),
+    ``source`` relative to the summary's directory (summaries of older versions
+    only have ``source``).
+
+    Parameters
+    ----------
+    summary : dict
+        The parsed ``summary.json``.
+    summary_path : Path
+        Its file.
+
+    Returns
+    -------
+    Path
+        The first candidate that exists.
+
+    Raises
+    ------
+    ValidationError
+        None exists (the message lists the places tried).
+    """
+    here = Path(summary_path).parent
+    source = Path(summary["source"])
+    tried: list[Path] = []
+    for key, base in (("source_path", None), ("source_relpath", here), ("source", None)):
+        value = summary.get(key)
+        if isinstance(value, str) and value:
+            tried.append(Path(value) if base is None else base / value)
+    if not source.is_absolute():
+        tried.append(here / source)
+    seen: list[Path] = []
+    for cand in tried:
+        if cand not in seen:
+            seen.append(cand)
+        if cand.is_file():
+            return cand
+    raise ValidationError(
+        f"{source}: run file of {Path(summary_path).name} not found (moved?); "
+        f"looked for {', '.join(map(str, seen))}"
+    )
 
 
 def summary_warnings(summary: dict[str, Any]) -> tuple[str, ...]:
@@ -665,6 +737,30 @@ def _ranges(index: Sequence[int], limit: int = 40) -> str:
 # the batch
 
 
+def check_distinct_runs(paths: Sequence[Path]) -> None:
+    """Refuse a run file given more than once (also under another name or via a link).
+
+    Parameters
+    ----------
+    paths : sequence of Path
+        The run files, as given.
+
+    Raises
+    ------
+    ValidationError
+        One line naming the file given twice.
+    """
+    seen: dict[Path, Path] = {}
+    for p in map(Path, paths):
+        key = p.resolve()
+        if key in seen:
+            what = f"run {p} is given twice"
+            if seen[key] != p:
+                what = f"runs {seen[key]} and {p} are the same file"
+            raise ValidationError(f"{what}; give each run once")
+        seen[key] = p
+
+
 def output_paths(paths: Sequence[Path], out_dir: Path, fmt: str) -> list[tuple[Path, Path, Path]]:
     """``(periods table, summary.json, summary.md)`` of each input (see the module notes).
 
@@ -673,10 +769,12 @@ def output_paths(paths: Sequence[Path], out_dir: Path, fmt: str) -> list[tuple[P
     Raises
     ------
     ValidationError
-        Two inputs would write the same summaries (or the same ``source`` rows).
+        A run given twice (:func:`check_distinct_runs`), or two inputs that would
+        write the same summaries (or the same ``source`` rows).
     """
     from accal.pipeline import output_stem
 
+    check_distinct_runs(paths)
     table = out_dir / f"periods.{fmt}"
     if len(paths) == 1:
         return [(table, out_dir / "summary.json", out_dir / "summary.md")]
@@ -713,11 +811,12 @@ def process_run(
 
     res, info = estimate(path, opts, psd)
     rows, units = period_rows(res, path.name, info.units)
-    summary = summarise(path, info, res, opts)
+    summary = summarise(path, info, res, opts, out_dir=targets[1].parent)
     closure: dict[str, Any] | None = None
     plots: list[Path] = []
     if opts.close_loop:
-        closure, extended, plots = close_run(path, opts, targets[0].parent)
+        step = info.step if info.resample is not None else None
+        closure, extended, plots = close_run(path, opts, targets[0].parent, step=step)
         rows, units = apply_closure(rows, units, extended)
         summary["closure"] = {
             k: closure[k] for k in ("effects", "unexplained", "rms_before", "rms_after", "model")
@@ -776,16 +875,31 @@ def process_run(
 
 
 def close_run(
-    path: Path, opts: DemodOptions, out_dir: Path
+    path: Path, opts: DemodOptions, out_dir: Path, *, step: float | None = None
 ) -> tuple[dict[str, Any], Any, list[Path]]:
     """Close the loop on one run with the demodulation model as base.
 
-    The run is read whole (:func:`accal.io.rawlog.read_rawlog`); the declared
+    The run is read whole (:func:`accal.io.rawlog.read_rawlog`) and, with
+    ``opts.resample``, resampled as the demodulation resampled it
+    (:func:`accal.estimators.resample.resample_uniform` onto ``t0 + k·step``, gaps
+    longer than ``opts.gap_factor`` steps kept as invalid samples); the declared
     model is the per-period signal (``--signal-model``) and affine bias (plus the
     ``--bias-model`` channels, eq. 18); every other auxiliary channel is offered
     to the ``auxiliary`` candidate, with the platform candidates (angle offset,
     intra-period bias shape) and the generic ones (steps, periodic terms,
     polynomial drift).  Plots go to ``out_dir/<stem>.closure*.png``.
+
+    Parameters
+    ----------
+    path : Path
+        The run file.
+    opts : DemodOptions
+        Options of the demodulation (``tau``, models, ``resample``, ``gap_factor``, ``alpha``).
+    out_dir : Path
+        Where the plots go.
+    step : float, optional
+        With ``opts.resample``: the grid step the demodulation used [s]; default
+        :func:`accal.estimators.resample.nominal_step` of the run.
 
     Returns
     -------
@@ -801,23 +915,33 @@ def close_run(
     from accal.io.rawlog import read_rawlog
 
     series = read_rawlog(path)
-    ay = list(series.axes).index("y")
-    az = list(series.axes).index("z")
-    theta = series.aux["theta"]
-    bias_aux = {c: series.aux[c] for c in opts.aux_channels if c in series.aux}
-    missing = [c for c in opts.aux_channels if c not in series.aux]
+    time, valid = series.time, series.valid
+    cols = {
+        "m_y": series.acc[:, list(series.axes).index("y")],
+        "m_z": series.acc[:, list(series.axes).index("z")],
+        **{k: np.asarray(v, dtype=np.float64) for k, v in series.aux.items()},
+    }
+    if opts.resample:  # the grid of the demodulation (validated_chunks' UniformResampler)
+        from accal.estimators.resample import nominal_step, resample_uniform
+
+        grid_step = step if step is not None else nominal_step(time, opts.tau)
+        time, cols, valid, _ = resample_uniform(time, cols, grid_step, gap_factor=opts.gap_factor)
+    theta = cols["theta"]
+    chans = {k: v for k, v in cols.items() if k not in ("m_y", "m_z", "theta")}
+    bias_aux = {c: chans[c] for c in opts.aux_channels if c in chans}
+    missing = [c for c in opts.aux_channels if c not in chans]
     if missing:
         raise ValidationError(f"bias-model channel(s) {missing} not in the run")
     aux = {
         k: v
-        for k, v in series.aux.items()
-        if k != "theta" and k not in bias_aux and np.ptp(v[np.isfinite(v)]) > 0
+        for k, v in chans.items()
+        if k not in bias_aux and np.isfinite(v).any() and np.ptp(v[np.isfinite(v)]) > 0
     }
     dc = close_loop_demod(
-        series.time,
-        (series.acc[:, ay], series.acc[:, az]),
+        time,
+        (cols["m_y"], cols["m_z"]),
         theta,
-        series.valid,
+        valid,
         tau=opts.tau,
         signal_model=opts.signal_model,
         bias_model="affine",
@@ -1230,7 +1354,8 @@ def diagnose_demod_dir(
     """Close the loop on the runs of an earlier ``accal demod`` output directory.
 
     Each ``summary.json``/``<stem>.summary.json`` names its run file and options;
-    the run is re-read (it must still exist) and analysed with the same declared
+    the run is re-read (it must still exist; found by :func:`find_run`, from any
+    working directory), resampled as it was, and analysed with the same declared
     model.  The periods table is not changed (re-run ``demod --close-loop`` for
     that); ``closure.json``/``closure.md`` and plots go to ``out_dir``.
 
@@ -1248,20 +1373,24 @@ def diagnose_demod_dir(
             s = json.loads(sp.read_text())
             src = Path(s["source"])
             o = s["options"]
-        except (OSError, ValueError, KeyError, TypeError):
+            rs = (s.get("input") or {}).get("resample")
+        except (OSError, ValueError, KeyError, TypeError, AttributeError):
             continue  # not a demod summary
+        rs = rs if isinstance(rs, dict) and rs else None  # the resampling report, if resampled
         try:
-            if not src.exists():
-                raise ValidationError(f"{src}: run file of {sp.name} not found (moved?)")
+            src = find_run(s, sp)
             opts = DemodOptions(
                 tau=float(o["tau"]),
                 mask=float(o["mask"]),
                 signal_model=o.get("signal_model", "mean"),
                 bias_model=o.get("bias_model", "affine"),
+                resample=rs is not None,
+                gap_factor=float(rs.get("gap_factor", 2.0)) if rs else 2.0,
                 close_loop=True,
                 alpha=alpha,
             )
-            entry, _, _ = close_run(src, opts, out_dir)
+            step = float(rs["step"]) if rs and "step" in rs else None
+            entry, _, _ = close_run(src, opts, out_dir, step=step)
             write_demod_closure(out_dir, src.name, entry)
             results.append((src, entry, ""))
         except AccalError as exc:
