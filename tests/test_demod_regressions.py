@@ -134,6 +134,8 @@ def test_diagnose_missing_run_is_one_line_and_writes_nothing(run_csv, tmp_path):
     assert len(lines) == 1 and "run file of summary.json not found (moved?)" in lines[0], err
     assert str(run) in lines[0]
     assert not (res / "closure.json").exists() and not (res / "closure.md").exists()
+    code, _, err = invoke("diagnose", res)  # not quiet: no "reports:" line for nothing written
+    assert code == 1 and "reports:" not in err
 
 
 # --- 3. --close-loop ignored --resample ----------------------------------------------

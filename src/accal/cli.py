@@ -433,7 +433,7 @@ def diagnose(
                     f"{src.name}: {', '.join(found) or 'nothing found'}; RMS "
                     f"{entry['rms_before']:.3g} -> {entry['rms_after']:.3g} m/s^2"
                 )
-        if not quiet:
+        if not quiet and any(e is not None for _, e, _ in results):
             click.echo(f"reports: {out / 'closure.json'}, {out / 'closure.md'}", err=True)
         sys.exit(1 if any(e is None for _, e, _ in results) else 0)
     outcomes = diagnose_dir(
