@@ -391,3 +391,14 @@ def test_summary_reports_the_workers_peak_memory(tmp_path):
     for text in (err, (tmp_path / "accal.log").read_text()):
         m = re.search(r"peak RSS (\d+) MB per worker", text)
         assert m and 30 < int(m.group(1)) < 4000
+
+
+def test_file_system_errors_of_any_command_are_one_line(tmp_path):
+    """An OSError no command handled (here: demod's --out under a file) is one line, exit 2."""
+    blocker = tmp_path / "afile"
+    blocker.write_text("x")
+    run = tmp_path / "run.parquet"
+    assert invoke("simulate", "gap", "--out", run, "--days", "0.05")[0] == 0
+    code, _, err = invoke("demod", run, "--tau", "600", "--mask", "200", "--out", blocker / "sub")
+    assert code == 2
+    assert err.strip() == f"accal: {blocker / 'sub'}: Not a directory"

@@ -68,6 +68,28 @@ def err(msg: str) -> None:
     click.echo(f"accal: {msg}", err=True)
 
 
+class Group(click.Group):
+    """The ``accal`` command group: a file-system error no command handled is one line.
+
+    An :class:`OSError` that escapes a command (an output path under a file, a
+    read-only or full disk, ...) is reported as ``accal: PATH: what the system
+    said`` with exit status 2 instead of a traceback (``accal --debug`` keeps the
+    traceback).
+    """
+
+    def invoke(self, ctx: click.Context) -> Any:
+        import os
+
+        try:
+            return super().invoke(ctx)
+        except OSError as exc:
+            if os.environ.get("ACCAL_DEBUG"):
+                raise
+            where = exc.filename or "accal"
+            err(f"{where}: {exc.strerror or exc}")
+            sys.exit(2)
+
+
 def progress(quiet: bool, desc: str) -> Any:
     """A ``wrap(iterable, total=None)`` progress bar on a terminal, else None."""
     if quiet or not sys.stderr.isatty():

@@ -14,14 +14,14 @@ import click
 import numpy as np
 
 from accal import __version__
-from accal._cliutil import alpha_option, aux_option, config_option
+from accal._cliutil import Group, alpha_option, aux_option, config_option
 from accal._cliutil import err as _err
 from accal._cliutil import progress as _progress
 
 CONTEXT_SETTINGS = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
 
 
-@click.group(context_settings=CONTEXT_SETTINGS)
+@click.group(cls=Group, context_settings=CONTEXT_SETTINGS)
 @click.version_option(__version__, prog_name="accal")
 @click.option("--debug", is_flag=True, help="Show tracebacks of internal errors (for bug reports).")
 def main(debug: bool) -> None:
