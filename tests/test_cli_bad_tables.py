@@ -64,3 +64,59 @@ def test_bad_tables_fail_one_line_each_and_the_good_file_is_processed(tmp_path):
     manifest = json.loads((out / "manifest.json").read_text())["entries"]
     assert [Path(k).name for k in manifest] == [GRACE_A.name]
     assert not any(out.glob("huge_time*") or out.glob("dup_columns*") or out.glob("quality*"))
+
+
+def _qa_inputs(d: Path) -> tuple[dict[Path, str], list[Path]]:
+    """Inputs of the black-box QA pass: broken ones (-> stderr rest) and good ones."""
+    import gzip
+
+    d.mkdir()
+    raw = GRACE_A.read_bytes()
+    empty = d / "ACC1B_empty.asc"
+    empty.write_bytes(b"")
+    cut = d / "ACC1B_cut.asc.gz"
+    cut.write_bytes(gzip.compress(raw)[:2000])
+    bad_time = d / "bad_time.csv"
+    bad_time.write_text(
+        "time_utc,lin_accl_x\n2024-05-11T00:00:49.796,1e-7\n2024-05-11T25:00:49.796,2e-7\n"
+    )
+    text_acc = d / "text_acc.csv"
+    text_acc.write_text("gps_time,lin_accl_x\n116769600,1e-7\n116769601,abc\n")
+    short_row = d / "short_row.csv"
+    short_row.write_text("gps_time,lin_accl_x,lin_accl_y\n116769600,1e-7,1e-7\n116769601,2e-7\n")
+    lines = raw.decode().split("\n")
+    empty_field = d / "ACC1B_empty_field.asc"
+    fields = lines[40].split(" ")
+    fields[6] = ""  # ang_accl_y
+    empty_field.write_text("\n".join([*lines[:40], " ".join(fields), *lines[41:]]))
+    bom = d / "ACC1B_2003-09-14_A_bom.asc"
+    bom.write_bytes(b"\xef\xbb\xbf" + raw)
+    no_newline = d / "ACC1B_2003-09-14_A_nonl.asc"
+    no_newline.write_bytes(raw[:-1])
+    bad = {
+        empty: ": empty file",
+        cut: ": corrupt gzip stream (truncated: no end-of-stream marker)",
+        bad_time: ":3: time_utc: '2024-05-11T25:00:49.796' is not an ISO-8601 UTC time",
+        text_acc: ":3: column 'lin_accl_x' is not numeric (type string): 'abc' is not a number",
+        short_row: ":3: CSV: Expected 3 columns, got 2: 116769601,2e-7",
+        empty_field: ":41: ang_accl_y: empty field (two spaces where a value was expected)",
+    }
+    return bad, [bom, no_newline]
+
+
+def test_qa_inputs_say_what_is_wrong_and_quirky_good_files_are_read(tmp_path):
+    bad, good = _qa_inputs(tmp_path / "in")
+    out = tmp_path / "out"
+    args = ["grace-bias", *map(str, [*bad, *good]), "--out", str(out), "-q"]
+    res = CliRunner().invoke(main, args, catch_exceptions=False)
+
+    assert res.exit_code == 1, res.output
+    err = res.stderr
+    assert "format not recognised" not in err and "internal error" not in err, err
+    lines = err.strip().splitlines()
+    assert len(lines) == len(bad), err
+    for path, rest in bad.items():
+        mine = [ln for ln in lines if ln.startswith(f"accal: {path}")]
+        assert len(mine) == 1 and mine[0].startswith(f"accal: {path}{rest}"), err
+    manifest = json.loads((out / "manifest.json").read_text())["entries"]
+    assert sorted(Path(k).name for k in manifest) == sorted(p.name for p in good)

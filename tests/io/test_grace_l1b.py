@@ -2,6 +2,7 @@
 
 import gzip
 import os
+import re
 import shutil
 import warnings
 
@@ -10,6 +11,7 @@ import pytest
 
 from accal.errors import FormatError, UnsupportedFormatError, ValidationError
 from accal.io.grace_l1b import (
+    COLUMNS,
     DEFAULT_INVALID_BITS,
     read_grace_acc1b,
     sniff_grace_acc1b,
@@ -497,3 +499,79 @@ def test_gzip_bomb_and_huge_file_refused(samples, tmp_path, monkeypatch):
 def test_invalid_bits_checked(samples, bits):
     with pytest.raises(ValidationError, match="invalid_bits must be"):
         read_grace_acc1b(samples["grace_a"], invalid_bits=bits)
+
+
+# ---------------------------------------------------------------- QA pass: messages and quirks
+
+
+@pytest.mark.parametrize("name", ["grace_a", "gracefo_c"])
+def test_complete_last_record_without_newline_is_read(samples, tmp_path, name):
+    raw = samples[name].read_bytes()
+    assert raw.endswith(b"\n")
+    ref = read_grace_acc1b(samples[name])
+    assert_same_series(read_grace_acc1b(_write(tmp_path, raw[:-1])), ref)
+    crlf = raw.replace(b"\n", b"\r\n")
+    assert_same_series(read_grace_acc1b(_write(tmp_path, crlf[:-1])), ref)  # ends in '\r'
+    assert_same_series(read_grace_acc1b(_write(tmp_path, crlf[:-2])), ref)
+    gz = gzip.compress(raw[:-1])
+    assert_same_series(read_grace_acc1b(_write(tmp_path, gz, "bad.asc.gz")), ref)
+
+
+@pytest.mark.parametrize("cut", [2, 5, 9, 10, 11, 20, 40])
+def test_incomplete_last_record_without_newline_is_refused(samples, tmp_path, cut):
+    # cut inside qualflg (2, 5, 9), at the blank before it (10, 11), inside acl_z_res (20)
+    raw = samples["grace_a"].read_bytes()
+    with pytest.raises(
+        FormatError, match=r"truncated last line \(no newline at end of file\)"
+    ) as e:
+        read_grace_acc1b(_write(tmp_path, raw[:-cut]))
+    assert e.value.line == 90
+
+
+def test_last_record_with_a_bad_flag_and_no_newline_is_refused(samples, tmp_path):
+    raw = samples["grace_a"].read_bytes()
+    for tail in (b"  0010000x", b"  001000000", b"  00100000 1"):
+        text = raw[: raw.rstrip(b"\n").rfind(b"  ")] + tail
+        with pytest.raises(FormatError, match="truncated last line") as e:
+            read_grace_acc1b(_write(tmp_path, text))
+        assert e.value.line == 90
+
+
+#: The 11 numeric and flag columns of a record (all but the satellite id), by field index.
+_CHECKED = [(i, c) for i, c in enumerate(COLUMNS) if c != "GRACE_id"]
+
+
+@pytest.mark.parametrize("token", ["nan", "inf", "abc", "1.2.3", "1e999", "", "1_0"])
+@pytest.mark.parametrize(("field", "column"), _CHECKED, ids=[c for _, c in _CHECKED])
+def test_bad_value_in_any_column_names_line_and_column(samples, tmp_path, field, column, token):
+    head, data = _data_lines(samples["grace_a"])
+    fields = data[4].rstrip("\n").split(" ")  # 11 fields, the blank, qualflg
+    fields[field if column != "qualflg" else 12] = token
+    data[4] = " ".join(fields) + "\n"
+    with pytest.raises(FormatError) as e:
+        read_grace_acc1b(_write(tmp_path, "".join(head + data).encode()))
+    msg = str(e.value)
+    assert e.value.line == 35 and msg.startswith(str(tmp_path / "bad.asc") + ":35: "), msg
+    assert f"{column}: " in msg and "\n" not in msg, msg
+    if column != "qualflg":
+        assert re.search("not a number|non-finite value|empty field", msg), msg
+
+
+def test_empty_field_names_its_column(samples, tmp_path):
+    head, data = _data_lines(samples["grace_a"])
+    fields = data[6].split(" ")
+    fields[9] = ""  # acl_y_res: two spaces where a number should be
+    data[6] = " ".join(fields)
+    with pytest.raises(FormatError, match=r"acl_y_res: empty field \(two spaces") as e:
+        read_grace_acc1b(_write(tmp_path, "".join(head + data).encode()))
+    assert e.value.line == 37
+
+
+@pytest.mark.parametrize("name", ["grace_a", "gracefo_c", "grace_a_bin"])
+@pytest.mark.parametrize("gz", [False, True])
+def test_utf8_bom_is_skipped(samples, tmp_path, name, gz):
+    raw = b"\xef\xbb\xbf" + samples[name].read_bytes()
+    p = _write(tmp_path, gzip.compress(raw) if gz else raw, "bom.asc.gz" if gz else "bom.asc")
+    assert sniff_grace_acc1b(p)
+    s = read_grace_acc1b(p)
+    assert_same_series(s, read_grace_acc1b(samples[name]))  # meta keys without the BOM

@@ -498,7 +498,8 @@ def test_bad_gracefo_record(samples, tmp_path):
 def test_other_products_are_unsupported(samples, tmp_path):
     expect(
         samples["grace_a"],
-        r"'ipACC1BF' is not accelerometer housekeeping \(AHK1B\) \(use read_grace_acc1b\)",
+        r"'ipACC1BF' is not accelerometer housekeeping \(AHK1B\) \(accelerometer data: "
+        r"give it as an input file, not as --aux; in Python read it with accal\.io\.read\)",
         3,
         UnsupportedFormatError,
     )

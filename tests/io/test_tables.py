@@ -165,10 +165,13 @@ def test_registry_errors(samples, tmp_path):
 
 
 def test_permission_error_becomes_format_error(samples, monkeypatch):
-    def deny(self):
+    import accal.io._common
+
+    def deny(*args, **kwargs):
         raise PermissionError(13, "Permission denied")
 
-    monkeypatch.setattr(Path, "read_bytes", deny)
+    # read_bytes opens the file itself (unbuffered, to skip a BOM without a copy)
+    monkeypatch.setattr(accal.io._common, "open", deny, raising=False)
     with pytest.raises(FormatError, match="permission denied"):
         read_grace_acc1b(samples["grace_a"])
     with pytest.raises(FormatError, match="permission denied"):
@@ -356,3 +359,175 @@ def test_stray_quote_does_not_swallow_the_rest_of_the_file(tmp_path):
     # a quoted value on one line (with the separator inside) is fine
     ok = _w(tmp_path, "ok.csv", b'gps_time,lin_accl_x,note\n1,1e-7,"a,b"\n2,2e-7,c\n')
     assert len(read_table_series(ok)) == 2
+
+
+# ---------------------------------------------------------------- QA pass: what the messages say
+
+
+BOM = b"\xef\xbb\xbf"
+
+
+@pytest.mark.parametrize("name", ["x.asc", "x.csv", "x.txt", "x.dat"])
+@pytest.mark.parametrize("content", [b"", b"  \n\n", BOM, BOM + b"\n"], ids=repr)
+def test_detect_empty_file(tmp_path, name, content):
+    # was "format not recognised ... name one explicitly"
+    p = _w(tmp_path, name, content)
+    with pytest.raises(FormatError, match=r"empty file$") as e:
+        aio.detect_format(p)
+    assert str(e.value) == f"{p}: empty file"
+    with pytest.raises(FormatError, match=r": empty file$"):
+        aio.read(p)
+
+
+@pytest.mark.parametrize(
+    ("cut", "match"),
+    [
+        (lambda gz: gz[:2000], r"corrupt gzip stream \(truncated: no end-of-stream marker\)"),
+        (lambda gz: gz[:10] + b"garbage" * 10, r"corrupt gzip stream \(.*invalid block type"),
+        (lambda gz: gz[:5], r"corrupt gzip stream"),
+        (lambda gz: gzip.compress(b""), r"empty file"),
+    ],
+    ids=["truncated", "deflate_garbage", "header_only", "empty_member"],
+)
+def test_detect_corrupt_gzip(samples, tmp_path, cut, match):
+    gz = gzip.compress(samples["grace_a"].read_bytes())
+    p = _w(tmp_path, "ACC1B.asc.gz", cut(gz))
+    with pytest.raises(FormatError, match=match) as e:
+        aio.detect_format(p)
+    with pytest.raises(FormatError) as named:  # the same wording as with the format named
+        aio.read(p, format="grace-l1b")
+    assert str(e.value) == str(named.value)
+
+
+def test_detect_unknown_gzip_content_is_still_unrecognised(tmp_path):
+    p = _w(tmp_path, "x.gz", gzip.compress(b"hello world\n" * 10))
+    with pytest.raises(FormatError, match="format not recognised"):
+        aio.detect_format(p)
+
+
+@pytest.mark.parametrize(
+    ("name", "fmt"),
+    [("grace_a", "grace-l1b"), ("gracefo_c", "grace-l1b"), ("grace_a_bin", "grace-l1b")],
+)
+def test_detect_and_read_after_a_bom(samples, tmp_path, name, fmt):
+    p = _w(tmp_path, "bom_" + samples[name].name, BOM + samples[name].read_bytes())
+    assert aio.detect_format(p) == fmt
+    s, ref = aio.read(p), aio.read(samples[name])
+    assert np.array_equal(s.acc, ref.acc) and s.meta == ref.meta
+
+
+def test_csv_with_bom_and_comment_lines(tmp_path):
+    csv = b'# units: {"lin_accl_x": "m/s^2", "temp": "degC"}\ngps_time,lin_accl_x,temp\n'
+    csv += b"".join(b"%d,%de-9,20.5\n" % (116769600 + i, i) for i in range(5))
+    ref = read_table_series(_w(tmp_path, "plain.csv", csv))
+    for name, content in (("bom.csv", BOM + csv), ("bom.csv.gz", gzip.compress(BOM + csv))):
+        p = _w(tmp_path, name, content)
+        assert sniff_table(p) and aio.detect_format(p) == "table"
+        s = read_table_series(p)
+        assert_identical(s, ref)
+        assert s.units["temp"] == "degC"  # the comment line was read, not taken as the header
+        stream = _stream(p, rows=2)
+        assert sum(t.num_rows for _, t in stream) == 5
+        assert stream[0][1].column_names == ["gps_time", "lin_accl_x", "temp"]
+    p = _w(tmp_path, "bomonly.csv", BOM)
+    with pytest.raises(FormatError, match="empty file"):
+        open_table(p)
+
+
+def test_no_acceleration_column_names_the_cli_option(tmp_path):
+    p = _w(tmp_path, "t.csv", b"gps_time,a_cal_x\n1,2\n2,3\n")
+    with pytest.raises(FormatError, match=r"--column x=NAME.*columns=\{'x': NAME\}") as e:
+        read_table_series(p)
+    assert "a_cal_x" in str(e.value)
+
+
+BAD_TIME = b"time_utc,a_cal_x\n2024-05-11T23:59:49.796,1e-7\n2024-05-11T25:00:49.796,2e-7\n"
+
+
+def test_bad_utc_time_is_one_clean_line(tmp_path):
+    # was pandas' text with a literal "\n", cut off in the middle
+    p = _w(tmp_path, "t.csv", BAD_TIME)
+    with pytest.raises(FormatError) as e:
+        read_table_series(p, columns={"x": "a_cal_x"})
+    assert str(e.value) == (
+        f"{p}:3: time_utc: '2024-05-11T25:00:49.796' is not an ISO-8601 UTC time "
+        "(YYYY-MM-DDThh:mm:ss[.fff][Z])"
+    )
+    # a blank line before it is counted; a comment line too
+    p = _w(
+        tmp_path, "t2.csv", b"# c\n" + BAD_TIME.replace(b"\n2024-05-11T25", b"\n\n2024-05-11T25")
+    )
+    with pytest.raises(FormatError, match="'2024-05-11T25:00:49.796' is not") as e:
+        read_table_series(p, columns={"x": "a_cal_x"})
+    assert e.value.line == 5
+    # Parquet: the row
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    pq.write_table(
+        pa.table({"time_utc": ["2024-05-11T00:00:00", "x"], "lin_accl_x": [1.0, 2.0]}),
+        tmp_path / "t.parquet",
+    )
+    with pytest.raises(FormatError, match=r"t\.parquet: row 2: time_utc: 'x' is not an ISO-8601"):
+        read_table_series(tmp_path / "t.parquet")
+
+
+@pytest.mark.parametrize(
+    ("value", "match"),
+    [
+        (b"2600-05-11T00:00:00", r"time_utc 2600-05-11T00:00:00 is outside 1980-01-06"),
+        (b"1960-05-11T00:00:00", r"time_utc 1960-05-11T00:00:00.* is outside 1980-01-06"),
+        (b"", r"time_utc: empty value"),
+    ],
+)
+def test_utc_time_out_of_range_or_empty_names_the_line(tmp_path, value, match):
+    # a year 2600 without "Z" stayed text, and its [ns] conversion wrapped into 2015
+    p = _w(tmp_path, "t.csv", BAD_TIME.replace(b"2024-05-11T25:00:49.796", value))
+    with pytest.raises(FormatError, match=match) as e:
+        read_table_series(p, columns={"x": "a_cal_x"})
+    assert e.value.line == 3
+
+
+def test_non_numeric_column_names_the_first_bad_line(tmp_path):
+    csv = b"gps_time,lin_accl_x,m_y\n1,2,3\n2,3,\n\n3,4,x\n4,5,y\n"
+    p = _w(tmp_path, "t.csv", csv)
+    with pytest.raises(FormatError) as e:
+        read_table_series(p, columns={"y": "m_y"})
+    assert str(e.value) == f"{p}:5: column 'm_y' is not numeric (type string): 'x' is not a number"
+    s = read_table_series(p)  # not an axis: an auxiliary text column is skipped, as before
+    assert "non-numeric columns ignored: m_y" in s.report.warnings
+    with pytest.raises(FormatError, match=r"^.*t\.csv:4: column 'gps_time' is not numeric"):
+        read_table_series(_w(tmp_path, "t.csv", b"gps_time,lin_accl_x\n1,2\n2,3\nnow,4\n"))
+    with pytest.raises(FormatError, match=r":3: column 'flag_val' is not numeric .*'bad'"):
+        read_table_series(_w(tmp_path, "t.csv", b"gps_time,lin_accl_x,flag_val\n1,2,0\n2,3,bad\n"))
+    with pytest.raises(FormatError, match=r":4: column 'quality' is neither .* integers: 'x1'"):
+        read_table_series(
+            _w(tmp_path, "t.csv", b"gps_time,lin_accl_x,quality\n1,2,00000000\n2,3,7\n3,4,x1\n")
+        )
+
+
+def test_non_numeric_parquet_column_names_the_row(tmp_path):
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    p = tmp_path / "t.parquet"
+    pq.write_table(pa.table({"gps_time": [1.0, 2.0, 3.0], "lin_accl_x": ["1", "2", "zz"]}), p)
+    with pytest.raises(FormatError) as e:
+        read_table_series(p)
+    assert str(e.value) == (
+        f"{p}: row 3: column 'lin_accl_x' is not numeric (type string): 'zz' is not a number"
+    )
+
+
+def test_wrong_number_of_columns_names_the_line(tmp_path):
+    csv = b"# units: {}\ngps_time,lin_accl_x,lin_accl_y\n1,2,3\n\n2,3,4\n3,4\n4,5,6\n"
+    p = _w(tmp_path, "t.csv", csv)
+    with pytest.raises(FormatError) as e:
+        read_table_series(p)
+    assert str(e.value) == f"{p}:6: CSV: Expected 3 columns, got 2: 3,4"
+    q = _w(tmp_path, "q.csv", b'gps_time,lin_accl_x,note\n1,2,"a\nb"\n2,3,c,d\n')
+    with pytest.raises(FormatError, match="Expected 3 columns, got 4") as e:
+        read_table_series(q)
+    assert e.value.line == 4  # the quoted value spans lines 2-3
+    with pytest.raises(FormatError, match=r"t\.csv:6: CSV: Expected 3 columns, got 2"):
+        _stream(p, rows=2)

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from accal.errors import FormatError, check_option
+from accal.io._common import GZIP_MAGIC, peek, read_bytes
 from accal.io.grace_l1b import read_grace_acc1b, sniff_grace_acc1b, write_grace_acc1b
 from accal.io.tables import read_table_series, sniff_table, write_series
 from accal.series import AccSeries
@@ -43,17 +44,41 @@ def detect_format(path: str | Path) -> str:
     Raises
     ------
     FormatError
-        The path is missing, a directory or unreadable, or no format matches.
+        The path is missing, a directory or unreadable, empty (``empty file``), a
+        gzip stream that cannot be decompressed (``corrupt gzip stream ...``), or
+        no format matches.
+
+    Notes
+    -----
+    A leading UTF-8 byte-order mark does not stop sniffing (the readers skip it too).
     """
     path = Path(path)
     _check_path(path)
     for name, (sniff, _, _) in FORMATS.items():
         if sniff(path):
             return name
+    _check_content(path)
     raise FormatError(
         f"format not recognised (known formats: {', '.join(FORMATS)}); name one explicitly",
         path,
     )
+
+
+def _check_content(path: Path) -> None:
+    """Raise the real problem of a file no sniffer accepts, if it has one (error path only).
+
+    An empty (or blank) file and a gzip stream that cannot be decompressed are
+    reported as the readers report them (:func:`accal.io._common.read_bytes`:
+    ``empty file``, ``corrupt gzip stream (...)``), not as an unknown format.
+    """
+    head = peek(path, 4096)
+    try:
+        with open(path, "rb") as fh:
+            gz = fh.read(2) == GZIP_MAGIC
+    except OSError:
+        return
+    if gz or not head.strip():
+        read_bytes(path)  # raises FormatError: empty file, corrupt gzip stream, too large
 
 
 def read(path: str | Path, *, format: str | None = None, **kw: Any) -> AccSeries:  # noqa: A002

@@ -23,6 +23,9 @@ from accal.timescale import nominal_step
 
 GZIP_MAGIC = b"\x1f\x8b"
 PARQUET_MAGIC = b"PAR1"
+#: UTF-8 byte-order mark: some editors (and Windows tools) start a text file with it.
+#: The readers and sniffers skip it; it is not part of any format.
+UTF8_BOM = b"\xef\xbb\xbf"
 
 #: A time step larger than this many nominal steps is a gap.
 GAP_FACTOR = 1.5
@@ -42,9 +45,11 @@ GPS_TIME_RANGE = (-630_763_200.0, 3_155_716_800.0)
 
 
 def read_bytes(path: str | Path) -> bytes:
-    """Return the (decompressed) content of ``path``.
+    """Return the (decompressed) content of ``path``, without a leading UTF-8 BOM.
 
-    Gzip is detected by its magic bytes, not by the file name.
+    Gzip is detected by its magic bytes, not by the file name.  A UTF-8
+    byte-order mark (:data:`UTF8_BOM`) at the start of the text is dropped
+    (without copying the content of an uncompressed file).
 
     Raises
     ------
@@ -58,7 +63,12 @@ def read_bytes(path: str | Path) -> bytes:
     try:
         if p.stat().st_size > MAX_INPUT_BYTES:
             raise FormatError(f"file larger than {MAX_INPUT_BYTES:,} bytes (not an input file?)", p)
-        raw = p.read_bytes()
+        # Unbuffered: readall() sizes its one read by fstat (a buffered read() after a
+        # small read is ~25x slower).  A BOM is skipped by reading after it: no copy.
+        with open(p, "rb", buffering=0) as fh:
+            if fh.read(3) != UTF8_BOM:
+                fh.seek(0)
+            raw = fh.readall()
     except FileNotFoundError:
         raise FormatError("no such file", p) from None
     except PermissionError:
@@ -67,6 +77,8 @@ def read_bytes(path: str | Path) -> bytes:
         raise FormatError(f"cannot read file: {exc.strerror or exc}", p) from None
     if raw[:2] == GZIP_MAGIC:
         raw = gunzip(raw, p)
+        if raw.startswith(UTF8_BOM):
+            raw = raw[len(UTF8_BOM) :]
     if not raw or raw.isspace():
         raise FormatError("empty file", p)
     return raw
@@ -148,23 +160,80 @@ def check_gps_time(
         )
 
 
+def one_line(text: str, limit: int = 200) -> str:
+    """``text`` as one short line: control characters escaped, cut at ``limit``."""
+    text = str(text)
+    if not text.isprintable():
+        text = repr(text)[1:-1]
+    return text[:limit]
+
+
 def _short(value: Any, n: int = 20) -> str:
     """``repr`` of a value cut to ``n`` characters, for error messages."""
     return repr(value[:n] if isinstance(value, str | bytes) else value)
 
 
 def peek(path: str | Path, n: int = 8192) -> bytes:
-    """Return up to ``n`` leading (decompressed) bytes of ``path``; b"" on any error."""
+    """Return up to ``n`` leading (decompressed) bytes of ``path``; b"" on any error.
+
+    A leading UTF-8 BOM is skipped (the bytes after it are returned), as
+    :func:`read_bytes` does, so that sniffers see what the readers will parse.
+    """
     try:
         with open(path, "rb") as fh:
-            head = fh.read(n)
-            if head[:2] != GZIP_MAGIC:
-                return head
-            fh.seek(0)
-            with gzip.GzipFile(fileobj=fh) as gz:
-                return gz.read(n)
+            head = fh.read(n + len(UTF8_BOM))
+            if head[:2] == GZIP_MAGIC:
+                fh.seek(0)
+                with gzip.GzipFile(fileobj=fh) as gz:
+                    head = gz.read(n + len(UTF8_BOM))
     except Exception:
         return b""
+    if head.startswith(UTF8_BOM):
+        head = head[len(UTF8_BOM) :]
+    return head[:n]
+
+
+def row_to_line(
+    text: bytes, first_line: int, *, text_line: int | None = None
+) -> Callable[[int], int]:
+    """Map a 0-based data row (as pyarrow counts them) to its 1-based file line.
+
+    Parameters
+    ----------
+    text : bytes
+        Text that starts at file line ``text_line`` (default ``first_line``).
+    first_line : int
+        1-based file line of data row 0.
+    text_line : int, optional
+        1-based file line of the start of ``text`` (lines before ``first_line`` are
+        header lines, skipped).
+
+    Returns
+    -------
+    callable
+        ``line_of(row) -> line``.  pyarrow skips empty lines, so with blank lines
+        among the data the row index is not ``line - first_line``; the scan for
+        them runs only when ``line_of`` is called (the error path).
+    """
+    skip = first_line - (first_line if text_line is None else text_line)
+
+    def line_of(row: int) -> int:
+        start = 0
+        for _ in range(skip):
+            nl = text.find(b"\n", start)
+            start = len(text) if nl < 0 else nl + 1
+        data = text[start:] if start else text
+        if b"\n\n" not in data and b"\n\r\n" not in data and data[:1] not in (b"\n", b"\r"):
+            return first_line + row
+        k = -1
+        for j, bline in enumerate(data.split(b"\n")):
+            if bline.rstrip(b"\r"):
+                k += 1
+                if k == row:
+                    return first_line + j
+        return first_line + row
+
+    return line_of
 
 
 def check_binary(text: bytes, path: str | Path, first_line: int = 1) -> None:
@@ -207,12 +276,13 @@ def bits_from_strings(
     width: int = 8,
     *,
     line_of: Callable[[int], int | None] | None = None,
+    name: str = "qualflg",
 ) -> NDArray:
     """Convert an Arrow string array of ``width`` '0'/'1' characters to uint32 bitmasks.
 
     Bit 0 is the rightmost character.  Vectorised on the Arrow buffers.  The line
     of a bad value is ``line_of(row)`` when given (for files with blank lines),
-    else ``first_line + row``.
+    else ``first_line + row``; ``name`` is the column named in the message.
 
     Raises
     ------
@@ -238,7 +308,7 @@ def bits_from_strings(
     if bad.size:
         i = int(bad[0])
         raise FormatError(
-            f"quality flag {_short(arr[i].as_py())} is not {width} characters of 0/1",
+            f"{name}: quality flag {_short(arr[i].as_py())} is not {width} characters of 0/1",
             path,
             where(i),
         )
@@ -249,7 +319,7 @@ def bits_from_strings(
     if not np.all(ones | (chars == ord("0"))):
         i = int(np.flatnonzero(~(ones | (chars == ord("0"))).all(axis=1))[0])
         raise FormatError(
-            f"quality flag {_short(arr[i].as_py())} is not {width} characters of 0/1",
+            f"{name}: quality flag {_short(arr[i].as_py())} is not {width} characters of 0/1",
             path,
             where(i),
         )

@@ -42,8 +42,10 @@ from accal.io._common import (
     bits_from_strings,
     check_binary,
     check_gps_time,
+    one_line,
     peek,
     read_bytes,
+    row_to_line,
     tidy,
 )
 from accal.io.writers import atomic_path
@@ -373,29 +375,25 @@ def _interpret_gracefo(header: bytes, path: Path) -> dict[str, Any]:
 # --------------------------------------------------------------------------- data
 
 
-def _row_to_line(data: bytes, first_line: int) -> Callable[[int], int]:
-    """Map a 0-based data row (as pyarrow counts them) to its 1-based file line.
+#: A number as pyarrow parses one in a record (Python's float() also takes forms such
+#: as "1_0" that pyarrow refuses); used on the error path to name the bad field.
+_NUMBER_RE = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
 
-    pyarrow skips empty lines, so with blank lines in the data the row index is not
-    ``line - first_line``; the scan only runs on the error path.
+
+def _field_names(n_fields: int) -> tuple[str, ...]:
+    """Name of each space-separated token of a record (``""``: the blank before qualflg)."""
+    return COLUMNS if n_fields == len(COLUMNS) else (*COLUMNS[:11], "", "qualflg")
+
+
+def _locate_bad_line(
+    data: bytes, first_line: int, n_fields: int, path: Path, reason: str = ""
+) -> FormatError:
+    """Scan the data rows in Python to say which line is bad and why (error path only).
+
+    ``reason`` (pyarrow's message) is added to the fallback message when no line
+    is found.
     """
-
-    def line_of(row: int) -> int:
-        if b"\n\n" not in data and b"\n\r\n" not in data and data[:1] not in (b"\n", b"\r"):
-            return first_line + row
-        k = -1
-        for j, bline in enumerate(data.split(b"\n")):
-            if bline.rstrip(b"\r"):
-                k += 1
-                if k == row:
-                    return first_line + j
-        return first_line + row
-
-    return line_of
-
-
-def _locate_bad_line(data: bytes, first_line: int, n_fields: int, path: Path) -> FormatError:
-    """Scan the data rows in Python to say which line is bad and why (error path only)."""
+    names = _field_names(n_fields)
     lines = data.split(b"\n")
     if lines and lines[-1] == b"":
         lines.pop()
@@ -412,6 +410,10 @@ def _locate_bad_line(data: bytes, first_line: int, n_fields: int, path: Path) ->
             return FormatError("blank line of spaces or tabs among the data records", path, lineno)
         if any(ord(c) < 32 and c != "\t" for c in line):
             return FormatError("binary data where a text record was expected", path, lineno)
+        if "\t" in line:
+            return FormatError(
+                "tab character inside a record (fields are space-separated)", path, lineno
+            )
         tokens = line.split(" ")
         if len(tokens) != n_fields:
             ntok = len(line.split())
@@ -425,12 +427,20 @@ def _locate_bad_line(data: bytes, first_line: int, n_fields: int, path: Path) ->
                 path,
                 lineno,
             )
-        if "\t" in line:
-            return FormatError(
-                "tab character inside a record (fields are space-separated)", path, lineno
-            )
-        values = [tok for tok in tokens if tok]
-        for name, tok in zip(COLUMNS, values, strict=False):
+        for name, tok in zip(names, tokens, strict=True):
+            if not name:  # the blank before qualflg
+                if tok:
+                    return FormatError(
+                        "irregular spacing: expected two spaces before qualflg, "
+                        "as on the first record",
+                        path,
+                        lineno,
+                    )
+                continue
+            if not tok:
+                return FormatError(
+                    f"{name}: empty field (two spaces where a value was expected)", path, lineno
+                )
             if DTYPES[name] != "float64":
                 continue
             try:
@@ -439,7 +449,32 @@ def _locate_bad_line(data: bytes, first_line: int, n_fields: int, path: Path) ->
                 return FormatError(f"{name}: not a number: {_short(tok)}", path, lineno)
             if not np.isfinite(v):
                 return FormatError(f"{name}: non-finite value {_short(tok)}", path, lineno)
-    return FormatError("cannot parse data records", path)
+            if not _NUMBER_RE.fullmatch(tok):
+                return FormatError(f"{name}: not a number: {_short(tok)}", path, lineno)
+    why = f" ({one_line(reason, 120)})" if reason else ""
+    return FormatError(f"cannot parse data records{why}", path)
+
+
+def _check_last_line(data: bytes, first_line: int, path: Path) -> None:
+    """Accept a last record without its newline only if it is complete (else FormatError).
+
+    The record is complete when it has all fields and ends with the fixed-width
+    8-character 0/1 ``qualflg``: a cut anywhere in the line leaves fewer fields or
+    a shorter last field.  Only the last line is looked at (and copied).
+    """
+    start = data.rfind(b"\n") + 1
+    last = data[start:].rstrip(b"\r")
+    fields = last.split()
+    flag = fields[-1] if fields else b""
+    if not (
+        len(fields) == len(COLUMNS)
+        and last.endswith(flag)
+        and len(flag) == 8
+        and not flag.strip(b"01")
+    ):
+        raise FormatError(
+            "truncated last line (no newline at end of file)", path, first_line + data.count(b"\n")
+        )
 
 
 def _parse_ascii(data: bytes, first_line: int, path: Path) -> dict[str, Any]:
@@ -449,9 +484,7 @@ def _parse_ascii(data: bytes, first_line: int, path: Path) -> dict[str, Any]:
     if not data or data.isspace():
         raise FormatError("header but no data records", path, first_line)
     if not data.endswith(b"\n"):
-        raise FormatError(
-            "truncated last line (no newline at end of file)", path, first_line + data.count(b"\n")
-        )
+        _check_last_line(data, first_line, path)
     nl = data.find(b"\n")
     first = data[:nl].rstrip(b"\r")
     double = b"  " in first
@@ -475,8 +508,8 @@ def _parse_ascii(data: bytes, first_line: int, path: Path) -> dict[str, Any]:
                 include_columns=[n for n in names if n != "_blank"],
             ),
         )
-    except (pa.ArrowException, ValueError):
-        raise _locate_bad_line(data, first_line, len(names), path) from None
+    except (pa.ArrowException, ValueError) as exc:
+        raise _locate_bad_line(data, first_line, len(names), path, str(exc)) from None
     out: dict[str, Any] = {}
     for name in COLUMNS[:11]:
         if name == "GRACE_id":
@@ -488,7 +521,7 @@ def _parse_ascii(data: bytes, first_line: int, path: Path) -> dict[str, Any]:
         if not np.isfinite(arr).all():
             raise _locate_bad_line(data, first_line, len(names), path)
         out[name] = arr
-    line_of = _row_to_line(data, first_line)
+    line_of = row_to_line(data, first_line)
     check_gps_time(out["gps_time"], path, line_of)
     out["GRACE_id"] = table.column("GRACE_id")
     out["qualflg"] = bits_from_strings(table.column("qualflg"), path, first_line, line_of=line_of)
@@ -609,6 +642,9 @@ def read_grace_acc1b(path: str | Path, *, invalid_bits: int = DEFAULT_INVALID_BI
     counted; a record count different from the header's is a warning.  All of this
     is reported in :attr:`AccSeries.report`.  Epochs outside 1980-2100
     (:data:`TIME_RANGE`), non-finite values and malformed records are errors.
+    A leading UTF-8 byte-order mark is skipped.  A last record without its final
+    newline is read when it is complete (all 12 fields, ending with the
+    fixed-width 8-character qualflg), else it is a truncated last line.
     """
     if isinstance(invalid_bits, bool) or not isinstance(invalid_bits, int | np.integer):
         raise ValidationError(f"invalid_bits must be an integer bit mask, got {invalid_bits!r}")

@@ -414,7 +414,12 @@ def _interpret_grace(header: bytes, path: Path) -> dict[str, Any]:
     if file_type is not None:
         m = re.search(r"ip(\w{3}1[ABX])F", file_type)
         if m and m.group(1) not in GRACE_FILE_TYPES:
-            hint = " (use read_grace_acc1b)" if m.group(1) in ("ACC1B", "ACT1B") else ""
+            hint = (
+                " (accelerometer data: give it as an input file, not as --aux; "
+                "in Python read it with accal.io.read)"
+                if m.group(1) in ("ACC1B", "ACT1B")
+                else ""
+            )
             raise UnsupportedFormatError(
                 f"file type {m.group(0)!r} is not accelerometer housekeeping (AHK1B){hint}",
                 path,
@@ -869,7 +874,7 @@ def _read_table(raw: bytes, path: Path) -> Housekeeping:
     if tname == "time_utc":
         time = utc_column_to_gps(tcol, tname, path, line_of)
     else:
-        time = numeric_column(tcol, tname, path).astype(np.float64)
+        time = numeric_column(tcol, tname, path, line_of, locate=True).astype(np.float64)
     bad = np.flatnonzero(~np.isfinite(time))
     if bad.size:
         line = first_line + int(bad[0]) if first_line else None

@@ -19,10 +19,12 @@ history and meta (``accal.meta`` / ``# meta:``), so reading them gives back the 
 from __future__ import annotations
 
 import contextlib
+import csv
 import gzip
 import io
 import json
 import re
+import warnings
 import zlib
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -33,12 +35,15 @@ import numpy as np
 from accal.errors import FormatError, ValidationError, check_option
 from accal.io._common import (
     PARQUET_MAGIC,
+    UTF8_BOM,
     arrow_to_numpy,
     bits_from_strings,
     check_binary,
     check_gps_time,
+    one_line,
     peek,
     read_bytes,
+    row_to_line,
     tidy,
 )
 from accal.io.grace_l1b import DEFAULT_INVALID_BITS
@@ -72,14 +77,6 @@ SERIES_META_TYPES = {
 }
 
 _FMTS = ("parquet", "csv")
-
-
-def one_line(text: str, limit: int = 200) -> str:
-    """``text`` as one short line: control characters escaped, cut at ``limit``."""
-    text = str(text)
-    if not text.isprintable():
-        text = repr(text)[1:-1]
-    return text[:limit]
 
 
 def _exc_text(exc: BaseException, limit: int = 200) -> str:
@@ -280,6 +277,55 @@ def _comment(line: bytes, path: Path, lineno: int, units: dict, meta: dict) -> N
         target.update(obj)
 
 
+def _csv_error(exc: BaseException, body: bytes, header_line: int) -> tuple[str, int | None]:
+    """pyarrow's CSV error as one clean line, and the file line it is about (error path only).
+
+    Parameters
+    ----------
+    exc : Exception
+        pyarrow's exception.
+    body : bytes
+        The CSV text that was parsed: the header line, then the rows.
+    header_line : int
+        1-based file line of the header line.
+
+    Returns
+    -------
+    message : str
+        ``Expected 4 columns, got 3: ...`` or ``column 'x': invalid value 'abc'
+        (expected double)``.
+    line : int or None
+        The first row with the wrong number of fields, or with the invalid value in
+        that column; None when it cannot be found.
+    """
+    msg = re.sub(r"^CSV parse error: ", "", _exc_text(exc))
+    m = re.search(r"Row #(\d+)", msg)
+    if m:
+        return msg, header_line + int(m.group(1)) - 1
+    count = re.search(r"Expected (\d+) columns, got \d+", msg)
+    conv = re.match(
+        r"In CSV column #(\d+): CSV conversion error to (\w+): invalid value '(.*)'$", msg
+    )
+    if not (count or conv):
+        return msg, None
+    rows = csv.reader(io.StringIO(body.decode("utf-8", "replace"), newline=""))
+    header = next(rows, [])
+    if conv:
+        k, typ, value = int(conv.group(1)), conv.group(2), conv.group(3)
+        if k < len(header):
+            msg = f"column {one_line(header[k], 40)!r}: invalid value {value!r} (expected {typ})"
+    end = rows.line_num
+    for row in rows:
+        start, end = end + 1, rows.line_num
+        if not row:  # a blank line (skipped by pyarrow)
+            continue
+        if (count and len(row) != int(count.group(1))) or (
+            conv and len(row) > k and row[k] == value
+        ):
+            return msg, header_line + start - 1
+    return msg, None
+
+
 def read_csv_table(raw: bytes, path: Path) -> tuple[Any, dict, dict, int]:
     """Parse a whole CSV table (comment header, then a header line and rows).
 
@@ -339,12 +385,8 @@ def read_csv_table(raw: bytes, path: Path) -> tuple[Any, dict, dict, int]:
             ),
         )
     except (pa.ArrowException, ValueError) as exc:
-        msg = _exc_text(exc)
-        line = None
-        m = re.search(r"Row #(\d+)", msg)
-        if m:
-            line = n_comment + int(m.group(1)) + 1
-        raise FormatError(f"CSV: {msg[:200]}", path, line) from None
+        msg, line = _csv_error(exc, body, n_comment + 1)
+        raise FormatError(f"CSV: {msg}", path, line) from None
     check_unique_names(table.column_names, path, n_comment + 1)
     check_single_line_values(table, path, n_comment + 2)
     return table, units, meta, n_comment + 2
@@ -392,19 +434,67 @@ def read_parquet_table(raw: bytes, path: Path) -> tuple[Any, dict, dict, int]:
     return table, units, meta, 0
 
 
-def numeric_column(col: Any, name: str, path: Path) -> np.ndarray:
+#: A number as pyarrow's CSV reader reads one (RE2 syntax), for finding the value
+#: that made a column text (error path only).
+_NUMBER_PATTERN = r"(?i)^[+-]?(?:(?:\d+\.?\d*|\.\d+)(?:e[+-]?\d+)?|nan|inf|infinity)$"
+
+
+def _first_non_number(col: Any) -> int | None:
+    """Row of the first non-empty value of a text column that is not a number, if any."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    if not (pa.types.is_string(col.type) or pa.types.is_large_string(col.type)):
+        return None
+    bad = pc.and_(
+        pc.invert(pc.match_substring_regex(col, _NUMBER_PATTERN)), pc.not_equal(col, "")
+    ).fill_null(False)
+    row = pc.index(bad, True).as_py()
+    return None if row is None or row < 0 else int(row)
+
+
+def numeric_column(
+    col: Any,
+    name: str,
+    path: Path,
+    line_of: Callable[[int], int] | None = None,
+    *,
+    locate: bool = False,
+) -> np.ndarray:
     """An integer, float or boolean Arrow column as numpy; nulls become NaN.
+
+    Parameters
+    ----------
+    col : pyarrow.ChunkedArray or pyarrow.Array
+        The column.
+    name : str
+        Its name, for messages.
+    path : Path
+        The file, for messages.
+    line_of : callable, optional
+        Row index -> 1-based file line (CSV).  Given, the error names the line of
+        the first value that is not a number.
+    locate : bool
+        Name that value's row (``row N:``) when there are no lines (Parquet).  The
+        search runs on the error path only; leave both off for columns that may
+        legitimately be text (e.g. auxiliary columns that are tried and skipped).
 
     Raises
     ------
     FormatError
-        The column is not numeric (names the column).
+        The column is not numeric (names the column, and the line or row of the
+        first value that is not a number where asked and found).
     """
     import pyarrow as pa
 
     t = col.type
     if not (pa.types.is_integer(t) or pa.types.is_floating(t) or pa.types.is_boolean(t)):
-        raise FormatError(f"column {name!r} is not numeric (type {t})", path)
+        msg = f"column {one_line(name, 40)!r} is not numeric (type {t})"
+        row = _first_non_number(col) if locate or line_of is not None else None
+        if row is None:
+            raise FormatError(msg, path)
+        value = one_line(str(col[row].as_py()), 40)
+        raise _row_error(f"{msg}: {value!r} is not a number", path, row, line_of)
     arr = arrow_to_numpy(col)
     if col.null_count:
         arr = np.asarray(col.cast(pa.float64()).fill_null(np.nan).to_numpy(), float)
@@ -414,6 +504,8 @@ def numeric_column(col: Any, name: str, path: Path) -> np.ndarray:
 #: UTC instants accepted in a ``time_utc`` column: the GPS epoch to 2100 (as
 #: :data:`accal.io._common.GPS_TIME_RANGE`).
 UTC_RANGE = (np.datetime64("1980-01-06T00:00:00", "s"), np.datetime64("2100-01-01T00:00:00", "s"))
+#: :data:`UTC_RANGE` as ISO-8601 text, compared with the smallest and largest string.
+_UTC_TEXT_RANGE = ("1980-01-06", "2100-01-01T00:00:00")
 
 
 def utc_column_to_gps(
@@ -445,9 +537,11 @@ def utc_column_to_gps(
         GPS era), values that are not ISO-8601 UTC.
     """
     import pyarrow as pa
+    import pyarrow.compute as pc
 
     if col.null_count:
-        raise FormatError(f"{name} has empty values", path)
+        row = int(pc.index(col.is_null(), True).as_py())
+        raise _row_error(f"{name}: empty value", path, row, line_of)
     if pa.types.is_timestamp(col.type):
         vals = col.to_numpy()
         bad = np.flatnonzero((vals < UTC_RANGE[0]) | (vals > UTC_RANGE[1]))
@@ -458,10 +552,69 @@ def utc_column_to_gps(
             )
     else:
         vals = np.asarray(col.to_pylist())
+        if pa.types.is_string(col.type) or pa.types.is_large_string(col.type):
+            # ISO-8601 text sorts by date: a cheap range check before the conversion,
+            # whose datetime64[ns] would wrap a year like 2600 into the GPS era
+            lo, hi = pc.min_max(col).values()
+            if lo.as_py() < _UTC_TEXT_RANGE[0] or hi.as_py() > _UTC_TEXT_RANGE[1]:
+                err = _bad_utc(vals, name, path, line_of)
+                if err is not None:
+                    raise err
     try:
         return utc_to_gps(vals)
     except (ValueError, TypeError) as exc:
-        raise FormatError(f"{name}: {one_line(str(exc))}", path) from None
+        err = _bad_utc(vals, name, path, line_of)
+        raise err or FormatError(f"{name}: {_exc_text(exc)}", path) from None
+
+
+def _bad_utc(
+    vals: np.ndarray,
+    name: str,
+    path: Path,
+    line_of: Callable[[int], int] | None,
+) -> FormatError | None:
+    """The error for the first bad value of a UTC text column, or None (error path).
+
+    A value is bad when it is not ISO-8601 or lies outside :data:`UTC_RANGE`; the
+    error gives its line (CSV) or row (Parquet).
+    """
+    import pandas as pd
+
+    if vals.dtype.kind in "USO":
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            ts = pd.to_datetime(
+                pd.Series(vals.ravel(), dtype=object), format="ISO8601", utc=True, errors="coerce"
+            )
+        t = ts.dt.tz_convert(None).to_numpy()  # its own unit: [ns] would wrap year 2600
+        bad = np.flatnonzero(np.isnat(t) | (t < UTC_RANGE[0]) | (t > UTC_RANGE[1]))
+        if bad.size:
+            i = int(bad[0])
+            shown = one_line(str(vals[i]), 40)
+            msg = (
+                f"{name}: {shown!r} is not an ISO-8601 UTC time (YYYY-MM-DDThh:mm:ss[.fff][Z])"
+                if np.isnat(t[i])
+                else f"{name} {shown} is outside 1980-01-06 ... 2100-01-01"
+            )
+            return _row_error(msg, path, i, line_of)
+    return None
+
+
+def _bad_flags(
+    col: Any, name: str, path: Path, line_of: Callable[[int], int] | None
+) -> FormatError:
+    """The error for a text flag column that is neither 0/1 flags nor integers (error path)."""
+    import pyarrow.compute as pc
+
+    msg = f"column {name!r} is neither 8-character 0/1 flags nor integers"
+    ok = pc.or_(
+        pc.match_substring_regex(col, r"^[01]{8}$"), pc.match_substring_regex(col, r"^[+-]?\d+$")
+    )
+    row = pc.index(pc.invert(ok).fill_null(True), True).as_py()
+    if row is None or row < 0:
+        return FormatError(msg, path)
+    value = one_line(str(col[int(row)].as_py()), 40)
+    return _row_error(f"{msg}: {value!r}", path, int(row), line_of)
 
 
 def _row_error(msg: str, path: Path, row: int, line_of: Callable[[int], int] | None) -> FormatError:
@@ -651,8 +804,9 @@ def read_table_series(path: str | Path, *, columns: dict[str, str] | None = None
     aux_dtypes = {
         k: _aux_dtype(k, v, path) for k, v in (series_meta or {}).get("aux_dtypes", {}).items()
     }
-    # 1-based CSV line of data row i (blank lines aside); Parquet rows have no line
-    line_of = (lambda i: first_line + i) if first_line else None
+    # 1-based CSV line of data row i (blank lines counted on the error path only);
+    # Parquet rows have no line
+    line_of = row_to_line(raw, first_line, text_line=1) if first_line else None
 
     tname = next((c for c in TIME_COLUMNS if c in names), None)
     if tname is None:
@@ -664,12 +818,10 @@ def read_table_series(path: str | Path, *, columns: dict[str, str] | None = None
     if tname == "time_utc":
         time = utc_column_to_gps(tcol, tname, path, line_of)
     else:
-        time = numeric_column(tcol, tname, path).astype(np.float64)
+        time = numeric_column(tcol, tname, path, line_of, locate=True).astype(np.float64)
     bad = np.flatnonzero(~np.isfinite(time))
     if bad.size:
-        raise FormatError(
-            f"{tname}: missing or non-finite time", path, (first_line + int(bad[0])) or None
-        )
+        raise _row_error(f"{tname}: missing or non-finite time", path, int(bad[0]), line_of)
     check_gps_time(time, path, line_of, name=tname, unit="row")
 
     axes, acc_cols = [], []
@@ -684,13 +836,14 @@ def read_table_series(path: str | Path, *, columns: dict[str, str] | None = None
             )
     if not axes:
         raise FormatError(
-            "no acceleration column (lin_accl_x/y/z, or map one with columns={'x': name}); "
+            "no acceleration column lin_accl_x/y/z (map one with --column x=NAME, "
+            "or columns={'x': NAME} in Python); "
             f"columns are {column_list(names)}",
             path,
         )
-    acc = np.column_stack([numeric_column(table.column(c), c, path) for c in acc_cols]).astype(
-        np.float64
-    )
+    acc = np.column_stack(
+        [numeric_column(table.column(c), c, path, line_of, locate=True) for c in acc_cols]
+    ).astype(np.float64)
 
     warn: list[str] = []
     n = table.num_rows
@@ -709,23 +862,22 @@ def read_table_series(path: str | Path, *, columns: dict[str, str] | None = None
                 try:  # an integer bitmask read as text
                     q = numeric_column(qcol.cast(pa.int64()), qname, path)
                 except (pa.ArrowException, FormatError):
-                    raise FormatError(
-                        f"column {qname!r} is neither 8-character 0/1 flags nor integers", path
-                    ) from None
+                    raise _bad_flags(qcol, qname, path, line_of) from None
                 quality = _bitmask(q, qname, path, line_of)
         else:
-            quality = _bitmask(numeric_column(qcol, qname, path), qname, path, line_of)
+            q = numeric_column(qcol, qname, path, line_of, locate=True)
+            quality = _bitmask(q, qname, path, line_of)
         valid = (quality & np.uint32(DEFAULT_INVALID_BITS)) == 0
         used.add(qname)
     if FLAG_COLUMN in names:
-        f = numeric_column(table.column(FLAG_COLUMN), FLAG_COLUMN, path)
+        f = numeric_column(table.column(FLAG_COLUMN), FLAG_COLUMN, path, line_of, locate=True)
         flag = _bitmask(f, FLAG_COLUMN, path, line_of, allow_nan=True)
         if qname is None:  # a missing flag counts as invalid
             quality = np.where(np.isnan(f), np.uint32(1), flag) if f.dtype.kind == "f" else flag
         valid = f == 0
         used.add(FLAG_COLUMN)
     if VALID_COLUMN in names:
-        v = numeric_column(table.column(VALID_COLUMN), VALID_COLUMN, path)
+        v = numeric_column(table.column(VALID_COLUMN), VALID_COLUMN, path, line_of, locate=True)
         valid = np.asarray(v == 1, dtype=bool)
         used.add(VALID_COLUMN)
     nonfinite = ~np.isfinite(acc).all(axis=1)
@@ -964,6 +1116,8 @@ class TableStream:
         with _open_binary(self.path) as fh:
             head = self._read(fh.read, 4)
             gz = not isinstance(fh, io.BufferedReader)
+            if head.startswith(UTF8_BOM):  # a UTF-8 CSV that starts with a byte-order mark
+                head = head[len(UTF8_BOM) :] + self._read(fh.read, len(UTF8_BOM))
             blank = not head.strip() and not self._read(fh.read, 1 << 16).strip()
         if blank:
             raise FormatError("empty file", self.path)
@@ -1034,6 +1188,8 @@ class TableStream:
         while True:
             line = self._read(fh.readline)
             lineno += 1
+            if lineno == 1 and line.startswith(UTF8_BOM):
+                line = line[len(UTF8_BOM) :]
             if not line.startswith(b"#"):
                 break
             _comment(line, self.path, lineno, self.units, self.meta)
@@ -1095,7 +1251,9 @@ class TableStream:
                         ),
                     )
                 except (pa.ArrowException, ValueError) as exc:
-                    msg = _exc_text(exc)
+                    msg, at = _csv_error(exc, header + body, line - 1)
+                    if at is not None:
+                        raise FormatError(f"CSV: {msg}", self.path, at) from None
                     raise FormatError(
                         f"CSV: {msg} (in lines {line}-{line + len(lines) - 1})", self.path
                     ) from None
