@@ -14,10 +14,16 @@ The simulated raw reading follows the wavelet paper's eq. (9),
 * ``d``: a random drift of a few 1e-14 m/s³;
 * noise: white at ``noise`` m/s²/√Hz plus a 1/f rise below 1 mHz
   (SuperSTAR-like), drawn by FFT shaping.
+
+Random draws (noise, drift, phases, gaps, flags) come from one seed.  Without an
+explicit seed it is :func:`default_seed` of the date and satellite, so different
+days and satellites get different noise while every run of the same day gives the
+same file; an explicit seed is used as given.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,6 +39,27 @@ ORBIT_PERIOD = 5600.0  # [s]
 #: Raw-data offsets (m/s², eq. 9 sign) for GRACE-FO C and D, from the measured
 #: 100-s means on 2023-06-01 (shared/data/SOURCES.md).
 GRACEFO_OFFSETS = {"C": (-0.278e-6, -10.651e-6, -0.182e-6), "D": (0.278e-6, 10.650e-6, -0.183e-6)}
+
+
+def default_seed(date: str, satellite: str) -> int:
+    """The seed of a simulated day when none is given: a hash of date and satellite.
+
+    Parameters
+    ----------
+    date : str
+        UTC day, ``YYYY-MM-DD``.
+    satellite : str
+        ``"A"``, ``"B"``, ``"C"`` or ``"D"``.
+
+    Returns
+    -------
+    int
+        The first 8 bytes (little-endian) of SHA-256 of ``"accal.simulate.grace:"``
+        + date + ``":"`` + satellite: the same on every machine and Python version
+        (unlike :func:`hash`), different for every (date, satellite).
+    """
+    digest = hashlib.sha256(f"accal.simulate.grace:{date}:{satellite}".encode()).digest()
+    return int.from_bytes(digest[:8], "little")
 
 
 @dataclass(frozen=True)
@@ -51,7 +78,7 @@ class SimulatedDay:
         False for flagged samples.
     truth : dict
         ``bias`` [m/s²] (at ``t0``), ``drift`` [m/s³], ``scale_s`` (eq. 9 ``s``),
-        ``t0`` [s], plus ``signal_trend``: the LS bias/drift of ``s·a_true`` alone
+        ``t0`` [s], ``seed`` (the one used), plus ``signal_trend``: the LS bias/drift of ``s·a_true`` alone
         (the part of the true signal any trend estimator will also see).
     """
 
@@ -102,7 +129,7 @@ def simulate_grace_day(
     *,
     date: str = "2005-01-01",
     satellite: str = "A",
-    seed: int = 0,
+    seed: int | None = None,
     duration: float = 86400.0,
     dt: float = 1.0,
     n_gaps: int = 0,
@@ -117,8 +144,9 @@ def simulate_grace_day(
         UTC day, ``YYYY-MM-DD``.
     satellite : {"A", "B", "C", "D"}
         GRACE A/B or GRACE-FO C/D.
-    seed : int
-        Random seed.
+    seed : int, optional
+        Random seed, used as given.  Default :func:`default_seed` of ``date`` and
+        ``satellite`` (deterministic, different for each day and satellite).
     duration : float
         Length [s].
     dt : float
@@ -141,6 +169,8 @@ def simulate_grace_day(
         raise ValidationError(f"satellite must be A, B, C or D, got {satellite!r}")
     if not duration > 0 or not dt > 0:
         raise ValidationError("duration and dt must be positive")
+    if seed is None:
+        seed = default_seed(date, satellite)
     rng = np.random.default_rng(seed)
     t0 = gps_day_start(date)
     n = int(round(duration / dt))
@@ -196,6 +226,7 @@ def simulate_grace_day(
     truth = {
         "satellite": satellite,
         "date": date,
+        "seed": seed,
         "t0": float(t[0]),
         "bias": bias.tolist(),
         "drift": drift.tolist(),
