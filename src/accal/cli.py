@@ -481,7 +481,13 @@ def simulate() -> None:
     required=True,
     help="Output ACC1B file (.asc/.txt, .gz to compress); truth goes to <out>.truth.json.",
 )
-@click.option("--seed", type=int, default=0, show_default=True)
+@click.option(
+    "--seed",
+    type=int,
+    default=None,
+    help="Random seed (default: derived from --date and --satellite, so every day differs "
+    "and a day is the same on every machine).",
+)
 @click.option("--duration", type=float, default=86400.0, show_default=True, help="Seconds.")
 @click.option("--gaps", type=int, default=0, show_default=True, help="Number of data gaps.")
 @click.option(
@@ -503,7 +509,7 @@ def simulate_grace(
     date: str,
     satellite: str,
     out: Path,
-    seed: int,
+    seed: int | None,
     duration: float,
     gaps: int,
     flagged: float,

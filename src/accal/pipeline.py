@@ -781,6 +781,8 @@ def _read_bias_drift_arrow(path: Path):
     if path.suffix == ".csv":
         import pyarrow.csv as pacsv
 
+        from accal.io._common import csv_read_options
+
         with open(path, "rb") as fh:
             skip = 0
             for line in fh:
@@ -789,7 +791,7 @@ def _read_bias_drift_arrow(path: Path):
                 skip += 1
         table = pacsv.read_csv(
             path,
-            read_options=pacsv.ReadOptions(skip_rows=skip),
+            read_options=csv_read_options(skip_rows=skip),
             convert_options=pacsv.ConvertOptions(
                 column_types={f.name: f.type for f in schema}, strings_can_be_null=False
             ),

@@ -168,6 +168,22 @@ def one_line(text: str, limit: int = 200) -> str:
     return text[:limit]
 
 
+def csv_read_options(**kwargs: Any) -> Any:
+    """``pyarrow.csv.ReadOptions`` for every CSV parse of accal: single-threaded.
+
+    pyarrow's threaded reader finishes its clean-up on a worker thread after
+    ``read_csv`` has returned; when the process exits right after a read (a bad
+    file that is the last of a run) that clean-up can meet the interpreter's
+    shutdown and abort the process (``terminate called without an active
+    exception``, exit 134; seen in 1-3 of 40 runs).  accal parallelises over
+    files instead (``--workers``), so one parsing thread per process costs
+    nothing there (~8 ms per 1 Hz day in a one-process run).
+    """
+    import pyarrow.csv as pacsv
+
+    return pacsv.ReadOptions(use_threads=False, **kwargs)
+
+
 def _short(value: Any, n: int = 20) -> str:
     """``repr`` of a value cut to ``n`` characters, for error messages."""
     return repr(value[:n] if isinstance(value, str | bytes) else value)

@@ -42,6 +42,7 @@ from accal.io._common import (
     bits_from_strings,
     check_binary,
     check_gps_time,
+    csv_read_options,
     one_line,
     peek,
     read_bytes,
@@ -496,7 +497,7 @@ def _parse_ascii(data: bytes, first_line: int, path: Path) -> dict[str, Any]:
     try:
         table = pacsv.read_csv(
             pa.py_buffer(data),
-            read_options=pacsv.ReadOptions(column_names=names, block_size=1 << 22),
+            read_options=csv_read_options(column_names=names, block_size=1 << 22),
             parse_options=pacsv.ParseOptions(
                 delimiter=" ", quote_char=False, double_quote=False, ignore_empty_lines=True
             ),

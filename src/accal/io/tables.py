@@ -40,6 +40,7 @@ from accal.io._common import (
     bits_from_strings,
     check_binary,
     check_gps_time,
+    csv_read_options,
     one_line,
     peek,
     read_bytes,
@@ -300,14 +301,15 @@ def _csv_error(exc: BaseException, body: bytes, header_line: int) -> tuple[str, 
     """
     msg = re.sub(r"^CSV parse error: ", "", _exc_text(exc))
     m = re.search(r"Row #(\d+)", msg)
-    if m:
-        return msg, header_line + int(m.group(1)) - 1
+    # the single-threaded reader names the row ("Row #3: ..."); the line is found below,
+    # counting blank lines, so the message is the same for either reader
+    msg = re.sub(r"(^|: )Row #\d+: ", r"\1", msg)
     count = re.search(r"Expected (\d+) columns, got \d+", msg)
     conv = re.match(
         r"In CSV column #(\d+): CSV conversion error to (\w+): invalid value '(.*)'$", msg
     )
     if not (count or conv):
-        return msg, None
+        return msg, (header_line + int(m.group(1)) - 1) if m else None
     rows = csv.reader(io.StringIO(body.decode("utf-8", "replace"), newline=""))
     header = next(rows, [])
     if conv:
@@ -376,6 +378,7 @@ def read_csv_table(raw: bytes, path: Path) -> tuple[Any, dict, dict, int]:
     try:
         table = pacsv.read_csv(
             pa.py_buffer(body),
+            read_options=csv_read_options(),
             parse_options=pacsv.ParseOptions(ignore_empty_lines=True),
             convert_options=pacsv.ConvertOptions(
                 timestamp_parsers=[pacsv.ISO8601],
@@ -1208,7 +1211,9 @@ class TableStream:
         with _open_binary(self.path) as fh:
             header, lineno = self._read_csv_header(fh)
         try:
-            self.names = pacsv.read_csv(pa.py_buffer(header)).column_names
+            self.names = pacsv.read_csv(
+                pa.py_buffer(header), read_options=csv_read_options()
+            ).column_names
         except (pa.ArrowException, ValueError) as exc:
             msg = _exc_text(exc)
             raise FormatError(f"CSV header: {msg}", self.path, lineno) from None
@@ -1243,6 +1248,7 @@ class TableStream:
                 try:
                     table = pacsv.read_csv(
                         pa.py_buffer(header + body),
+                        read_options=csv_read_options(),
                         parse_options=pacsv.ParseOptions(ignore_empty_lines=True),
                         convert_options=pacsv.ConvertOptions(
                             timestamp_parsers=[pacsv.ISO8601],
