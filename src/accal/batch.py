@@ -444,8 +444,12 @@ def execute(
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
-    # forkserver: no fork of a process that may hold threads (tqdm, BLAS)
+    # forkserver: no fork of a process that may hold threads (tqdm, BLAS); the
+    # server imports the task's module and the heavy libraries once, so each worker
+    # starts in milliseconds instead of importing them again (~0.6 s)
     ctx = mp.get_context("forkserver")
+    func = getattr(task, "func", task)  # functools.partial -> the function
+    ctx.set_forkserver_preload([*_PRELOAD, getattr(func, "__module__", "accal")])
     with ProcessPoolExecutor(
         max_workers=min(workers, len(paths)), mp_context=ctx, initializer=_worker_init
     ) as pool:
@@ -456,6 +460,10 @@ def execute(
                 yield i, fut.result()
             except Exception as exc:  # BrokenProcessPool, pickling errors, bugs
                 yield i, on_error(paths[i], exc)
+
+
+#: Modules the worker fork server imports before forking workers.
+_PRELOAD = ("numpy", "scipy.fft", "pyarrow.csv", "pyarrow.parquet")
 
 
 def _worker_init() -> None:

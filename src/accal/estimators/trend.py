@@ -409,9 +409,8 @@ class _CovarianceKernel:
         edges[-1] = nf
         edges_arr = np.asarray(edges)
         self.nbins = edges_arr.size - 1
-        widths = np.diff(edges_arr)
-        self.which = np.repeat(np.arange(self.nbins), widths)
-        self.counts = np.maximum(widths, 1)
+        self.counts = np.diff(edges_arr)  # every bin holds >= 1 frequency
+        self.starts = edges_arr[:-1] - 1  # bin starts as indices into f_1 .. f_nf-1
         two_sided = np.full(nf, 2.0)
         two_sided[0] = 1.0
         if self.ngrid % 2 == 0:
@@ -423,17 +422,17 @@ class _CovarianceKernel:
         from scipy import fft as sfft
 
         rspec = sfft.rfft(_on_grid(residuals, self.idx, self.ngrid), axis=1)
-        out = []
-        for row in rspec:
-            pgram = np.abs(row) ** 2 / self.n * self.inv_suppress
-            sums = np.bincount(self.which, weights=pgram[1:], minlength=self.nbins)
-            sbin = sums / self.counts
-            psd = np.empty(pgram.size)
-            psd[1:] = sbin[self.which]
-            psd[0] = sbin[0]
-            w = self.two_sided * psd
-            out.append(((self.gs * w) @ np.conj(self.gs).T).real / self.ngrid)
-        return np.array(out)
+        pgram = (rspec.real**2 + rspec.imag**2) * (self.inv_suppress / self.n)  # (k, nf)
+        # mean over each log-spaced bin of f_1 .. f_nf-1 (bins are contiguous runs)
+        sbin = np.add.reduceat(pgram[:, 1:], self.starts, axis=1) / self.counts
+        w = np.empty_like(pgram)
+        w[:, 1:] = np.repeat(sbin, self.counts, axis=1)
+        w[:, 0] = sbin[:, 0]
+        w *= self.two_sided
+        # Re(G diag(w) G^H) = Gr diag(w) Gr^T + Gi diag(w) Gi^T, for every row of w
+        gr, gi = self.gs.real, self.gs.imag
+        cov = (gr[None] * w[:, None, :]) @ gr.T + (gi[None] * w[:, None, :]) @ gi.T
+        return cov / self.ngrid
 
 
 # --------------------------------------------------------------------------------------

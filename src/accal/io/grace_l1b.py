@@ -507,6 +507,8 @@ def _parse_ascii(data: bytes, first_line: int, path: Path) -> dict[str, Any]:
                 strings_can_be_null=False,
                 quoted_strings_can_be_null=False,
                 include_columns=[n for n in names if n != "_blank"],
+                # ids and flags are checked byte by byte below (A-D, 0/1): no UTF-8 pass
+                check_utf8=False,
             ),
         )
     except (pa.ArrowException, ValueError) as exc:
