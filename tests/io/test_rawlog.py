@@ -182,3 +182,18 @@ def test_stream_header_checks_on_open(tmp_path):
         list(open_rawlog(p, rows=5))
     with pytest.raises(FormatError, match="no such file"):
         open_rawlog(tmp_path / "nope.parquet")
+
+
+@pytest.mark.parametrize("rows", [None, 7])  # whole file, and streamed in 7-row chunks
+def test_non_numeric_value_names_its_line_or_row(tmp_path, rows):
+    lines = [f"{k},{1e-7 * k},1e-7,0.5" for k in range(20)]
+    lines[12] = "12,oops,1e-7,0.5"
+    csv = tmp_path / "t.csv"
+    csv.write_text("time,m_y,m_z,theta\n" + "\n".join(lines) + "\n")
+    with pytest.raises(FormatError, match=r"t\.csv:14: .*'m_y'.*'oops'"):
+        list(open_rawlog(csv, rows=rows)) if rows else read_rawlog(csv)
+    df = pd.DataFrame([ln.split(",") for ln in lines], columns=["time", "m_y", "m_z", "theta"])
+    pq_path = tmp_path / "t.parquet"
+    df.astype({"time": float, "m_z": float, "theta": float}).to_parquet(pq_path)
+    with pytest.raises(FormatError, match=r"row 13: column 'm_y' is not numeric.*'oops'"):
+        read_rawlog(pq_path)

@@ -166,8 +166,14 @@ class RawlogStream:
         aux_names: list[str] | None = None
         self.warnings = []
         for row0, table in self._tables():
+
+            def csv_line(i: int, row0: int = row0) -> int:
+                return self.first_line + row0 + int(i)
+
+            line_of = csv_line if self.first_line else None  # Parquet: the message names rows
+
             cols = {
-                c: numeric_column(table.column(c), c, path).astype(np.float64)
+                c: numeric_column(table.column(c), c, path, line_of, locate=True).astype(np.float64)
                 for c in REQUIRED_COLUMNS
             }
             time = cols["time"]
@@ -194,7 +200,11 @@ class RawlogStream:
             last_t = float(time[-1])
             acc = []
             if "x" in self.axes:
-                acc.append(numeric_column(table.column("m_x"), "m_x", path).astype(np.float64))
+                acc.append(
+                    numeric_column(table.column("m_x"), "m_x", path, line_of, locate=True).astype(
+                        np.float64
+                    )
+                )
             acc += [cols["m_y"], cols["m_z"]]
             if aux_names is None:  # decided on the first chunk (CSV types are fixed there)
                 aux_names, skipped = [], []
