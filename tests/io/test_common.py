@@ -33,3 +33,21 @@ def test_bits_from_strings_names_the_bad_line(bad, why):
     with pytest.raises(FormatError, match=why) as info:
         bits_from_strings(pa.array(values), "f.txt", 10)
     assert info.value.line == 15
+
+
+def test_tidy_says_when_dropped_duplicates_had_other_values():
+    from accal.io._common import tidy
+
+    t = np.array([0.0, 1, 1, 2, 3, 3, 3])
+    acc = np.arange(14.0).reshape(7, 2)
+    acc[2], acc[5], acc[6] = acc[1], acc[4], acc[4]
+    flags = np.zeros(7, np.uint32)
+    res = tidy(t, {"acc": acc, "flags": flags})
+    assert res.warnings == ["3 duplicated epochs dropped (first kept)"]
+    assert np.array_equal(res.time, [0, 1, 2, 3]) and np.array_equal(res.arrays["acc"][1], [2, 3])
+    acc[6, 1] += 1e-12  # one dropped record differs from the one kept
+    flags[2] = 1  # and another only in its flag
+    res = tidy(t, {"acc": acc, "flags": flags})
+    assert res.warnings == [
+        "3 duplicated epochs dropped (first kept); 2 of them with different values"
+    ]

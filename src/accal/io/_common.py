@@ -397,10 +397,22 @@ def tidy(time: NDArray[np.float64], arrays: dict[str, NDArray]) -> Tidied:
     dup = d == 0
     n_dup = int(np.count_nonzero(dup))
     if n_dup:
+        # of the dropped records, how many disagree with the record before them
+        differ = np.zeros(n_dup, dtype=bool)
+        for v in arrays.values():
+            a, b = v[1:][dup], v[:-1][dup]
+            ne = a != b
+            if a.dtype.kind == "f":
+                ne &= ~(np.isnan(a) & np.isnan(b))
+            differ |= ne.reshape(n_dup, -1).any(axis=1)
         keep = np.concatenate(([True], ~dup))
         time = time[keep]
         arrays = {k: v[keep] for k, v in arrays.items()}
-        warnings.append(f"{n_dup} duplicated epochs dropped (first kept)")
+        n_differ = int(np.count_nonzero(differ))
+        warnings.append(
+            f"{n_dup} duplicated epochs dropped (first kept)"
+            + (f"; {n_differ} of them with different values" if n_differ else "")
+        )
         d = np.diff(time)
     step = nominal_step(d)
     if d.size:
