@@ -203,3 +203,11 @@ def test_same_run_twice_is_a_usage_error(run_csv, tmp_path, monkeypatch):
         assert code == 2, err
         assert [x for x in err.splitlines() if x.startswith("Error:")] == [f"Error: {message}"]
         assert not out.exists()
+
+
+def test_tau_not_matching_the_pattern_is_warned_not_hidden(run_csv, tmp_path):
+    """--tau 599 on a 600 s pattern: estimates still fine (joint fit), one warning line."""
+    code, _, err = invoke("demod", run_csv, "--tau", "599", "--mask", MASK, "--out", tmp_path / "a")
+    assert code == 0 and err.count("eq. 16 leakage up to") == 1
+    code, _, err = invoke("demod", run_csv, "--tau", TAU, "--mask", MASK, "--out", tmp_path / "b")
+    assert code == 0 and "leakage" not in err

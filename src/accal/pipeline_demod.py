@@ -645,6 +645,11 @@ def find_run(summary: dict[str, Any], summary_path: Path) -> Path:
     )
 
 
+#: Eq. 16 leakage above which the summary warns (a pattern designed for the
+#: period gives ~1e-15; a pattern of period 600 s demodulated with --tau 599 gives 0.3).
+LEAKAGE_WARN = 1e-3
+
+
 def summary_warnings(summary: dict[str, Any]) -> tuple[str, ...]:
     """Findings of a summary worth a line on stderr."""
     w = []
@@ -656,6 +661,14 @@ def summary_warnings(summary: dict[str, Any]) -> tuple[str, ...]:
         )
     if summary["dropped"]:
         w.append(f"{summary['dropped']} of {summary['n_periods']} periods dropped")
+    leak = summary.get("leakage_max")
+    aux_bias = "+" in str(summary.get("options", {}).get("bias_model", ""))  # aux leaks by nature
+    if not aux_bias and leak is not None and np.isfinite(leak) and leak > LEAKAGE_WARN:
+        w.append(
+            f"eq. 16 leakage up to {leak:.2g}: the rotation pattern does not cancel a constant "
+            "bias on its own (does --tau match the pattern's period?); the joint fit of eq. 17 "
+            "still removes it"
+        )
     rs = summary["input"].get("resample")
     if rs:
         w.append(
