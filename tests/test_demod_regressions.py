@@ -206,8 +206,10 @@ def test_same_run_twice_is_a_usage_error(run_csv, tmp_path, monkeypatch):
 
 
 def test_tau_not_matching_the_pattern_is_warned_not_hidden(run_csv, tmp_path):
-    """--tau 599 on a 600 s pattern: estimates still fine (joint fit), one warning line."""
-    code, _, err = invoke("demod", run_csv, "--tau", "599", "--mask", MASK, "--out", tmp_path / "a")
+    """--tau 59 on a 60 s pattern: estimates still fine (joint fit), one warning line."""
+    code, _, err = invoke(
+        "demod", run_csv, "--tau", TAU - 1, "--mask", MASK, "--out", tmp_path / "a"
+    )
     assert code == 0 and err.count("eq. 16 leakage up to") == 1
     code, _, err = invoke("demod", run_csv, "--tau", TAU, "--mask", MASK, "--out", tmp_path / "b")
     assert code == 0 and "leakage" not in err
