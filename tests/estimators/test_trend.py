@@ -359,3 +359,18 @@ def test_uniform_layouts_share_a_design_that_matches_the_direct_one(method):
     for f in fits[1:]:
         np.testing.assert_allclose(f.coef, fits[0].coef, rtol=1e-12)
         np.testing.assert_allclose(f.cov, fits[0].cov, rtol=1e-12)
+
+
+def test_noise_grid_is_bounded_when_stretches_are_far_apart():
+    """Two stretches months apart: the grid stays <= 4 n points (it was 35 M points and
+    9 GB for one record 400 days late), order and short gaps are kept."""
+    from accal.estimators.trend import MAX_GRID_FACTOR, _grid_index
+
+    t = np.concatenate([np.arange(1000.0), np.arange(1000.0, 1500.0, 2.0), [400 * 86400.0]])
+    idx, ngrid = _grid_index(t)
+    assert ngrid <= MAX_GRID_FACTOR * t.size and ngrid == idx[-1] + 1
+    assert np.all(np.diff(idx) >= 1)
+    assert np.array_equal(np.diff(idx)[:1249], np.rint(np.diff(t)[:1249]))  # short gaps kept
+    fit = fit_trend(t, 1e-7 + 1e-12 * t)
+    assert np.isfinite(fit.sigma).all()
+    np.testing.assert_allclose(fit.coef, [1e-7, 1e-12], rtol=1e-9)

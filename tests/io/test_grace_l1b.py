@@ -575,3 +575,38 @@ def test_utf8_bom_is_skipped(samples, tmp_path, name, gz):
     assert sniff_grace_acc1b(p)
     s = read_grace_acc1b(p)
     assert_same_series(s, read_grace_acc1b(samples[name]))  # meta keys without the BOM
+
+
+def test_record_far_outside_the_header_span_is_damage(samples, tmp_path):
+    """One record 400 days late (still in the GPS era) was read as a 1-year gap (and cost
+    9 GB in the fit); it is outside the header's first/last observation: an error."""
+    head, data = _data_lines(samples["grace_a"])
+    late = data[:]
+    late[-1] = late[-1].replace("116769659 ", f"{116769659 + 400 * 86400} ", 1)
+    with pytest.raises(FormatError, match=r"\(2004-10-18\) is outside the header's") as e:
+        read_grace_acc1b(_write(tmp_path, "".join(head + late).encode()))
+    assert e.value.line == len(head) + len(data)
+    near = data[:]  # within the tolerance (1 h): a small header/data disagreement is read
+    near[-1] = near[-1].replace("116769659 ", f"{116769659 + 1800} ", 1)
+    assert len(read_grace_acc1b(_write(tmp_path, "".join(head + near).encode()))) == 60
+    raw = bytearray(samples["grace_a_bin"].read_bytes())
+    raw[-78:-74] = (116769659 + 400 * 86400).to_bytes(4, "big")
+    with pytest.raises(FormatError, match="record 60: gps_time .* outside the header's"):
+        read_grace_acc1b(_write(tmp_path, bytes(raw), "bad.dat"))
+    fo = samples["gracefo_c"].read_text().splitlines(keepends=True)
+    t_last = fo[-1].split()[0]
+    fo[-1] = fo[-1].replace(t_last, str(int(t_last) + 400 * 86400), 1)
+    with pytest.raises(FormatError, match="outside the header's") as e:
+        read_grace_acc1b(_write(tmp_path, "".join(fo).encode(), "ACT1B.txt"))
+    assert e.value.line == len(fo)
+
+
+def test_undecodable_satellite_id_or_flag_is_a_clean_error(samples, tmp_path):
+    """Found by the deep fuzz run: bytes that are not UTF-8 in the id (or flag) field."""
+    raw = samples["grace_a"].read_bytes()
+    bad = raw.replace(b"116769659 A ", b"116769659 \xff\xfe ", 1)
+    with pytest.raises(FormatError, match=r"satellite id '\\ufffd|satellite id '.+' is not one of"):
+        read_grace_acc1b(_write(tmp_path, bad))
+    bad = raw[: raw.rindex(b"00000000")] + b"0000\xff000\n"
+    with pytest.raises(FormatError, match="quality flag"):
+        read_grace_acc1b(_write(tmp_path, bad))

@@ -270,21 +270,46 @@ METHODS = {"wavelet": wavelet_weights, "lsq": lsq_weights}
 # --------------------------------------------------------------------------------------
 
 
+#: The noise grid of :func:`linear_estimator_covariance` spans at most this many
+#: times the number of samples; longer gaps are shortened (see :func:`_grid_index`).
+MAX_GRID_FACTOR = 4
+
+
 def _grid_index(t: NDArray[np.float64]) -> tuple[NDArray[np.int64] | None, int]:
     """Index of each sample on the nominal uniform grid starting at ``t[0]``.
 
     Returns ``(None, n)`` when the samples are that grid (every step equal).
+    Gaps are kept at their length unless the grid would exceed
+    :data:`MAX_GRID_FACTOR` × n points (e.g. two stretches of data months apart):
+    then the longest gaps are shortened to a common length so that it does not.
+    Noise correlated across such a gap is treated as correlated across the
+    shortened gap; the alternative, a grid of months of samples, costs gigabytes.
     """
-    if t.size < 2:
-        return np.zeros(t.size, dtype=np.int64), 1
+    n = t.size
+    if n < 2:
+        return np.zeros(n, dtype=np.int64), 1
     d = np.diff(t)
     step = nominal_step(d)
     if d.min() == d.max():
-        return None, t.size
-    idx = np.rint((t - t[0]) / step).astype(np.int64)
-    # keep indices strictly increasing even for jittered sampling
-    idx = np.maximum.accumulate(np.maximum(idx, np.arange(idx.size)))
-    return idx, int(idx[-1]) + 1
+        return None, n
+    # grid steps between consecutive samples (>= 1 even for jittered sampling)
+    k = np.maximum(np.rint((t - t[0]) / step).astype(np.int64), np.arange(n))
+    k = np.maximum.accumulate(k)
+    steps = np.diff(k)
+    limit = MAX_GRID_FACTOR * n
+    if int(k[-1]) + 1 > limit:
+        # the largest cap c with sum(min(steps, c)) + 1 <= limit (rare path: bisect)
+        lo, hi = 1, int(steps.max())  # c = 1 fits: n <= limit
+        while lo < hi:
+            mid = (lo + hi + 1) // 2
+            if int(np.minimum(steps, mid).sum()) + 1 <= limit:
+                lo = mid
+            else:
+                hi = mid - 1
+        cap = lo
+        steps = np.minimum(steps, max(cap, 1))
+        k = np.concatenate(([0], np.cumsum(steps)))
+    return k, int(k[-1]) + 1
 
 
 def _on_grid(rows: NDArray[np.float64], idx: NDArray[np.int64] | None, ngrid: int) -> NDArray:

@@ -168,6 +168,20 @@ def one_line(text: str, limit: int = 200) -> str:
     return text[:limit]
 
 
+def string_at(arr: Any, i: int) -> str:
+    """Value ``i`` of an Arrow string array, undecodable bytes replaced (for messages).
+
+    The L1B parse skips pyarrow's UTF-8 check, so a damaged id or flag may not be
+    valid UTF-8 and ``arr[i].as_py()`` would raise.
+    """
+    import pyarrow as pa
+
+    if isinstance(arr, pa.ChunkedArray):
+        arr = arr.combine_chunks()
+    value = arr.cast(pa.binary())[i].as_py()
+    return "" if value is None else value.decode("utf-8", "replace")
+
+
 def csv_read_options(**kwargs: Any) -> Any:
     """``pyarrow.csv.ReadOptions`` for every CSV parse of accal: single-threaded.
 
@@ -324,7 +338,7 @@ def bits_from_strings(
     if bad.size:
         i = int(bad[0])
         raise FormatError(
-            f"{name}: quality flag {_short(arr[i].as_py())} is not {width} characters of 0/1",
+            f"{name}: quality flag {_short(string_at(arr, i))} is not {width} characters of 0/1",
             path,
             where(i),
         )
@@ -335,7 +349,7 @@ def bits_from_strings(
     if not np.all(ones | (chars == ord("0"))):
         i = int(np.flatnonzero(~(ones | (chars == ord("0"))).all(axis=1))[0])
         raise FormatError(
-            f"{name}: quality flag {_short(arr[i].as_py())} is not {width} characters of 0/1",
+            f"{name}: quality flag {_short(string_at(arr, i))} is not {width} characters of 0/1",
             path,
             where(i),
         )

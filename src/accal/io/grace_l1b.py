@@ -33,6 +33,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from accal.errors import FormatError, UnsupportedFormatError, ValidationError, check_option
 from accal.io._common import (
@@ -47,11 +48,12 @@ from accal.io._common import (
     peek,
     read_bytes,
     row_to_line,
+    string_at,
     tidy,
 )
 from accal.io.writers import atomic_path
 from accal.series import UNITS, AccSeries, ReadReport
-from accal.timescale import gps_to_gps_calendar
+from accal.timescale import gps_to_date, gps_to_gps_calendar
 
 #: Data columns of ACC1B / ACT1B, in file order (GRACE-FO names the id ``GRACEFO_id``).
 COLUMNS = (
@@ -595,7 +597,7 @@ def _check_ids(
         i = int(np.flatnonzero(~ok)[0])
         where = f"record {i + 1}: " if line_of is None else ""
         raise FormatError(
-            f"{where}satellite id {_short(ids[i].as_py(), 10)} is not one of A, B, C, D",
+            f"{where}satellite id {_short(string_at(ids, i), 10)} is not one of A, B, C, D",
             path,
             None if line_of is None else line_of(i),
         )
@@ -605,6 +607,60 @@ def _check_ids(
     if uniq and uniq[0] != letter:
         return [f"records carry satellite id {uniq[0]!r} but the header names {letter!r}"]
     return []
+
+
+#: How far a record may lie outside the header's first/last observation time [s].
+HEADER_SPAN_TOLERANCE = 3600.0
+
+
+def _header_span(meta: dict[str, Any]) -> tuple[float, float] | None:
+    """(first, last) observation time the header announces [s GPS], or None."""
+    try:
+        if "grace" in meta:
+            hdr = meta["grace"]
+            first, last = (
+                float(str(hdr[f"TIME {k} OBS(SEC PAST EPOCH)"]).split()[0])
+                for k in ("FIRST", "LAST")
+            )
+        else:
+            nsa = meta["gracefo"].get("non-standard_attributes") or {}
+            first = float(nsa["start_time_epoch_secs"])
+            last = float(nsa["stop_time_epoch_secs"])
+    except (KeyError, IndexError, TypeError, ValueError, AttributeError):
+        return None
+    if not (np.isfinite(first) and np.isfinite(last)) or last < first:
+        return None
+    return first, last
+
+
+def _check_header_span(
+    time: NDArray[np.float64],
+    meta: dict[str, Any],
+    path: Path,
+    line_of: Callable[[int], int] | None,
+) -> None:
+    """Raise FormatError for a record far outside the header's first/last observation.
+
+    A day file whose header says 2003-09-14 00:00–23:59:59 cannot hold a record of
+    2004: such a record is damage (a corrupted time stamp), and fitting through it
+    would put a ~year-long gap into the day.  Tolerance:
+    :data:`HEADER_SPAN_TOLERANCE`.  Headers without the times are not checked.
+    """
+    span = _header_span(meta)
+    if span is None or time.size == 0:
+        return
+    lo, hi = span[0] - HEADER_SPAN_TOLERANCE, span[1] + HEADER_SPAN_TOLERANCE
+    if time.min() >= lo and time.max() <= hi:
+        return
+    i = int(np.flatnonzero((time < lo) | (time > hi))[0])
+    where = f"record {i + 1}: " if line_of is None else ""
+    raise FormatError(
+        f"{where}gps_time {time[i]:.9g} s ({gps_to_date(float(time[i]))}) is outside the "
+        f"header's first/last observation {span[0]:.9g} ... {span[1]:.9g} s "
+        f"(by more than {HEADER_SPAN_TOLERANCE:g} s)",
+        path,
+        None if line_of is None else line_of(i),
+    )
 
 
 # --------------------------------------------------------------------------- read
@@ -663,6 +719,7 @@ def read_grace_acc1b(path: str | Path, *, invalid_bits: int = DEFAULT_INVALID_BI
     cols = _parse_binary(data, path) if info["binary"] else _parse_ascii(data, first_line, path)
     warn = _check_ids(cols["GRACE_id"], info["letter"], path, cols["line_of"])
     time = cols["gps_time"]
+    _check_header_span(time, info["meta"], path, cols["line_of"])
     acc = np.column_stack([cols["lin_accl_x"], cols["lin_accl_y"], cols["lin_accl_z"]])
     arrays = {"acc": acc, "quality": cols["qualflg"], **{c: cols[c] for c in AUX_COLUMNS}}
     t = tidy(time, arrays)
