@@ -402,3 +402,60 @@ def test_file_system_errors_of_any_command_are_one_line(tmp_path):
     code, _, err = invoke("demod", run, "--tau", "600", "--mask", "200", "--out", blocker / "sub")
     assert code == 2
     assert err.strip() == f"accal: {blocker / 'sub'}: Not a directory"
+
+
+def test_an_input_taking_over_outputs_displaces_the_earlier_one(tmp_path):
+    """Across runs: the same name from another directory (different data), or x.dat after
+    x.asc, replaces the earlier input's outputs, record and rows; re-running the earlier
+    input then redoes it instead of calling stale outputs current."""
+    e1, e2, out = tmp_path / "e1", tmp_path / "e2", tmp_path / "out"
+    for d, src in ((e1, GRACE_A), (e2, GRACE_B)):
+        d.mkdir()
+        (d / "ACC1B_2003-09-14_X_00.asc").write_bytes(src.read_bytes())
+
+    def bias_y():
+        df = table(out)
+        return df[(df.axis == "y")]["bias"].tolist()
+
+    assert invoke("grace-bias", e1 / "ACC1B_2003-09-14_X_00.asc", "--out", out, "-q")[0] == 0
+    first = bias_y()
+    assert invoke("grace-bias", e2 / "ACC1B_2003-09-14_X_00.asc", "--out", out, "-q")[0] == 0
+    second = bias_y()
+    assert len(second) == 1 and second != first
+    code, _, err = invoke("grace-bias", e1 / "ACC1B_2003-09-14_X_00.asc", "--out", out)
+    assert code == 0 and "1 ok, 0 skipped" in err
+    assert bias_y() == first
+    manifest = json.loads((out / "manifest.json").read_text())["entries"]
+    assert list(manifest) == [str((e1 / "ACC1B_2003-09-14_X_00.asc").resolve())]
+    # x.asc, then x.dat of the same day: the .dat owns the outputs, the .asc rows go
+    out2 = tmp_path / "out2"
+    assert invoke("grace-bias", GRACE_A, "--out", out2, "-q")[0] == 0
+    assert invoke("grace-bias", GRACE_A.with_suffix(".dat"), "--out", out2, "-q")[0] == 0
+    assert set(table(out2)["source"]) == {GRACE_A.with_suffix(".dat").name}
+
+
+def test_a_missing_or_empty_input_claims_no_outputs(tmp_path):
+    """A missing X.asc, or an empty one, fails alone: the good X of the same day is done."""
+    empty = tmp_path / "e" / GRACE_A.name
+    empty.parent.mkdir()
+    empty.write_bytes(b"")
+    code, _, err = invoke(
+        "grace-bias", tmp_path / "nothere" / GRACE_A.name, empty, GRACE_A, "--out", tmp_path / "o"
+    )
+    assert code == 1 and "same outputs" not in err
+    assert "no such file" in err and "empty file" in err
+    assert set(table(tmp_path / "o")["source"]) == {GRACE_A.name}
+
+
+def test_diagnose_with_unwritable_outputs_is_one_clear_line(tmp_path, monkeypatch):
+    import accal.pipeline as pipeline
+
+    assert invoke("grace-bias", GRACE_A, "--out", tmp_path / "g", "-q")[0] == 0
+
+    def refuse(*args, **kwargs):
+        raise PermissionError(1, "Operation not permitted", str(tmp_path / "imm" / "x.png"))
+
+    monkeypatch.setattr(pipeline, "_plot_closure", refuse)
+    code, _, err = invoke("diagnose", tmp_path / "g", "--out", tmp_path / "imm")
+    assert code == 1 and "internal error" not in err
+    assert "cannot write outputs" in err and "Operation not permitted" in err

@@ -97,6 +97,12 @@ def failure_message(path: Path | str, exc: AccalError) -> str:
     return msg
 
 
+def write_error_message(path: Path | str, exc: OSError) -> str:
+    """One line for an output that could not be written (read-only or full disk, ...)."""
+    where = f" ({exc.filename})" if exc.filename else ""
+    return f"{path}: cannot write outputs{where}: {exc.strerror or exc}"
+
+
 def internal_error_message(path: Path | str, exc: BaseException) -> str:
     """One line for a bug (not bad input); with ``ACCAL_DEBUG`` set, the traceback."""
     msg = (
@@ -334,6 +340,16 @@ class Manifest:
             return False
         out = self.path.parent
         return all((out / name).exists() for name in e.get("outputs", ()))
+
+    def sharing_outputs(self, path: Path, outputs: Sequence[Path]) -> dict[str, dict[str, Any]]:
+        """Entries of *other* inputs that name any of ``outputs`` (which ``path`` now wrote)."""
+        names = {Path(o).name for o in outputs}
+        me = self.key(path)
+        return {
+            k: e
+            for k, e in self.entries.items()
+            if k != me and names.intersection(e.get("outputs", ()))
+        }
 
     def record(
         self,

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from accal import __version__
-from accal.batch import Outcome, failure_message, internal_error_message
+from accal.batch import Outcome, failure_message, internal_error_message, write_error_message
 from accal.errors import AccalError, ValidationError, check_option
 from accal.series import AccSeries
 
@@ -230,12 +230,13 @@ class RunSummary:
             if self.seconds > 0
             else "-"
         )
+        rss = f", peak RSS {self.peak_rss:.0f} MB per worker" if self.peak_rss > 0 else ""
         return (
             f"{command}: {self.n_ok} ok, {self.n_skipped} skipped (current), {self.n_failed} "
             f"failed, {self.n_not_run} not run; {self.n_samples:,} samples, "
             f"{self.n_bytes / 1e6:.1f} MB in {self.seconds:.2f} s ({rate}, {self.workers} "
-            f"worker{'s' if self.workers != 1 else ''}, peak RSS {self.peak_rss:.0f} MB per "
-            f"worker); table: {self.table_path}"
+            f"worker{'s' if self.workers != 1 else ''}{rss}); table: "
+            f"{self.table_path or '(none written)'}"
         )
 
 
@@ -813,11 +814,15 @@ def _read_bias_drift_arrow(path: Path):
     return pa.Table.from_arrays(cols, schema=schema)
 
 
-def merge_bias_drift(out_dir: Path, rows: list[dict[str, Any]], fmt: str) -> Path | None:
+def merge_bias_drift(
+    out_dir: Path, rows: list[dict[str, Any]], fmt: str, drop_sources: Iterable[str] = ()
+) -> Path | None:
     """Merge ``rows`` into ``out_dir/bias_drift.<fmt>`` atomically.
 
-    Rows of an existing table with the same (source, axis, method) are replaced;
-    all others are kept, so the table accumulates every input processed there.
+    Rows of an existing table with the same (source, axis, method) are replaced,
+    and every row of ``drop_sources`` is removed (inputs whose outputs a new input
+    took over); all others are kept, so the table accumulates every input
+    processed there.
     """
     import pyarrow as pa
 
@@ -832,11 +837,14 @@ def merge_bias_drift(out_dir: Path, rows: list[dict[str, Any]], fmt: str) -> Pat
         ],
         schema=schema,
     )
+    drop = set(drop_sources)
     if path.exists():
         old = _read_bias_drift_arrow(path)
-        if new.num_rows:
+        if new.num_rows or drop:
             replaced = set(_keys(new))
-            keep = np.array([k not in replaced for k in _keys(old)], dtype=bool)
+            keep = np.array(
+                [k not in replaced and k[0] not in drop for k in _keys(old)], dtype=bool
+            )
             old = _take(old, np.flatnonzero(keep))
         new = pa.concat_tables([old, new])
     elif not rows:
@@ -943,10 +951,7 @@ def process_one(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutcom
     except MemoryError:
         return FileOutcome(path, False, f"{path}: out of memory")
     except OSError as exc:  # writing the outputs (disk full, permissions, ...)
-        where = f" ({exc.filename})" if exc.filename else ""
-        return FileOutcome(
-            path, False, f"{path}: cannot write outputs{where}: {exc.strerror or exc}"
-        )
+        return FileOutcome(path, False, write_error_message(path, exc))
     except Exception as exc:  # a bug, not bad input: still keep the batch going
         return _internal_error(path, exc)
 
@@ -1050,7 +1055,9 @@ def run(
             owners: dict[str, Path] = {}
             for i, p in enumerate(paths):
                 stem = output_stem(p)
-                if owners.setdefault(stem, p) is not p:
+                # a missing or empty input fails without writing: it claims no outputs
+                claims = p.is_file() and _size(p) > 0
+                if claims and owners.setdefault(stem, p) is not p:
                     results[i] = FileOutcome(
                         p,
                         False,
@@ -1135,7 +1142,19 @@ def _commit(
         return None
     sync_files(p for o in outcomes if o.ok for p in o.outputs)
     rows = [r for o in outcomes if o.ok for r in o.rows]
-    table = merge_bias_drift(out_dir, rows, opts.fmt) if rows else None
+    # inputs of earlier runs whose outputs these took over (same name from another
+    # directory, x.dat after x.asc): their records and rows go, they are no longer here
+    displaced = {
+        k: e
+        for o in outcomes
+        if o.ok
+        for k, e in manifest.sharing_outputs(o.path, o.outputs).items()
+    }
+    new_sources = {o.path.name for o in outcomes if o.ok}
+    drop = {e.get("source") for e in displaced.values()} - new_sources - {None}
+    table = merge_bias_drift(out_dir, rows, opts.fmt, drop) if rows or drop else None
+    for k in displaced:
+        manifest.entries.pop(k, None)
     for o in outcomes:
         if o.ok:
             manifest.record(o.path, key, o.outputs, o.path.name, checksum=checksum)
@@ -1278,6 +1297,8 @@ def diagnose_dir(
             )
         except AccalError as exc:
             outcomes.append(FileOutcome(p, False, failure_message(p, exc)))
+        except OSError as exc:  # writing the plots (read-only or full output directory)
+            outcomes.append(FileOutcome(p, False, write_error_message(p, exc)))
         except Exception as exc:
             outcomes.append(_internal_error(p, exc))
     return outcomes
