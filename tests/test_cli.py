@@ -459,3 +459,23 @@ def test_diagnose_with_unwritable_outputs_is_one_clear_line(tmp_path, monkeypatc
     code, _, err = invoke("diagnose", tmp_path / "g", "--out", tmp_path / "imm")
     assert code == 1 and "internal error" not in err
     assert "cannot write outputs" in err and "Operation not permitted" in err
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["--date", "2005-13-01"],
+        ["--date", "abc"],
+        ["--date", ""],
+        ["--date", "1900-01-01"],
+        ["--flagged", "-1"],
+        ["--flagged", "2"],
+        ["--noise", "-1"],
+        ["--gaps", "-1"],
+        ["--duration", "0"],
+    ],
+)
+def test_simulate_grace_checks_its_options(tmp_path, args):
+    code, _, err = invoke("simulate", "grace", "--out", tmp_path / "s.asc", *args)
+    assert code == 2 and "Traceback" not in err and args[0] in err
+    assert not any(tmp_path.iterdir())

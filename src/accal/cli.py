@@ -519,6 +519,20 @@ def simulate_grace(
     from accal.errors import AccalError
     from accal.simulate.grace import write_simulated_grace
 
+    if not _is_date(date) or not "1980-01-06" <= date < "2100-01-01":
+        raise click.BadParameter(
+            f"expected a day YYYY-MM-DD in 1980-01-06 ... 2099-12-31, got {date!r}",
+            param_hint="--date",
+        )
+    for name, value, ok in (
+        ("--duration", duration, duration > 0),
+        ("--gaps", gaps, gaps >= 0),
+        ("--flagged", flagged, 0 <= flagged < 1),
+        ("--noise", noise, noise >= 0),
+    ):
+        if not (ok and np.isfinite(value)):
+            raise click.BadParameter(f"out of range: {value!r}", param_hint=name)
+
     try:
         truth_path = write_simulated_grace(
             out,
