@@ -140,7 +140,6 @@ BAD = {
     "degrees": ({"theta": lambda d: np.degrees(d["theta"])}, [], r"bad\.csv: theta reaches 180 > 2π: it looks like degrees"),
     "short": ({}, ["--tau", 1800, "--mask", 600], r"bad\.csv: run lasts 1200 s .* shorter than one modulation period"),
     "tau_not_integer": ({}, ["--tau", 60.5], r"bad\.csv: tau·fs = 60.5 is not an integer .* use tau = 60 s or 61 s"),
-    "mask_ge_tau": ({}, ["--mask", 60], r"bad\.csv: mask .* must be in \[0, tau\) s, got 60"),
     "nan": ({"m_y": _nan}, [], r"bad\.csv: m_y has 1 NaN/inf value\(s\), first at t = 10 s \(row 11\)"),
     "never_pi": ({"theta": lambda d: np.where(d["theta"] > 0, 1.0, 0.0)}, [], r"bad\.csv: theta never reaches π"),
     "no_usable_period": ({"theta": lambda d: np.pi * (d["time"] % 60) / 59}, [], r"bad\.csv: no period has enough unmasked samples"),

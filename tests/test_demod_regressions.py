@@ -213,3 +213,22 @@ def test_tau_not_matching_the_pattern_is_warned_not_hidden(run_csv, tmp_path):
     assert code == 0 and err.count("eq. 16 leakage up to") == 1
     code, _, err = invoke("demod", run_csv, "--tau", TAU, "--mask", MASK, "--out", tmp_path / "b")
     assert code == 0 and "leakage" not in err
+
+
+@pytest.mark.parametrize("mask", ["60", "70", "-1", "nan"])
+def test_bad_mask_is_a_usage_error(run_csv, tmp_path, mask):
+    code, _, err = invoke("demod", run_csv, "--tau", TAU, "--mask", mask, "--out", tmp_path)
+    assert code == 2 and "must be in [0, tau) s" in err and "Traceback" not in err
+
+
+def test_colliding_stems_are_a_usage_error_before_anything_runs(run_csv, tmp_path):
+    for d in ("a", "b"):
+        (tmp_path / d).mkdir()
+        (tmp_path / d / "run.csv").write_bytes(run_csv.read_bytes())
+    out = tmp_path / "out"
+    code, _, err = invoke(
+        "demod", tmp_path / "a" / "run.csv", tmp_path / "b" / "run.csv",
+        "--tau", TAU, "--mask", MASK, "--out", out,
+    )  # fmt: skip
+    assert code == 2 and "would both write run.summary.json" in err
+    assert not out.exists()

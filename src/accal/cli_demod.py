@@ -131,10 +131,10 @@ def demod(
     and OUT/summary.md with one RUN, OUT/<stem>.summary.json/.md with several.
     """
     from accal.errors import AccalError
-    from accal.pipeline_demod import DemodOptions, check_distinct_runs, run_demod
+    from accal.pipeline_demod import DemodOptions, output_paths, run_demod
 
     try:
-        check_distinct_runs(runs)
+        output_paths(runs, out, fmt)  # a run given twice, colliding stems: usage errors
         opts = DemodOptions(
             tau=tau,
             mask=mask,

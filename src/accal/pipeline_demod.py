@@ -152,6 +152,11 @@ class DemodOptions:
             )
         if not 0 < self.tau < np.inf:
             raise ValidationError(f"tau must be positive and finite, got {self.tau} s")
+        if not 0 <= self.mask < self.tau:
+            raise ValidationError(
+                f"mask (masking time TM) must be in [0, tau) s, got {self.mask} s "
+                f"for tau = {self.tau} s"
+            )
         if self.sinusoid_period is not None and not 0 < self.sinusoid_period < np.inf:
             raise ValidationError(
                 f"sinusoid period must be positive and finite, got {self.sinusoid_period} s"
