@@ -610,3 +610,13 @@ def test_undecodable_satellite_id_or_flag_is_a_clean_error(samples, tmp_path):
     bad = raw[: raw.rindex(b"00000000")] + b"0000\xff000\n"
     with pytest.raises(FormatError, match="quality flag"):
         read_grace_acc1b(_write(tmp_path, bad))
+
+
+def test_records_win_over_a_header_naming_another_satellite(samples, tmp_path):
+    """Header 'GRACE B', every record 'A': GRACE-A (the scale and day status follow), warned."""
+    raw = samples["grace_a"].read_bytes().replace(b"SATELLITE NAME                : GRACE A",
+                                                  b"SATELLITE NAME                : GRACE B")  # fmt: skip
+    s = read_grace_acc1b(_write(tmp_path, raw, "ACC1B_2003-09-14_A_00.asc"))
+    assert s.satellite == "GRACE-A"
+    assert any("records carry satellite id 'A' but the header names 'B'" in w
+               for w in s.report.warnings)  # fmt: skip

@@ -198,7 +198,7 @@ def csv_read_options(**kwargs: Any) -> Any:
     return pacsv.ReadOptions(use_threads=False, **kwargs)
 
 
-def _short(value: Any, n: int = 20) -> str:
+def _short(value: Any, n: int = 40) -> str:
     """``repr`` of a value cut to ``n`` characters, for error messages."""
     return repr(value[:n] if isinstance(value, str | bytes) else value)
 

@@ -565,10 +565,12 @@ _ID_LOOKUP[np.frombuffer("".join(SATELLITES).encode(), np.uint8)] = True
 
 def _check_ids(
     ids: Any, letter: str, path: Path, line_of: Callable[[int], int] | None
-) -> list[str]:
+) -> tuple[list[str], str]:
     """Check the satellite-id column (one character per record) without pyarrow.compute.
 
     ``line_of`` maps a row to its file line (ASCII); None numbers binary records.
+    Returns the warnings and the satellite letter to use: the records' when they
+    disagree with the header's ``letter`` (every record says it, the header once).
     """
     import pyarrow as pa
 
@@ -578,7 +580,7 @@ def _check_ids(
         ids = ids.combine_chunks()
     n = len(ids)
     if n == 0:
-        return []
+        return [], letter
     if pa.types.is_large_string(ids.type):
         ids = ids.cast(pa.string())
     _, off_buf, data_buf = ids.buffers()
@@ -605,8 +607,11 @@ def _check_ids(
     if len(uniq) > 1:
         raise FormatError(f"mixed satellite ids {uniq} in one file", path)
     if uniq and uniq[0] != letter:
-        return [f"records carry satellite id {uniq[0]!r} but the header names {letter!r}"]
-    return []
+        return [
+            f"records carry satellite id {uniq[0]!r} but the header names {letter!r}; "
+            f"the records' {uniq[0]!r} is used"
+        ], uniq[0]
+    return [], letter
 
 
 #: How far a record may lie outside the header's first/last observation time [s].
@@ -717,7 +722,7 @@ def read_grace_acc1b(path: str | Path, *, invalid_bits: int = DEFAULT_INVALID_BI
     info = (_interpret_gracefo if flavour == "gracefo" else _interpret_grace)(header, path)
     data = raw[data_start:]
     cols = _parse_binary(data, path) if info["binary"] else _parse_ascii(data, first_line, path)
-    warn = _check_ids(cols["GRACE_id"], info["letter"], path, cols["line_of"])
+    warn, letter = _check_ids(cols["GRACE_id"], info["letter"], path, cols["line_of"])
     time = cols["gps_time"]
     _check_header_span(time, info["meta"], path, cols["line_of"])
     acc = np.column_stack([cols["lin_accl_x"], cols["lin_accl_y"], cols["lin_accl_z"]])
@@ -747,7 +752,7 @@ def read_grace_acc1b(path: str | Path, *, invalid_bits: int = DEFAULT_INVALID_BI
         quality=quality,
         aux={c: t.arrays[c] for c in AUX_COLUMNS},
         frame="SRF",
-        satellite=SATELLITES[info["letter"]],
+        satellite=SATELLITES[letter],
         units=units,
         meta=info["meta"],
         report=report,
