@@ -479,3 +479,11 @@ def test_simulate_grace_checks_its_options(tmp_path, args):
     code, _, err = invoke("simulate", "grace", "--out", tmp_path / "s.asc", *args)
     assert code == 2 and "Traceback" not in err and args[0] in err
     assert not any(tmp_path.iterdir())
+
+
+def test_output_file_under_a_file_says_not_a_directory(tmp_path):
+    (tmp_path / "afile").write_text("x")
+    code, _, err = invoke(
+        "design", "--tau", "600", "--mask", "200", "--out", tmp_path / "afile" / "x.csv"
+    )
+    assert code == 2 and err.strip() == f"accal: {tmp_path / 'afile'}: Not a directory"

@@ -620,3 +620,14 @@ def test_records_win_over_a_header_naming_another_satellite(samples, tmp_path):
     assert s.satellite == "GRACE-A"
     assert any("records carry satellite id 'A' but the header names 'B'" in w
                for w in s.report.warnings)  # fmt: skip
+
+
+def test_header_saying_binary_over_text_records_says_so(samples, tmp_path):
+    raw = (
+        samples["grace_a"]
+        .read_bytes()
+        .replace(b"FILE FORMAT 0=BINARY 1=ASCII  : 1", b"FILE FORMAT 0=BINARY 1=ASCII  : 0")
+    )
+    with pytest.raises(FormatError, match=r"header says binary records \(FILE FORMAT 0\)"):
+        read_grace_acc1b(_write(tmp_path, raw))
+    assert len(read_grace_acc1b(samples["grace_a_bin"])) == 60  # real binary still read

@@ -538,6 +538,13 @@ def _parse_binary(data: bytes, path: Path) -> dict[str, Any]:
     if not data:
         raise FormatError("header but no data records", path)
     rest = len(data) % BINARY_DTYPE.itemsize
+    head = data[:256]
+    if head.isascii() and all(c in b"0123456789+-.eE ABCD\r\n\t" for c in head):
+        raise FormatError(
+            "the header says binary records (FILE FORMAT 0) but the data are text; "
+            "fix the header's FILE FORMAT line (1 = ASCII)",
+            path,
+        )
     if rest:
         raise FormatError(
             f"truncated binary record: {len(data)} bytes is not a multiple of "

@@ -8,6 +8,7 @@ complete, so a crash or an error never leaves a partial output file.
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import os
 import tempfile
@@ -34,7 +35,10 @@ def atomic_path(path: str | Path, *, sync: bool = True) -> Iterator[Path]:
     :func:`sync_files` before it records them.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:  # a component of the directory is a file
+        raise NotADirectoryError(errno.ENOTDIR, "Not a directory", str(path.parent)) from None
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     os.close(fd)
     tmp_path = Path(tmp)
