@@ -182,3 +182,25 @@ def test_close_loop_on_real_short_samples_runs_and_reports(tmp_path):
     for entry in closure.values():
         for ax in "xyz":
             assert entry[ax]["rms_after"] <= entry[ax]["rms_before"] * (1 + 1e-12)
+
+
+def test_close_loop_on_a_file_too_short_for_it_still_fits(tmp_path):
+    """10 records: the bias/drift fit is written with a warning instead of failing the file."""
+    from click.testing import CliRunner
+
+    from accal.cli import main
+
+    src = Path(__file__).resolve().parents[1] / "data" / "samples" / "ACC1B_2003-09-14_A_00.asc"
+    lines = src.read_bytes().splitlines(keepends=True)
+    end = next(i for i, ln in enumerate(lines) if ln.startswith(b"END OF HEADER")) + 1
+    tiny = tmp_path / "ACC1B_2003-09-14_A_00.asc"
+    tiny.write_bytes(b"".join(lines[: end + 10]))
+    res = CliRunner().invoke(
+        main, ["grace-bias", str(tiny), "--close-loop", "--out", str(tmp_path / "o")]
+    )
+    assert res.exit_code == 0, res.stderr
+    assert "too short to close the loop (10 usable samples" in res.stderr
+    from accal.pipeline import read_bias_drift
+
+    df = read_bias_drift(tmp_path / "o" / "bias_drift.parquet")
+    assert len(df) == 3 and set(df["model"]) == {"poly1"}

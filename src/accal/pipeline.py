@@ -411,13 +411,30 @@ def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutco
     stem = output_stem(path)
     closure: dict[str, Any] = {}
     extra_outputs: list[Path] = []
-    if opts.close_loop:
+    close_loop = opts.close_loop
+    n_use = int(np.count_nonzero(use))
+    if close_loop:
+        from accal.closure.select import MIN_SAMPLES as MIN_CLOSURE_SAMPLES
+    if close_loop and n_use < MIN_CLOSURE_SAMPLES:
+        close_loop = False  # the declared fit still stands; say why there is no closure
+        rep = series.report
+        series = series.replace(
+            report=dataclasses.replace(
+                rep,
+                warnings=(
+                    *rep.warnings,
+                    f"too short to close the loop ({n_use} usable samples, the residual "
+                    f"analysis needs {MIN_CLOSURE_SAMPLES}): fitted with poly{opts.order} only",
+                ),
+            )
+        )
+    if close_loop:
         fits_before = estimate(fit_series, opts)
         fit_series, closure, extra_outputs = close_the_loop(
             path, series, fit_series, use, opts, out_dir / stem
         )
     fits = estimate(fit_series, opts)
-    if opts.close_loop:
+    if close_loop:
         truth = load_truth(opts.truth, series, opts.reference is not None) if opts.truth else {}
         for ax, entry in closure.items():
             entry["summary"]["estimates"] = _before_after(fits_before, fits, ax, truth.get(ax))
@@ -425,7 +442,7 @@ def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutco
     for r in rows:
         r["model"] = closure.get(r["axis"], {}).get("model", f"poly{opts.order}")
     cal = calibrate(
-        series if not opts.close_loop else _with_effects_removed(series, closure),
+        series if not close_loop else _with_effects_removed(series, closure),
         fits,
         opts.methods[0],
         scale,

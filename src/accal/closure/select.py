@@ -61,6 +61,9 @@ from accal.closure.residual import (
 )
 from accal.errors import ValidationError, check_option
 
+#: Fewest usable samples :func:`close_loop` analyses.
+MIN_SAMPLES = 50
+
 __all__ = ["DEFAULT_CANDIDATES", "BaseCoefficient", "ClosureResult", "Effect", "close_loop"]
 
 DEFAULT_CANDIDATES = ("quadratic_drift", "cubic_drift", "bias_step", "periodic", "auxiliary")
@@ -544,8 +547,8 @@ def close_loop(
         if v.shape != t_all.shape:
             raise ValidationError(f"valid must have shape {t_all.shape}, got {v.shape}")
         use &= v
-    if use.sum() < 50:
-        raise ValidationError(f"need at least 50 usable samples, got {int(use.sum())}")
+    if use.sum() < MIN_SAMPLES:
+        raise ValidationError(f"need at least {MIN_SAMPLES} usable samples, got {int(use.sum())}")
     if not 0 < alpha < 1:
         raise ValidationError(f"alpha must be in (0, 1), got {alpha}")
     aux_all = {}
