@@ -586,6 +586,13 @@ def test_record_far_outside_the_header_span_is_damage(samples, tmp_path):
     with pytest.raises(FormatError, match=r"\(2004-10-18\) is outside the header's") as e:
         read_grace_acc1b(_write(tmp_path, "".join(head + late).encode()))
     assert e.value.line == len(head) + len(data)
+    wrong_header = "".join(head).replace(
+        "TIME FIRST OBS(SEC PAST EPOCH): 116769600", "TIME FIRST OBS(SEC PAST EPOCH): 216769600"
+    )
+    wrong_header = wrong_header.replace("TIME LAST OBS(SEC PAST EPOCH) : 116769659",
+                                        "TIME LAST OBS(SEC PAST EPOCH) : 216769659")  # fmt: skip
+    s = read_grace_acc1b(_write(tmp_path, (wrong_header + "".join(data)).encode()))
+    assert len(s) == 60 and any("does not cover any record" in w for w in s.report.warnings)
     near = data[:]  # within the tolerance (1 h): a small header/data disagreement is read
     near[-1] = near[-1].replace("116769659 ", f"{116769659 + 1800} ", 1)
     assert len(read_grace_acc1b(_write(tmp_path, "".join(head + near).encode()))) == 60

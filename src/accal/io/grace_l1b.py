@@ -650,21 +650,28 @@ def _check_header_span(
     meta: dict[str, Any],
     path: Path,
     line_of: Callable[[int], int] | None,
-) -> None:
+) -> list[str]:
     """Raise FormatError for a record far outside the header's first/last observation.
 
     A day file whose header says 2003-09-14 00:00–23:59:59 cannot hold a record of
     2004: such a record is damage (a corrupted time stamp), and fitting through it
     would put a ~year-long gap into the day.  Tolerance:
-    :data:`HEADER_SPAN_TOLERANCE`.  Headers without the times are not checked.
+    :data:`HEADER_SPAN_TOLERANCE`.  Headers without the times are not checked; a
+    header whose span covers no record at all is itself wrong: a warning (returned).
     """
     span = _header_span(meta)
     if span is None or time.size == 0:
-        return
+        return []
     lo, hi = span[0] - HEADER_SPAN_TOLERANCE, span[1] + HEADER_SPAN_TOLERANCE
     if time.min() >= lo and time.max() <= hi:
-        return
-    i = int(np.flatnonzero((time < lo) | (time > hi))[0])
+        return []
+    outside = (time < lo) | (time > hi)
+    if outside.all():  # the header, not a record, is off: nothing to single out
+        return [
+            f"the header's first/last observation {span[0]:.9g} ... {span[1]:.9g} s does not "
+            f"cover any record ({time.min():.9g} ... {time.max():.9g} s)"
+        ]
+    i = int(np.flatnonzero(outside)[0])
     where = f"record {i + 1}: " if line_of is None else ""
     raise FormatError(
         f"{where}gps_time {time[i]:.9g} s ({gps_to_date(float(time[i]))}) is outside the "
@@ -731,7 +738,7 @@ def read_grace_acc1b(path: str | Path, *, invalid_bits: int = DEFAULT_INVALID_BI
     cols = _parse_binary(data, path) if info["binary"] else _parse_ascii(data, first_line, path)
     warn, letter = _check_ids(cols["GRACE_id"], info["letter"], path, cols["line_of"])
     time = cols["gps_time"]
-    _check_header_span(time, info["meta"], path, cols["line_of"])
+    warn += _check_header_span(time, info["meta"], path, cols["line_of"])
     acc = np.column_stack([cols["lin_accl_x"], cols["lin_accl_y"], cols["lin_accl_z"]])
     arrays = {"acc": acc, "quality": cols["qualflg"], **{c: cols[c] for c in AUX_COLUMNS}}
     t = tidy(time, arrays)
