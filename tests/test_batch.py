@@ -371,3 +371,44 @@ def test_degraded_days_are_flagged_in_the_table(tmp_path):
     assert code == 0
     assert text.strip().splitlines()[1].split()[0] == "ACT1B_2023-06-01_C_04.txt"
     assert len(text.strip().splitlines()) == 2
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+def test_ctrl_c_stops_the_batch_at_once_and_keeps_what_finished(tmp_path):
+    """SIGINT to the process group (Ctrl-C) mid-batch with 2 workers: exit 130 at once,
+    the finished inputs are in the table and manifest, no temporaries; a re-run finishes."""
+    from accal.simulate.grace import write_simulated_grace
+
+    src = tmp_path / "in"
+    for k in range(6):
+        write_simulated_grace(
+            src / f"ACC1B_2005-01-0{k + 1}_A_02.asc", date=f"2005-01-0{k + 1}", satellite="A",
+            duration=21600.0,
+        )  # fmt: skip
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "accal", "grace-bias", str(src), "-r", "-j", "2", "--close-loop"]
+    proc = subprocess.Popen(
+        [*cmd, "--out", str(out), "-q"],
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+    log = out / "accal.log"
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and proc.poll() is None:
+        if log.exists() and " ok " in log.read_text():
+            break
+        time.sleep(0.05)
+    assert proc.poll() is None, "the batch finished before it could be interrupted"
+    os.killpg(proc.pid, signal.SIGINT)
+    t0 = time.monotonic()
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130 and time.monotonic() - t0 < 10
+    assert "interrupted:" in err and "Traceback" not in err
+    done = {r.split()[-3].rstrip(":") for r in log.read_text().splitlines() if " ok " in r}
+    df = pd.read_parquet(out / "bias_drift.parquet")
+    assert {Path(p).name for p in done} == set(df["source"]) and len(done) < 6
+    assert not [p for p in out.iterdir() if p.name.endswith(".tmp")]
+    rerun = subprocess.run([*cmd, "--out", str(out), "-q"], capture_output=True, text=True)
+    assert rerun.returncode == 0, rerun.stderr
+    assert len(pd.read_parquet(out / "bias_drift.parquet")) == 6 * 3

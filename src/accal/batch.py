@@ -67,6 +67,18 @@ class LockedError(AccalError):
     """The output directory is being written by another accal run."""
 
 
+class Interrupted(Exception):  # noqa: N818 - a state, not a failure of the input
+    """A batch stopped by Ctrl-C (SIGINT) after committing the inputs that finished.
+
+    ``summary`` is the run's summary at that point (inputs never started count as
+    not run); a re-run finishes the batch.
+    """
+
+    def __init__(self, summary: Any) -> None:
+        super().__init__("interrupted")
+        self.summary = summary
+
+
 @dataclass(frozen=True)
 class Outcome:
     """What happened to one input of a batch (the part every command shares).
@@ -470,12 +482,23 @@ def execute(
         max_workers=min(workers, len(paths)), mp_context=ctx, initializer=_worker_init
     ) as pool:
         futures = {pool.submit(task, p): i for i, p in enumerate(paths)}
-        for fut in as_completed(futures):
-            i = futures[fut]
-            try:
-                yield i, fut.result()
-            except Exception as exc:  # BrokenProcessPool, pickling errors, bugs
-                yield i, on_error(paths[i], exc)
+        try:
+            for fut in as_completed(futures):
+                i = futures[fut]
+                try:
+                    yield i, fut.result()
+                except Exception as exc:  # BrokenProcessPool, pickling errors, bugs
+                    yield i, on_error(paths[i], exc)
+        except (KeyboardInterrupt, GeneratorExit):
+            # Ctrl-C (or the caller stopped): drop the queued inputs and stop the
+            # workers now; otherwise the pool's exit waits for every queued input
+            procs = list((getattr(pool, "_processes", None) or {}).values())
+            pool.shutdown(wait=False, cancel_futures=True)
+            for proc in procs:
+                proc.terminate()
+            for proc in procs:
+                proc.join(timeout=10)
+            raise
 
 
 #: Modules the worker fork server imports before forking workers.

@@ -196,7 +196,7 @@ def grace_bias(
     OUT/accal.log.  With --close-loop also OUT/closure.json, OUT/closure.md and
     plots.
     """
-    from accal.batch import DEFAULT_INCLUDE, LockedError, default_workers, discover
+    from accal.batch import DEFAULT_INCLUDE, Interrupted, LockedError, default_workers, discover
     from accal.errors import AccalError
     from accal.pipeline import GraceBiasOptions, run, write_closure_reports
 
@@ -244,6 +244,13 @@ def grace_bias(
     except (LockedError, AccalError) as exc:
         _err(str(exc))
         sys.exit(1)
+    except Interrupted as exc:
+        done = exc.summary
+        _err(
+            f"interrupted: {done.n_ok} ok, {done.n_failed} failed, {done.n_not_run} not run "
+            f"(kept in {out}; run the same command again to finish)"
+        )
+        sys.exit(130)
     except OSError as exc:  # the output directory cannot be made or written
         _err(f"{exc.filename or out}: cannot write the output directory: {exc.strerror or exc}")
         sys.exit(2)

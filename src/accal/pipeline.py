@@ -14,7 +14,7 @@ import json
 import os
 import sys
 import time as _time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -792,7 +792,29 @@ def _bias_drift_schema():
 
 
 def _read_bias_drift_arrow(path: Path):
-    """Read a ``bias_drift`` table as a pyarrow Table in the current schema."""
+    """Read a ``bias_drift`` table as a pyarrow Table in the current schema.
+
+    Raises
+    ------
+    FormatError
+        The table is damaged (truncated, ragged, a value of the wrong type).
+    """
+    import pyarrow as pa
+
+    from accal.errors import FormatError
+    from accal.io._common import one_line
+
+    try:
+        return _read_bias_drift_unchecked(path)
+    except (pa.ArrowException, ValueError, KeyError, TypeError) as exc:
+        raise FormatError(
+            f"damaged bias_drift table ({one_line(str(exc), 120)}); move it away and re-run "
+            "with --force to rebuild it",
+            path,
+        ) from None
+
+
+def _read_bias_drift_unchecked(path: Path):
     import pyarrow as pa
 
     schema = _bias_drift_schema()
@@ -1042,7 +1064,14 @@ def run(
     """
     import functools
 
-    from accal.batch import Manifest, OutputLock, RunLog, execute, remove_stale_temporaries
+    from accal.batch import (
+        Interrupted,
+        Manifest,
+        OutputLock,
+        RunLog,
+        execute,
+        remove_stale_temporaries,
+    )
 
     start = _time.perf_counter()
     out_dir = Path(out_dir)
@@ -1090,6 +1119,8 @@ def run(
             task = functools.partial(process_one, out_dir=out_dir, opts=opts)
             pending: list[FileOutcome] = []
             table_path = _table_if_exists(out_dir, opts.fmt)
+            if table_path is not None and todo:
+                _read_bias_drift_arrow(table_path)  # a damaged table: say so before the work
             last = _time.monotonic()
             done = execute(
                 task,
@@ -1100,23 +1131,27 @@ def run(
             )
             if progress is not None:
                 done = progress(done, total=len(todo))
-            for j, outcome in done:
-                results[todo[j]] = outcome
-                pending.append(outcome)
-                rlog(
-                    f"ok {outcome.path}: {outcome.n_samples} samples"
-                    if outcome.ok
-                    else f"FAILED {outcome.message}"
-                )
-                for w in outcome.warnings:
-                    rlog(f"warning {outcome.path}: {w}")
-                if fail_fast and not outcome.ok:
-                    break
-                if _time.monotonic() - last > commit_seconds:
-                    table_path = (
-                        _commit(out_dir, opts, manifest, key, pending, checksum) or table_path
+            interrupted = False
+            try:
+                for j, outcome in _outcomes(done):
+                    results[todo[j]] = outcome
+                    pending.append(outcome)
+                    rlog(
+                        f"ok {outcome.path}: {outcome.n_samples} samples"
+                        if outcome.ok
+                        else f"FAILED {outcome.message}"
                     )
-                    pending, last = [], _time.monotonic()
+                    for w in outcome.warnings:
+                        rlog(f"warning {outcome.path}: {w}")
+                    if fail_fast and not outcome.ok:
+                        break
+                    if _time.monotonic() - last > commit_seconds:
+                        table_path = (
+                            _commit(out_dir, opts, manifest, key, pending, checksum) or table_path
+                        )
+                        pending, last = [], _time.monotonic()
+            except KeyboardInterrupt:
+                interrupted = True  # keep what finished: commit it below
             table_path = _commit(out_dir, opts, manifest, key, pending, checksum) or table_path
             outcomes = [results[i] for i in sorted(results)]
             summary = RunSummary(
@@ -1128,9 +1163,24 @@ def run(
                 workers=max(1, min(workers, len(todo))) if scheduler is None else workers,
             )
             rlog(summary.line())
+            if interrupted:
+                remove_stale_temporaries(out_dir)  # of the workers stopped mid-write
+                rlog("interrupted (Ctrl-C): finished inputs kept; a re-run does the rest")
+                raise Interrupted(summary)
             return summary
         finally:
             rlog.close()
+
+
+def _outcomes(done: Iterable[tuple[int, Any]]) -> Iterator[tuple[int, Any]]:
+    """``done``, closed on the way out (a Ctrl-C stops the worker pool at once)."""
+    it = iter(done)
+    try:
+        yield from it
+    finally:
+        close = getattr(it, "close", None)
+        if close is not None:
+            close()
 
 
 def _table_if_exists(out_dir: Path, fmt: str) -> Path | None:
