@@ -204,3 +204,37 @@ def test_close_loop_on_a_file_too_short_for_it_still_fits(tmp_path):
 
     df = read_bias_drift(tmp_path / "o" / "bias_drift.parquet")
     assert len(df) == 3 and set(df["model"]) == {"poly1"}
+
+
+def test_aux_and_truth_must_describe_the_same_data(tmp_path):
+    """--aux of another day, or --truth of another satellite/day: one line, not silence."""
+    samples = Path(__file__).resolve().parents[1] / "data" / "samples"
+    acc = samples / "ACC1B_2003-09-14_A_00.asc"
+    res = CliRunner().invoke(
+        main,
+        ["grace-bias", str(acc), "--close-loop", "--aux", str(samples / "AHK1B_2023-06-01_C_04.txt"),
+         "--out", str(tmp_path / "a"), "-q"],
+    )  # fmt: skip
+    assert res.exit_code == 1 and "--aux covers 0% of the data" in res.stderr
+    ok = CliRunner().invoke(
+        main,
+        ["grace-bias", str(acc), "--close-loop", "--aux", str(samples / "AHK1B_2003-09-14_A_00.asc"),
+         "--out", str(tmp_path / "b"), "-q"],
+    )  # fmt: skip
+    assert ok.exit_code == 0, ok.stderr
+    sim = tmp_path / "ACC1B_2005-01-01_B_02.asc"
+    assert CliRunner().invoke(
+        main, ["simulate", "grace", "--date", "2005-01-01", "--satellite", "B", "--duration",
+               "3600", "--out", str(sim)],
+    ).exit_code == 0  # fmt: skip
+    truth = json.loads(sim.with_name(sim.name + ".truth.json").read_text())
+    for change, why in (
+        ({"satellite": "A"}, "truth of satellite A"),
+        ({"t0": 1e8}, "does not describe"),
+    ):
+        bad = tmp_path / "bad.truth.json"
+        bad.write_text(json.dumps({**truth, **change}))
+        res = CliRunner().invoke(
+            main, ["grace-bias", str(sim), "--truth", str(bad), "--out", str(tmp_path / "t"), "-q"]
+        )
+        assert res.exit_code == 1 and why in res.stderr

@@ -549,15 +549,25 @@ def load_aux(path: Path, t: np.ndarray) -> dict[str, np.ndarray]:
 
     hk = read_housekeeping(path)
     out = {}
+    coverage = 0.0
     for k, v in hk.on(t).items():
         v = np.asarray(v, dtype=np.float64)
         ok = np.isfinite(v)
+        coverage = max(coverage, float(ok.mean()))
         # a channel must cover the day and vary to be a candidate regressor
         if ok.mean() < 0.9 or np.ptp(v[ok]) == 0:
             continue
         if not ok.all():  # short holes: bridge linearly (the closure needs finite regressors)
             v[~ok] = np.interp(t[~ok], t[ok], v[ok])
         out[k] = v
+    if coverage < 0.9:
+        from accal.timescale import gps_to_date
+
+        raise ValidationError(
+            f"{path}: --aux covers {coverage:.0%} of the data "
+            f"({gps_to_date(float(t[0]))} ... {gps_to_date(float(t[-1]))}, GPS days); "
+            "give the housekeeping of the same day(s)"
+        )
     return out
 
 
@@ -569,6 +579,17 @@ def load_truth(path: Path, series: AccSeries, reference: bool) -> dict[str, dict
     """
     try:
         truth = json.loads(Path(path).read_text())
+        sat = str(truth.get("satellite", ""))
+        if sat and series.satellite and series.satellite[-1:] != sat[-1:]:
+            raise ValidationError(
+                f"{path}: truth of satellite {sat}, the data are {series.satellite}"
+            )
+        t0 = float(truth["t0"])
+        if len(series) and not series.time[0] - 86400 <= t0 <= series.time[-1]:
+            raise ValidationError(
+                f"{path}: truth of {truth.get('date', t0)} does not describe data starting "
+                f"at {series.time[0]:.9g} s"
+            )
         out = {}
         for i, ax in enumerate("xyz"):
             if ax not in series.axes:
@@ -581,6 +602,8 @@ def load_truth(path: Path, series: AccSeries, reference: bool) -> dict[str, dict
             # the truth refers to its own t0; move the bias to the series' first used sample
             out[ax] = {"bias": b, "drift": d, "t0": float(truth["t0"])}
         return out
+    except ValidationError:
+        raise
     except (OSError, ValueError, KeyError, IndexError, TypeError) as exc:
         raise ValidationError(f"{path}: not a readable truth file ({exc})") from None
 
