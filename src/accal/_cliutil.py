@@ -122,5 +122,6 @@ def aux_option(f: Any) -> Any:
         "--aux",
         type=click.Path(dir_okay=False, path_type=Path),
         default=None,
-        help="Housekeeping (AHK1B or a table with 'time'): candidate channels for --close-loop.",
+        help="Housekeeping (AHK1B or a table with 'time') of the same day(s): candidate "
+        "channels for --close-loop (implied in grace-bias).",
     )(f)

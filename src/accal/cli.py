@@ -145,7 +145,7 @@ def main(debug: bool) -> None:
     "--truth",
     type=click.Path(dir_okay=False, path_type=Path),
     default=None,
-    help="Truth JSON of a simulation: --close-loop reports the true error before/after.",
+    help="Truth JSON of a simulation: --close-loop (implied) reports the true error before/after.",
 )
 @alpha_option
 @click.option(
