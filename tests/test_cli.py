@@ -487,3 +487,14 @@ def test_output_file_under_a_file_says_not_a_directory(tmp_path):
         "design", "--tau", "600", "--mask", "200", "--out", tmp_path / "afile" / "x.csv"
     )
     assert code == 2 and err.strip() == f"accal: {tmp_path / 'afile'}: Not a directory"
+
+
+@pytest.mark.parametrize(
+    "text", ['[[period]]\nsatellite = "GRACE-B"\nstart = "2016-09-01"\nstatus = "weird"\n', "x [["]
+)
+def test_malformed_degraded_days_table_is_a_usage_error(tmp_path, text):
+    table_file = tmp_path / "dd.toml"
+    table_file.write_text(text)
+    out = tmp_path / "out"
+    code, _, err = invoke("grace-bias", GRACE_A, "--degraded-days", table_file, "--out", out)
+    assert code == 2 and "dd.toml" in err and not out.exists()

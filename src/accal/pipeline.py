@@ -138,6 +138,10 @@ class GraceBiasOptions:
             from accal.calibration import parse_scale
 
             parse_scale(self.scale, "")  # a numeric --scale is checked once, up front
+        if self.degraded_days is not None:
+            from accal.degraded import load_periods
+
+            load_periods(self.degraded_days)  # a malformed table: a usage error, up front
 
 
 @dataclass(frozen=True)
