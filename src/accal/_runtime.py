@@ -21,8 +21,10 @@ Neither setting changes any result.  A value the user set in the environment
 from __future__ import annotations
 
 import ctypes
+import functools
 import os
 import sys
+from typing import Any
 
 #: Thread-count variables of the BLAS / OpenMP runtimes numpy and scipy may load.
 THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
@@ -35,6 +37,17 @@ _MMAP_THRESHOLD = 32 << 20  # glibc's maximum on 64-bit
 _TRIM_THRESHOLD = 256 << 20
 _TOP_PAD = 16 << 20
 _ALLOCATOR_VARS = ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_", "MALLOC_TOP_PAD_")
+
+
+@functools.cache
+def libc() -> Any:
+    """glibc (``ctypes``, errno kept) on Linux, else None."""
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        return ctypes.CDLL("libc.so.6", use_errno=True)
+    except OSError:
+        return None
 
 
 def single_threaded_blas() -> None:
@@ -55,12 +68,10 @@ def tune_allocator() -> bool:
         True if the allocator was tuned (Linux with glibc, and no ``MALLOC_*_``
         variable set by the user); False otherwise (nothing changed).
     """
-    if not sys.platform.startswith("linux") or any(v in os.environ for v in _ALLOCATOR_VARS):
+    if any(v in os.environ for v in _ALLOCATOR_VARS):
         return False
-    try:
-        libc = ctypes.CDLL("libc.so.6")
-        mallopt = libc.mallopt
-    except (OSError, AttributeError):  # musl or another libc: leave it alone
+    mallopt = getattr(libc(), "mallopt", None)
+    if mallopt is None:  # not Linux/glibc: leave it alone
         return False
     mallopt.argtypes = (ctypes.c_int, ctypes.c_int)
     mallopt.restype = ctypes.c_int

@@ -14,7 +14,7 @@ import json
 import os
 import sys
 import time as _time
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -256,12 +256,14 @@ def output_stem(path: Path) -> str:
 
 def read_input(path: Path, opts: GraceBiasOptions) -> AccSeries:
     """Read one input with the registry (format sniffed unless forced)."""
-    from accal.io import detect_format, read
+    from accal.io import FORMATS, detect_format, read
 
-    fmt = opts.input_format or detect_format(path)
     kwargs: dict[str, Any] = {}
+    fmt = opts.input_format or detect_format(path)  # detect_format also checks the path
     if opts.columns and fmt == "table":  # --column maps table columns; L1B files have fixed ones
         kwargs["columns"] = dict(opts.columns)
+    if opts.input_format is None:  # sniffed and checked above: call the reader directly
+        return FORMATS[fmt][1](path, **kwargs)
     return read(path, format=fmt, **kwargs)
 
 
@@ -400,12 +402,7 @@ def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutco
     series = read_input(path, opts)
     if len(series) == 0:
         raise ValidationError("no data records")
-    mismatch = name_mismatch(path, series)
-    if mismatch:
-        rep = series.report
-        series = series.replace(
-            report=dataclasses.replace(rep, warnings=(*rep.warnings, *mismatch))
-        )
+    series = _with_warnings(series, *name_mismatch(path, series))
     fit_series = series
     if opts.reference is not None:
         ref = read_input(opts.reference, GraceBiasOptions(columns=opts.columns))
@@ -416,22 +413,17 @@ def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutco
     closure: dict[str, Any] = {}
     extra_outputs: list[Path] = []
     close_loop = opts.close_loop
-    n_use = int(np.count_nonzero(use))
     if close_loop:
-        from accal.closure.select import MIN_SAMPLES as MIN_CLOSURE_SAMPLES
-    if close_loop and n_use < MIN_CLOSURE_SAMPLES:
-        close_loop = False  # the declared fit still stands; say why there is no closure
-        rep = series.report
-        series = series.replace(
-            report=dataclasses.replace(
-                rep,
-                warnings=(
-                    *rep.warnings,
-                    f"too short to close the loop ({n_use} usable samples, the residual "
-                    f"analysis needs {MIN_CLOSURE_SAMPLES}): fitted with poly{opts.order} only",
-                ),
+        from accal.closure.select import MIN_SAMPLES
+
+        n_use = int(np.count_nonzero(use))
+        if n_use < MIN_SAMPLES:  # the declared fit still stands; say why there is no closure
+            close_loop = False
+            series = _with_warnings(
+                series,
+                f"too short to close the loop ({n_use} usable samples, the residual analysis "
+                f"needs {MIN_SAMPLES}): fitted with poly{opts.order} only",
             )
-        )
     if close_loop:
         fits_before = estimate(fit_series, opts)
         fit_series, closure, extra_outputs = close_the_loop(
@@ -490,6 +482,14 @@ def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutco
         closure={ax: c["summary"] for ax, c in closure.items()},
         warnings=tuple(report["read_report"]["warnings"]),
     )
+
+
+def _with_warnings(series: AccSeries, *warnings: str) -> AccSeries:
+    """``series`` with ``warnings`` appended to its read report (itself if none)."""
+    if not warnings:
+        return series
+    rep = series.report
+    return series.replace(report=dataclasses.replace(rep, warnings=(*rep.warnings, *warnings)))
 
 
 def name_mismatch(path: Path, series: AccSeries) -> list[str]:
@@ -1149,18 +1149,17 @@ def run(
             if table_path is not None and todo:
                 _read_bias_drift_arrow(table_path)  # a damaged table: say so before the work
             last = _time.monotonic()
-            done = execute(
+            gen = execute(
                 task,
                 [paths[i] for i in todo],
                 workers=workers,
                 scheduler=scheduler,
                 on_error=_internal_error,
             )
-            if progress is not None:
-                done = progress(done, total=len(todo))
+            done = gen if progress is None else progress(gen, total=len(todo))
             interrupted = False
             try:
-                for j, outcome in _outcomes(done):
+                for j, outcome in done:
                     results[todo[j]] = outcome
                     pending.append(outcome)
                     rlog(
@@ -1179,6 +1178,7 @@ def run(
                         pending, last = [], _time.monotonic()
             except KeyboardInterrupt:
                 interrupted = True  # keep what finished: commit it below
+                gen.close()  # stops the worker pool now if Ctrl-C came between results
             table_path = _commit(out_dir, opts, manifest, key, pending, checksum) or table_path
             outcomes = [results[i] for i in sorted(results)]
             summary = RunSummary(
@@ -1197,17 +1197,6 @@ def run(
             return summary
         finally:
             rlog.close()
-
-
-def _outcomes(done: Iterable[tuple[int, Any]]) -> Iterator[tuple[int, Any]]:
-    """``done``, closed on the way out (a Ctrl-C stops the worker pool at once)."""
-    it = iter(done)
-    try:
-        yield from it
-    finally:
-        close = getattr(it, "close", None)
-        if close is not None:
-            close()
 
 
 def _table_if_exists(out_dir: Path, fmt: str) -> Path | None:

@@ -8,6 +8,7 @@ complete, so a crash or an error never leaves a partial output file.
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import errno
 import json
 import os
@@ -101,17 +102,12 @@ def sync_files(paths: Iterable[str | Path]) -> None:
 
 def _libc_syncfs() -> Any:
     """``syncfs(2)`` from the C library, or None where it is not available."""
-    import ctypes
-    import sys
+    from accal._runtime import libc
 
-    if not sys.platform.startswith("linux"):
-        return None
-    try:
-        fn = ctypes.CDLL("libc.so.6", use_errno=True).syncfs
-    except (OSError, AttributeError):
-        return None
-    fn.argtypes = (ctypes.c_int,)
-    fn.restype = ctypes.c_int
+    fn = getattr(libc(), "syncfs", None)
+    if fn is not None:
+        fn.argtypes = (ctypes.c_int,)
+        fn.restype = ctypes.c_int
     return fn
 
 
