@@ -199,3 +199,38 @@ def test_two_effects_with_orbit_candidate(sim):
     err = _err(res, d)
     # measured: drift error 7.6e-14 -> 1.5e-16 (the coupling's mean stays in the bias)
     assert abs(err["drift"]["after"]) < 0.05 * abs(err["drift"]["before"])
+
+
+def test_lines_off_the_orbit_found_beside_its_harmonics():
+    """Two 5e-9 m/s² lines (1000 s, 4000 s) on a simulated half day's z axis.
+
+    The simulated signal carries the orbit's harmonics (solar pressure switched off in
+    eclipse: a square wave), several of them larger than 1e-9 m/s².  Ranked by the ratio
+    to a binned PSD, a strong low-frequency line could never beat a sharp noise-free line
+    where the floor is low (its own power raised its bin), and one line at a time the
+    orbit harmonics used up the effect budget: both injected lines were missed.  Now the
+    harmonics are one ``orbit`` effect and the lines are ranked by power.
+    """
+    from accal.simulate.grace import simulate_grace_day
+
+    sim = simulate_grace_day(date="2005-03-01", satellite="A", seed=3, duration=43200.0)
+    t = sim.time
+    tau = t - t[0]
+    lines = {1 / 1000: (5e-9, 0.3), 1 / 4000: (5e-9, 2.0)}  # frequency: (amplitude, phase)
+    z = sim.raw[:, 2] + sum(a * np.sin(2 * np.pi * f * tau + p) for f, (a, p) in lines.items())
+    res = close_loop(t, z, valid=sim.valid, orbit_period=ORBIT)
+    per = [e for e in res.effects if e.name == "periodic"]
+    orbit = [e for e in per if e.channel == "orbit"]
+    assert len(orbit) == 1 and len(orbit[0].details["harmonics"]) > 2
+    for f, (amp, _) in lines.items():
+        hit = [e for e in per if e.channel == "line" and abs(e.frequency - f) < 0.5 / 43200]
+        assert len(hit) == 1, [(e.channel, e.frequency) for e in per]
+        assert abs(hit[0].coefficient - amp) < 3 * hit[0].sigma + 0.01 * amp
+    # no line sits on an orbit harmonic the orbit effect covers
+    from accal.closure.candidates import ORBIT_HARMONICS
+
+    f_orb = orbit[0].frequency
+    for e in per:
+        if e.channel == "line":
+            n = round(e.frequency / f_orb)
+            assert not 0 < n <= ORBIT_HARMONICS or abs(e.frequency - n * f_orb) > 1.5 / 43200

@@ -865,6 +865,14 @@ class _Search:
             options=self.options,
             channel_all=self.chan_all,
             channel_names=self.names,
+            orbit_frequency=next(
+                (
+                    float(f.prop.params["frequency"])
+                    for f in found
+                    if f.prop.name == "periodic" and f.prop.channel == "orbit"
+                ),
+                None,
+            ),
         )
 
     def propose(self, ctx: Context, only: int | None = None) -> list[tuple[Proposal, int]]:
@@ -1038,7 +1046,7 @@ class _Search:
                 for p, _ in self.propose(ctx, only=cur.builder)
                 if p.name == cur.prop.name and p.channel == cur.prop.channel
             ]
-            if not alt or _key(alt[0]) == _key(cur.prop):
+            if not alt or _key(alt[0]) == _key(cur.prop) or self._other_line(cur.prop, alt[0]):
                 continue
             # move only on significant evidence (Wald statistics differ by > 4, ~2σ)
             w_cur = self.test(b_r, f_r, l_r, cur.prop.columns)
@@ -1055,6 +1063,20 @@ class _Search:
             )
             changed = True
         return changed
+
+    def _other_line(self, cur: Proposal, alt: Proposal) -> bool:
+        """Whether ``alt`` is another spectral line, not ``cur``'s frequency refined.
+
+        The line family has many members: re-searched given the others, a line's
+        slot would otherwise jump to a different (stronger-by-ratio) line and the
+        first one would be lost.  A refinement moves by at most two DFT bins.
+        """
+        if cur.name != "periodic" or cur.channel != "line":
+            return False
+        f0, f1 = cur.params.get("frequency"), alt.params.get("frequency")
+        if f0 is None or f1 is None:
+            return False
+        return abs(float(f1) - float(f0)) > 2.0 / (self.grid.size * self.grid.step)
 
     def _settle(self, protect_last: bool) -> None:
         """After an addition: refine the nonlinear parameters, then backward elimination."""
@@ -1171,7 +1193,9 @@ class _Search:
                     for p, _ in self.propose(ctx, only=newest.builder)
                     if p.name == newest.prop.name and p.channel == newest.prop.channel
                 ]
-                if not alt:
+                if not alt or _same_member(alt[0], self.found[i].prop, self.use):
+                    # re-searched without i, the family lands on i itself: i and the
+                    # newest are two distinct members (e.g. two spectral lines)
                     continue
                 cand = _Found(
                     _independent(b_r, alt[0], self.use), newest.p_adj, newest.info, newest.builder
@@ -1182,6 +1206,16 @@ class _Search:
                     changed = any_drop = True
                     break
         return any_drop
+
+
+def _same_member(a: Proposal, b: Proposal, use: NDArray[np.bool_], tol: float = 0.1) -> bool:
+    """Whether proposal ``a``'s columns lie (to ``tol`` in relative norm) in ``b``'s span."""
+    if a.name != b.name or a.channel != b.channel:
+        return False
+    za, zb = a.columns[use], b.columns[use]
+    coef, *_ = np.linalg.lstsq(zb, za, rcond=None)
+    left = np.linalg.norm(za - zb @ coef, axis=0)
+    return bool(np.all(left <= tol * np.maximum(np.linalg.norm(za, axis=0), 1e-300)))
 
 
 def _key(prop: Proposal) -> tuple:
