@@ -187,6 +187,10 @@ def test_rerun_skips_current_inputs_and_redoes_changed_ones(archive, tmp_path):
     code, _, err = invoke("grace-bias", src, "-r", "--out", out, "--checksum")
     assert "0 ok, 5 skipped" in err, err
 
+    # closure settings without --close-loop change nothing: still current
+    code, _, err = invoke("grace-bias", src, "-r", "--out", out, "--checksum", "--alpha", "0.05")
+    assert "0 ok, 5 skipped" in err, err
+
     # other options make the outputs out of date; --force redoes all
     code, _, err = invoke("grace-bias", src, "-r", "--out", out, "--order", "2")
     assert "5 ok, 0 skipped" in err, err
@@ -199,7 +203,7 @@ def test_rerun_skips_current_inputs_and_redoes_changed_ones(archive, tmp_path):
     assert "1 ok, 4 skipped" in err, err
 
     log = (out / "accal.log").read_text()
-    assert log.count(" start accal ") == 8
+    assert log.count(" start accal ") == 9
     assert "skip " in log and "accal grace-bias: 1 ok, 4 skipped" in log
 
 

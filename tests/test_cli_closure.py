@@ -116,7 +116,10 @@ def test_close_loop_finds_step_and_temperature_without_being_told(undeclared, tm
     from accal.pipeline import read_bias_drift
 
     df = read_bias_drift(tmp_path / "bias_drift.parquet").set_index("axis")
-    assert df.loc["z", "model"].startswith("poly1+bias_step@2005-01-01T")
+    # the step's epoch on the GPS calendar, like `date` (t0 = 2005-01-01T00:00:00 GPS)
+    epoch = int(np.floor(step["epoch"] - d["t0"]))
+    hms = f"{epoch // 3600:02d}:{epoch % 3600 // 60:02d}:{epoch % 60:02d}"
+    assert df.loc["z", "model"] == f"poly1+bias_step@2005-01-01T{hms}GPS"
     assert "auxiliary(temperature)" in df.loc["y", "model"]
     md = (tmp_path / "closure.md").read_text()
     assert "bias_step" in md and "auxiliary" in md
@@ -151,7 +154,7 @@ def test_diagnose_previous_run_reports_without_rewriting(undeclared, tmp_path):
     code, out, err = invoke("diagnose", tmp_path, "--aux", d["aux"])
     assert code == 0, err
     assert cal.stat().st_mtime_ns == before
-    closure = json.loads((tmp_path / "closure.json").read_text())["sources"]
+    closure = json.loads((tmp_path / "diagnose" / "closure.json").read_text())["sources"]
     entry = closure[d["day"].name]
     assert "bias_step" in effects(entry, "z")
     assert "auxiliary" in effects(entry, "y")

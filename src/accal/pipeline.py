@@ -535,11 +535,12 @@ def effect_models(result: Any) -> list[tuple[Any, np.ndarray]]:
 
 
 def _effect_label(e: Any) -> str:
-    from accal.timescale import gps_to_utc
+    from accal.timescale import gps_to_gps_calendar
 
     if e.name == "bias_step" and e.epoch is not None:
-        utc = np.datetime_as_string(gps_to_utc(e.epoch).astype("datetime64[s]"))
-        return f"bias_step@{utc}"
+        # the GPS calendar, like the table's `date` (GRACE days are GPS days)
+        gps = np.datetime_as_string(gps_to_gps_calendar(e.epoch).astype("datetime64[s]"))
+        return f"bias_step@{gps}GPS"
     if e.name == "auxiliary":
         return f"auxiliary({e.channel})"
     if e.name == "periodic" and e.frequency is not None:
@@ -982,13 +983,17 @@ def options_key(opts: GraceBiasOptions) -> dict[str, Any]:
     """The options as a canonical JSON-able dict (what the manifest compares).
 
     Files named in the options (reference, aux, truth) enter with their size and
-    mtime, so changing them makes the inputs out of date.
+    mtime, so changing them makes the inputs out of date.  Without ``close_loop``
+    its settings (``alpha``, ``orbit_period``) are left out: they change nothing.
     """
     from dataclasses import asdict
 
     from accal.batch import file_signature
 
     d = asdict(opts)
+    if not opts.close_loop:  # settings of the closure alone change nothing without it
+        for k in ("alpha", "orbit_period"):
+            d.pop(k)
     for k, v in list(d.items()):
         if isinstance(v, Path):
             try:
@@ -1252,7 +1257,7 @@ def write_closure_reports(out_dir: Path, outcomes: Sequence[FileOutcome]) -> tup
 
     Layout of ``closure.json``: ``{"accal_version": ..., "sources": {SOURCE: {AXIS:
     entry}}}`` where ``entry`` is :meth:`accal.closure.ClosureResult.to_dict` plus
-    ``model`` (the fitted model, e.g. ``poly1+bias_step@2005-01-01T10:00:00``) and
+    ``model`` (the fitted model, e.g. ``poly1+bias_step@2005-01-01T10:00:00GPS``, GPS calendar) and
     ``removed_from_calibrated`` (the effects subtracted from the calibrated series).
     Sources of earlier runs in the same directory are kept; a re-run replaces its
     own entries.
