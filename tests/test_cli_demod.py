@@ -536,7 +536,7 @@ def test_diagnose_demod_directory(undeclared_run, tmp_path):
     assert code == 0, err
     assert "bias_step" in text and "auxiliary" in text
     assert (out / "periods.parquet").read_bytes() == before  # diagnose reports only
-    closure = json.loads((out / "closure.json").read_text())["sources"]["run.parquet"]
+    closure = json.loads((out / "diagnose" / "closure.json").read_text())["sources"]["run.parquet"]
     assert any(
         abs(e["epoch"] - step_at) <= 60 for e in closure["effects"] if e["name"] == "bias_step"
     )

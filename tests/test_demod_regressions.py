@@ -97,17 +97,19 @@ def test_diagnose_finds_the_run_from_any_directory(run_csv, tmp_path, monkeypatc
     monkeypatch.chdir(elsewhere)
     code, text, err = invoke("diagnose", res, "-q")
     assert code == 0, err
-    assert set(json.loads((res / "closure.json").read_text())["sources"]) == {"run.csv"}
+    assert set(json.loads((res / "diagnose" / "closure.json").read_text())["sources"]) == {
+        "run.csv"
+    }
 
     # run and outputs moved together: found relative to the summary's directory
     moved = tmp_path / "moved"
     moved.mkdir()
     data.rename(moved / "data")
     res.rename(moved / "res")
-    (moved / "res" / "closure.json").unlink()
+    (moved / "res" / "diagnose" / "closure.json").unlink()
     code, _, err = invoke("diagnose", moved / "res", "-q")
     assert code == 0, err
-    assert (moved / "res" / "closure.json").exists()
+    assert (moved / "res" / "diagnose" / "closure.json").exists()
 
     # a summary of an older accal: only the path as typed, relative to its directory
     legacy = tmp_path / "legacy"
@@ -130,7 +132,7 @@ def test_diagnose_missing_run_is_one_line_and_writes_nothing(run_csv, tmp_path):
     lines = err.strip().splitlines()
     assert len(lines) == 1 and "run file of summary.json not found (moved?)" in lines[0], err
     assert str(run) in lines[0]
-    assert not (res / "closure.json").exists() and not (res / "closure.md").exists()
+    assert not (res / "diagnose").exists() and not (res / "closure.json").exists()
     code, _, err = invoke("diagnose", res)  # not quiet: no "reports:" line for nothing written
     assert code == 1 and "reports:" not in err
 
@@ -157,12 +159,14 @@ def test_close_loop_resamples_like_the_demodulation(run_csv, tmp_path, drop):
         assert rs["n_gaps"] == 1 and rs["n_gap"] == 10
     closure = json.loads((out / "closure.json").read_text())["sources"]["missing.csv"]
     assert closure["periods"]["n"] == summary["n_kept"]
-    # diagnose re-reads the run resampled the same way
-    (out / "closure.json").unlink()
+    # diagnose re-reads the run resampled the same way, into DIR/diagnose: the run's own
+    # closure report is kept
+    own = (out / "closure.json").read_bytes()
     code, _, err = invoke("diagnose", out, "-q")
     assert code == 0, err
-    again = json.loads((out / "closure.json").read_text())["sources"]["missing.csv"]
+    again = json.loads((out / "diagnose" / "closure.json").read_text())["sources"]["missing.csv"]
     assert again["periods"] == closure["periods"]
+    assert (out / "closure.json").read_bytes() == own
     assert [e["name"] for e in again["effects"]] == [e["name"] for e in closure["effects"]]
 
 

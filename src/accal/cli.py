@@ -400,7 +400,8 @@ def _is_date(s: str) -> bool:
     "out",
     type=click.Path(file_okay=False, path_type=Path),
     default=None,
-    help="Where closure.json/closure.md/plots go [default: DIRECTORY].",
+    help="Where closure.json/closure.md/plots go [default: DIRECTORY/diagnose, so a "
+    "--close-loop run's own reports are kept].",
 )
 @aux_option
 @alpha_option
@@ -422,7 +423,7 @@ def diagnose(
     """
     from accal.pipeline import diagnose_dir, write_closure_reports
 
-    out = out or directory
+    out = out or directory / "diagnose"
     if any(directory.glob("periods.*")):  # an accal demod output directory
         from accal.pipeline_demod import diagnose_demod_dir
 

@@ -1384,7 +1384,6 @@ def diagnose_demod_dir(
         one-line error message (empty on success).
     """
     directory, out_dir = Path(directory), Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
     results: list[tuple[Path, dict[str, Any] | None, str]] = []
     for sp in sorted(directory.glob("*summary.json")):
         try:
@@ -1408,6 +1407,7 @@ def diagnose_demod_dir(
                 alpha=alpha,
             )
             step = float(rs["step"]) if rs and "step" in rs else None
+            out_dir.mkdir(parents=True, exist_ok=True)  # not before a run is found
             entry, _, _ = close_run(src, opts, out_dir, step=step)
             write_demod_closure(out_dir, src.name, entry)
             results.append((src, entry, ""))
