@@ -535,7 +535,13 @@ def _execute_dask(
     try:
         client = Client(scheduler) if own else scheduler
     except (OSError, TimeoutError, ValueError) as exc:
-        raise AccalError(f"cannot connect to the dask scheduler {scheduler!r}: {exc}") from None
+        import dask
+
+        wait = dask.config.get("distributed.comm.timeouts.connect", default="?")
+        raise AccalError(
+            f"cannot connect to the dask scheduler {scheduler!r}: {exc} (waited up to {wait}; "
+            "DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT sets how long)"
+        ) from None
     try:
         futures = client.map(task, list(paths), pure=False)
         index = {f.key: i for i, f in enumerate(futures)}
