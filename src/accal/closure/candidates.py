@@ -105,6 +105,11 @@ class Context:
     orbit_frequency : float or None
         Frequency of the ``periodic``/``orbit`` effect already in the model [Hz]
         (its harmonics are then not searched as separate lines).
+    n_lines : int
+        Number of ``periodic``/``line`` effects already in the model.
+    cache : dict
+        Shared by the contexts of one selection: what builders compute from the
+        data alone (not the residual), e.g. filtered auxiliary channels.
     """
 
     t_all: NDArray[np.float64]
@@ -123,6 +128,8 @@ class Context:
     channel_all: NDArray[np.int64] | None = None
     channel_names: tuple[str, ...] = ()
     orbit_frequency: float | None = None
+    n_lines: int = 0
+    cache: dict[Any, Any] = field(default_factory=dict)
 
     @property
     def t(self) -> NDArray[np.float64]:
@@ -395,8 +402,11 @@ def _excluded(f: float, ctx: Context, width: float) -> bool:
     return any(abs(f - g) < width for g in ctx.excluded_freqs)
 
 
-ORBIT_HARMONICS = 20
+ORBIT_HARMONICS = 6
 """Highest once-per-revolution harmonic the ``orbit`` proposal may include."""
+
+MAX_LINES = 2
+"""Most ``line`` effects one selection adds (option ``max_lines``), strongest first."""
 
 
 def periodic(ctx: Context) -> list[Proposal]:
@@ -417,7 +427,10 @@ def periodic(ctx: Context) -> list[Proposal]:
       refined on a grid of ±1 DFT bin; the multiplicity ``M`` is the number of
       DFT frequencies searched.  Ranking by power and not by ratio: the sharpest
       line is often a tiny one where the noise floor is low (1e-10 m/s² at
-      0.02 Hz over white noise), and the budget would go to those first.
+      0.02 Hz over white noise), and the budget would go to those first.  At most
+      :data:`MAX_LINES` lines are added (option ``max_lines``): real signal has
+      lines everywhere (the eclipse switching of radiation pressure puts orbit
+      harmonics up to the 40th above 3e-10 m/s²), and each costs a selection step.
 
     With several data channels the search uses their summed periodograms and the
     amplitudes are per channel.
@@ -445,31 +458,23 @@ def periodic(ctx: Context) -> list[Proposal]:
         return any(rat[j] > level for j in ks)
 
     def orbit_harmonics(f: float, n_max: int) -> list[int]:
-        # harmonics 1 and 2 always; then, with the harmonics so far fitted out of the
-        # residual (their power and leakage raise the background of the others: on a
-        # simulated day the 3rd-8th stand 12-23x above it before, 20-86x after), every
-        # harmonic clearly above its background, at twice the Bonferroni level of the
-        # harmonics searched: three rounds at most
-        harm = [1, 2]
+        # harmonics 1 and 2 always; then, with those fitted out of the residual (their
+        # power and its leakage through the gaps raise the background of the others: on
+        # a simulated half day the 3rd-6th stand 6-23x above it before, 19-86x after),
+        # every harmonic clearly above its background, at twice the Bonferroni level of
+        # the harmonics searched
         top = min(fmax, freqs[-1])
         level = 2.0 * np.log(max(n_max, 1) / 0.01)
-        for _ in range(3):
-            x = _harmonic_cols(tau, [n * f for n in harm])
-            r2 = r.copy()
-            for m in masks:
-                coef, *_ = np.linalg.lstsq(x[m], r[m], rcond=None)
-                r2[m] -= x[m] @ coef
-            pg = np.mean(np.abs(ctx.grid.fft(r2)[0]) ** 2, axis=0)
-            rat = pg / np.maximum(_line_background(pg), 1e-300)
-            new = [
-                n
-                for n in range(3, n_max + 1)
-                if n not in harm and n * f <= top and clear_at(n * f, rat, level)
-            ]
-            if not new:
-                break
-            harm = sorted(harm + new)
-        return harm
+        x = _harmonic_cols(tau, [f, 2 * f])
+        r2 = r.copy()
+        for m in masks:
+            coef, *_ = np.linalg.lstsq(x[m], r[m], rcond=None)
+            r2[m] -= x[m] @ coef
+        pg = np.mean(np.abs(ctx.grid.fft(r2)[0]) ** 2, axis=0)
+        rat = pg / np.maximum(_line_background(pg), 1e-300)
+        return [1, 2] + [
+            n for n in range(3, n_max + 1) if n * f <= top and clear_at(n * f, rat, level)
+        ]
 
     n_max = int(ctx.options.get("orbit_harmonics", ORBIT_HARMONICS))
     if ctx.orbit_frequency is not None:
@@ -484,7 +489,7 @@ def periodic(ctx: Context) -> list[Proposal]:
             pw = _line_power(tau, r, trial, masks) + _line_power(tau, r, 2 * trial, masks)
             f = float(trial[int(np.argmax(pw))])
             harm = orbit_harmonics(f, n_max)
-            for n in range(1, n_max + 1):  # orbit harmonics belong to this family
+            for n in range(1, n_max + 1):  # these harmonics belong to the orbit effect
                 band &= np.abs(freqs - n * f) > 1.5 * df
             m = max(1.0, 0.06 * f0 * ctx.span)
             labs = tuple(lab for n in harm for lab in (f"cos@{n * f!r}", f"sin@{n * f!r}"))
@@ -501,7 +506,7 @@ def periodic(ctx: Context) -> list[Proposal]:
                     axes,
                 )
             )
-    if band.any():
+    if band.any() and ctx.n_lines < int(ctx.options.get("max_lines", MAX_LINES)):
         clear = band & (ratio > thr)
         if clear.any():
             excess = noise.pgram - noise.pgram / np.maximum(ratio, 1e-300)
@@ -569,8 +574,15 @@ def auxiliary(ctx: Context) -> list[Proposal]:
             continue
         xf = np.interp(tu, tu[good], x[good])
         best = (-1.0, 0.0, 0.0)
+
+        def filtered(tc: float, name: str = name, xf: NDArray[np.float64] = xf):
+            key = ("aux", name, tc)  # the same at every step: filter once per selection
+            if key not in ctx.cache:
+                ctx.cache[key] = _first_order(xf, tu, tc)
+            return ctx.cache[key]
+
         for tc in taus:
-            h = _first_order(xf, tu, tc)
+            h = filtered(tc)
             for j, lag in enumerate(lags):
                 z[j] = np.interp(t_u - lag, tu, h)
             pw = sum(_row_power(ctx, z * m if len(masks) > 1 else z) for m in masks)
@@ -578,7 +590,7 @@ def auxiliary(ctx: Context) -> list[Proposal]:
             if pw[j] > best[0]:
                 best = (float(pw[j]), float(lags[j]), float(tc))
         _, lag, tc = best
-        col = np.interp(t_all - lag, tu, _first_order(xf, tu, tc))
+        col = np.interp(t_all - lag, tu, filtered(tc))
         col = col - col[ctx.use].mean()
         cc, labs, axes = ctx.split(col[:, None], (f"aux:{name}",))
         out.append(

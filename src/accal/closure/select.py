@@ -824,6 +824,7 @@ class _Search:
     notes: dict[tuple, dict[str, Any]] = field(default_factory=dict)
     excluded: list[float] = field(default_factory=list)
     _states: dict = field(default_factory=dict, repr=False)
+    _cache: dict = field(default_factory=dict, repr=False)
 
     # ------------------------------------------------------------------
     def state(self, found: Sequence[_Found]) -> tuple[Basis, FitResult, NDArray[np.float64]]:
@@ -865,6 +866,8 @@ class _Search:
             options=self.options,
             channel_all=self.chan_all,
             channel_names=self.names,
+            cache=self._cache,
+            n_lines=sum(f.prop.name == "periodic" and f.prop.channel == "line" for f in found),
             orbit_frequency=next(
                 (
                     float(f.prop.params["frequency"])
