@@ -234,3 +234,23 @@ def test_lines_off_the_orbit_found_beside_its_harmonics():
         if e.channel == "line":
             n = round(e.frequency / f_orb)
             assert not 0 < n <= ORBIT_HARMONICS or abs(e.frequency - n * f_orb) > 1.5 / 43200
+
+
+def test_at_most_max_lines_lines_strongest_first(sim):
+    """Three lines on coloured noise: the two strongest by power by default, all with max_lines=3."""
+    d = sim(8, **DAY)
+    tau = d["t"] - d["t"][0]
+    lines = {1 / 700: 3e-10, 1 / 1700: 1e-9, 1 / 2900: 6e-10}  # frequency: amplitude
+    y = d["y"] + sum(a * np.cos(2 * np.pi * f * tau + 1.0) for f, a in lines.items())
+    found = {}
+    for k in (None, 3):
+        res = close_loop(
+            d["t"], y, valid=d["valid"], options=None if k is None else {"max_lines": k}
+        )
+        got = [e.frequency for e in res.effects if e.channel == "line"]
+        span = d["t"][-1] - d["t"][0]
+        # each found line within half a DFT bin of an injected one: its period
+        found[k] = sorted(round(1 / f) for f in lines for g in got if abs(g - f) < 0.5 / span)
+        assert len(got) == len(found[k])
+    assert found[None] == [1700, 2900]
+    assert found[3] == [700, 1700, 2900]
