@@ -258,6 +258,32 @@ def test_config_file_sets_defaults_and_flags_win(tmp_path):
     assert code == 2 and "unknown key 'methd'" in err
 
 
+def test_config_sections_lists_and_messages(tmp_path):
+    """Flat files apply to the command; other commands' tables set nothing; lists/strings fit."""
+    cfg = tmp_path / "c.toml"
+    # tables for another command only: grace-bias runs with its own defaults
+    cfg.write_text('[table]\nsatellite = "GRACE-A"\n')
+    code, _, err = invoke("grace-bias", GRACE_A, "--config", cfg, "--out", tmp_path / "a", "-q")
+    assert code == 0, err
+    assert set(table(tmp_path / "a")["method"]) == {"wavelet"}
+    # a flat file (no tables) applies to the command; a list for --scale, a string for
+    # the repeatable --include
+    cfg.write_text('format = "csv"\nscale = [2.0, 2.0, 2.0]\ninclude = "*ACC1B_*.asc"\n')
+    code, _, err = invoke(
+        "grace-bias", GRACE_A.parent, "-r", "--config", cfg, "--out", tmp_path / "b", "-q"
+    )
+    assert code == 0, err
+    df = table(tmp_path / "b", "csv")
+    assert set(df["source"]) == {p.name for p in GRACE_A.parent.glob("*ACC1B_*.asc")}
+    assert (df["scale"] == 2.0).all()
+    # the message names the options as typed on the command line
+    cfg.write_text("[grace-bias]\nkeep_goin = true\n")
+    code, _, err = invoke("grace-bias", GRACE_A, "--config", cfg, "--out", tmp_path / "c")
+    assert code == 2 and "unknown key 'keep_goin'" in err
+    assert "keep-going" in err and "format" in err
+    assert "fmt" not in err and "keep_going" not in err
+
+
 def test_bundled_configs_are_valid(tmp_path):
     cfgs = sorted((SAMPLES.parents[1] / "configs").glob("*.toml"))
     assert cfgs

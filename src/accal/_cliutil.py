@@ -9,8 +9,29 @@ from typing import Any
 import click
 
 
+def _command_names(ctx: click.Context) -> set[str]:
+    """Names of every accal command and sub-command (``grace-bias``, ``gap``, ...)."""
+    root = ctx.find_root().command
+    names: set[str] = set()
+    todo = [root]
+    while todo:
+        cmd = todo.pop()
+        if isinstance(cmd, click.Group):
+            names.update(cmd.commands)
+            todo.extend(cmd.commands.values())
+    return names
+
+
 def load_config(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
-    """Eager ``--config`` callback: a TOML file's ``[<command>]`` table becomes the defaults."""
+    """Eager ``--config`` callback: a TOML file's ``[<command>]`` table becomes the defaults.
+
+    A file whose top level holds only keys (no command tables) applies to the
+    command it is given to.  A file with tables for other commands only (e.g.
+    ``[table]``) sets nothing for this one.  Keys are the long option names
+    (``keep-going`` or ``keep_going``); a list is accepted for an option that
+    takes a comma-separated value (``scale = [1.0, 1.0, 1.0]``) and a single
+    string for a repeatable option (``include = "*.asc"``).
+    """
     if not value:
         return value
     import tomllib
@@ -21,33 +42,48 @@ def load_config(ctx: click.Context, param: click.Parameter, value: str | None) -
             data = tomllib.load(fh)
     except (OSError, tomllib.TOMLDecodeError) as exc:
         raise click.BadParameter(f"{path}: {exc}", ctx=ctx, param=param) from None
-    section = data.get(ctx.info_name, data)
+    name = ctx.info_name or ""
+    commands = _command_names(ctx)
+    if name in data:
+        section = data[name]
+    elif any(k in commands and isinstance(v, dict) for k, v in data.items()):
+        section = {}  # tables for other commands only
+    else:
+        section = data
     if not isinstance(section, dict):
-        raise click.BadParameter(f"{path}: [{ctx.info_name}] must be a table", ctx=ctx, param=param)
-    # config keys are the long option names ("format", "keep-going"), or the
-    # parameter names; "columns" is accepted for the repeatable --column
-    known: dict[str, str] = {}
+        raise click.BadParameter(f"{path}: [{name}] must be a table", ctx=ctx, param=param)
+    # config keys are the long option names, with dashes or underscores ("columns"
+    # is accepted for the repeatable --column); messages use the dashed names
+    known: dict[str, click.Option] = {}
+    shown: dict[str, str] = {}
     for p in ctx.command.params:
         if not isinstance(p, click.Option) or p.name == "config":
             continue
-        known[p.name] = p.name
-        for opt in (*p.opts, *p.secondary_opts):
-            if opt.startswith("--"):
-                known[opt[2:].replace("-", "_")] = p.name
-    known["columns"] = known.get("column", "columns")
+        longs = [o[2:] for o in (*p.opts, *p.secondary_opts) if o.startswith("--")]
+        for lo in longs:
+            known[lo.replace("-", "_")] = p
+            shown[lo.replace("-", "_")] = lo
+        known.setdefault(str(p.name), p)
+    if "column" in known:
+        known["columns"] = known["column"]
     defaults = {}
     for key, val in section.items():
-        name = known.get(key.replace("-", "_"))
-        if name is None:
+        k = key.replace("-", "_")
+        opt = known.get(k)
+        if opt is None:
+            names = sorted({v for v in shown.values() if not v.startswith("fail")})
             raise click.BadParameter(
-                f"{path}: unknown key {key!r} for '{ctx.info_name}' "
-                f"(known: {', '.join(sorted({k for k in known if not k.startswith('fail')}))})",
+                f"{path}: unknown key {key!r} for '{name}' (known: {', '.join(names)})",
                 ctx=ctx,
                 param=param,
             )
-        if key.replace("-", "_") == "fail_fast":
+        if k == "fail_fast":
             val = not val
-        defaults[name] = val
+        if opt.multiple and isinstance(val, str):
+            val = [val]
+        elif not opt.multiple and isinstance(val, list) and not opt.is_flag:
+            val = ",".join(str(v) for v in val)
+        defaults[str(opt.name)] = val
     ctx.default_map = {**(ctx.default_map or {}), **defaults}
     return value
 
