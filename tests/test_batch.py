@@ -376,6 +376,16 @@ def test_degraded_days_are_flagged_in_the_table(tmp_path):
     assert text.strip().splitlines()[1].split()[0] == "ACT1B_2023-06-01_C_04.txt"
     assert len(text.strip().splitlines()) == 2
 
+    # a GRACE-B day while its accelerometer was off: processed, flagged, and said
+    b_off = tmp_path / "ACC1B_2016-10-01_B_02.asc"
+    write_simulated_grace(b_off, date="2016-10-01", satellite="B", seed=3, duration=3600.0)
+    code, _, err = invoke("grace-bias", b_off, "--out", out)
+    assert code == 0, err
+    assert f"accal: {b_off}: warning: instrument off on this day (" in err
+    assert (
+        read_outputs(out)["table"].set_index("source").loc[b_off.name, "day_status"].eq("off").all()
+    )
+
 
 @pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
 def test_ctrl_c_stops_the_batch_at_once_and_keeps_what_finished(tmp_path):

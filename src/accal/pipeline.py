@@ -437,6 +437,11 @@ def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutco
     rows = table_rows(path, series, fits, scale, opts)
     for r in rows:
         r["model"] = closure.get(r["axis"], {}).get("model", f"poly{opts.order}")
+    off = sorted({r["day_status_reason"] for r in rows if r["day_status"] == "off"})
+    if off:  # a day the accelerometer was off: whatever the file holds is not its data
+        series = _with_warnings(
+            series, f"instrument off on this day ({'; '.join(off)}): fitted, flagged 'off'"
+        )
     cal = calibrate(
         series if not close_loop else _with_effects_removed(series, closure),
         fits,
