@@ -232,8 +232,12 @@ def test_load_periods_yaml_replace_defaults(tmp_path):
         ),
         ("period = 3\n", "must be a list"),
         ('[[period]]\nsatellite = "A"\nstart = "2016-99-01"\nstatus = "off"\n', "expected a date"),
+        (
+            '[[period]]\nsatellite = "GRACE-E"\nstart = 2016-01-01\nstatus = "off"\n',
+            "period 1: unknown GRACE satellite 'GRACE-E'",
+        ),
     ],
-    ids=["syntax", "status", "missing", "unknown-key", "not-a-list", "bad-date"],
+    ids=["syntax", "status", "missing", "unknown-key", "not-a-list", "bad-date", "satellite"],
 )
 def test_load_periods_errors(tmp_path, text, match):
     p = tmp_path / "bad.toml"

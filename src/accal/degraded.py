@@ -175,6 +175,13 @@ class Period:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "satellite", normalise_satellite(self.satellite))
+        if self.satellite.upper().startswith("GRACE") and self.satellite not in _LETTER:
+            # another mission's name is kept as written; a misspelt GRACE one would
+            # silently never match
+            raise ValidationError(
+                f"unknown GRACE satellite {self.satellite!r} "
+                f"(one of {', '.join(_LETTER)}, or A-D, GRACE C, GF1, ...)"
+            )
         object.__setattr__(self, "start", _as_date(self.start, "start"))
         if self.end is not None:
             object.__setattr__(self, "end", _as_date(self.end, "end"))
