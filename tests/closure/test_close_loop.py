@@ -254,3 +254,20 @@ def test_at_most_max_lines_lines_strongest_first(sim):
         assert len(got) == len(found[k])
     assert found[None] == [1700, 2900]
     assert found[3] == [700, 1700, 2900]
+
+
+def test_no_orbit_term_on_a_record_shorter_than_a_revolution():
+    """The real 100 s GRACE-FO D sample: its x axis once "found" a 1.1e-3 m/s² orbit term.
+
+    Over 100 s a 5,600 s sinusoid is a smooth curve (the base's business); the orbit
+    proposal now needs a record spanning at least one revolution.
+    """
+    from pathlib import Path
+
+    from accal.io.grace_l1b import read_grace_acc1b
+
+    path = Path(__file__).resolve().parents[2] / "data/samples/ACT1B_2023-06-01_D_04.txt"
+    s = read_grace_acc1b(path)
+    for k in range(3):
+        res = close_loop(s.time, s.acc[:, k], valid=s.valid, orbit_period=ORBIT)
+        assert not [e for e in res.effects if e.channel == "orbit"], res.effects

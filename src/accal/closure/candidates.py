@@ -412,7 +412,8 @@ MAX_LINES = 2
 def periodic(ctx: Context) -> list[Proposal]:
     """Sinusoids: the strongest residual spectral line, and the orbit harmonics.
 
-    * ``channel="orbit"`` (only with ``orbit_period``): cos/sin at ``f`` and ``2f``,
+    * ``channel="orbit"`` (only with ``orbit_period``, on records spanning at least
+      one revolution): cos/sin at ``f`` and ``2f``,
       with ``f`` estimated from the data within ±3 % of ``1/orbit_period``
       (multiplicity: resolvable frequencies in that band), plus every higher
       harmonic ``n f`` (``n ≤`` :data:`ORBIT_HARMONICS`, option ``orbit_harmonics``)
@@ -484,7 +485,10 @@ def periodic(ctx: Context) -> list[Proposal]:
             band &= np.abs(freqs - n * ctx.orbit_frequency) > 1.5 * df
     elif ctx.orbit_period and ctx.orbit_period > 0:
         f0 = 1.0 / ctx.orbit_period
-        if not _excluded(f0, ctx, 0.05 * f0) and 2 * f0 < freqs[-1]:
+        # shorter than a revolution, once/twice-per-revolution terms are a smooth curve
+        # the polynomial base already has: a 100 s record "found" a 1e-3 m/s² orbit term
+        long_enough = ctx.span >= ctx.orbit_period
+        if long_enough and not _excluded(f0, ctx, 0.05 * f0) and 2 * f0 < freqs[-1]:
             trial = f0 * (1 + np.linspace(-0.03, 0.03, 41))
             pw = _line_power(tau, r, trial, masks) + _line_power(tau, r, 2 * trial, masks)
             f = float(trial[int(np.argmax(pw))])
