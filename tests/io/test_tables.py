@@ -531,3 +531,22 @@ def test_wrong_number_of_columns_names_the_line(tmp_path):
     assert e.value.line == 4  # the quoted value spans lines 2-3
     with pytest.raises(FormatError, match=r"t\.csv:6: CSV: Expected 3 columns, got 2"):
         _stream(p, rows=2)
+
+
+@pytest.mark.parametrize("fmt", ["csv", "parquet"])
+def test_calibrated_output_reads_back_with_its_satellite(samples, tmp_path, fmt):
+    """grace-bias writes the satellite in the calibrated file's metadata: it comes back."""
+    from accal.pipeline import GraceBiasOptions, process_file
+
+    src = samples["grace_a"]
+    out = process_file(src, tmp_path, GraceBiasOptions(fmt=fmt))
+    cal = next(p for p in out.outputs if ".calibrated." in p.name)
+    s = read_table_series(cal)
+    assert (s.satellite, s.frame, s.axes) == ("GRACE-A", "SRF", ("x", "y", "z"))
+    # without metadata, an L1B-style file name names the satellite
+    for name, sat in [
+        ("ACC1B_2005-01-01_B_02.csv", "GRACE-B"),
+        ("ACT1B_2023-06-01_D_04.csv", "GRACE-FO-D"),
+    ]:
+        write_table({"gps_time": s.time, "lin_accl_x": s.acc[:, 0]}, tmp_path / name)
+        assert read_table_series(tmp_path / name).satellite == sat

@@ -61,7 +61,11 @@ VALID_COLUMN, FLAG_COLUMN, QUALITY_COLUMNS = "valid", "flag_val", ("quality", "q
 #: Key of the series description in the file metadata written by :func:`write_series`.
 META_KEY = "accal_series"
 #: File-name patterns that name the satellite when the file does not.
-SATELLITE_PATTERNS = ((re.compile(r"(?:^|[_/])SW_(?:OPER_\w*?_)?([ABC])_"), "Swarm-{}"),)
+SATELLITE_PATTERNS = (
+    (re.compile(r"(?:^|[_/])SW_(?:OPER_\w*?_)?([ABC])_"), "Swarm-{}"),
+    (re.compile(r"^AC[CT]1[AB]_\d{4}-\d{2}-\d{2}_([AB])_"), "GRACE-{}"),
+    (re.compile(r"^AC[CT]1[AB]_\d{4}-\d{2}-\d{2}_([CD])_"), "GRACE-FO-{}"),
+)
 #: Deepest nesting of lists/objects accepted in the JSON metadata (deeper is corrupt,
 #: and would overflow the stack of whatever serialises ``meta`` again).
 MAX_META_DEPTH = 64
@@ -927,8 +931,12 @@ def read_table_series(path: str | Path, *, columns: dict[str, str] | None = None
         history = tuple(series_meta.get("history", ()))
         col_units = dict(series_meta.get("units") or col_units)
     else:
-        satellite = _guess_satellite(path)
-        frame = "SRF"
+        # an accal output (e.g. grace-bias's calibrated file) names its satellite and
+        # frame in its metadata; else the file name may
+        named = fmeta.get("satellite") if isinstance(fmeta, dict) else None
+        satellite = named if isinstance(named, str) and named else _guess_satellite(path)
+        fr = fmeta.get("frame") if isinstance(fmeta, dict) else None
+        frame = fr if isinstance(fr, str) and fr else "SRF"
         meta = {
             "table": {
                 "time_column": tname,
