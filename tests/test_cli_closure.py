@@ -241,3 +241,46 @@ def test_aux_and_truth_must_describe_the_same_data(tmp_path):
             main, ["grace-bias", str(sim), "--truth", str(bad), "--out", str(tmp_path / "t"), "-q"]
         )
         assert res.exit_code == 1 and why in res.stderr
+
+
+def test_aux_covering_part_of_the_day_is_used_where_it_is(undeclared, tmp_path):
+    """A temperature table ending before the data: the closure uses the covered samples.
+
+    It once extrapolated the last temperature over the rest of the day, and the
+    coupling's mismatch there was "found" as a bias step (QA: 4.8e-10 m/s^2, p 9e-13).
+    """
+    import pandas as pd
+
+    d = undeclared
+    temp = pd.read_parquet(d["aux"])
+    part = tmp_path / "temperature_95.csv"
+    temp[temp["time"] < temp["time"].iloc[0] + 0.95 * DURATION].to_csv(part, index=False)
+    code, _, err = invoke(
+        "grace-bias", d["day"], "--close-loop", "--aux", part, "--method", "lsq",
+        "--out", tmp_path / "o",
+    )  # fmt: skip
+    assert code == 0, err
+    assert f"{d['day']}: warning: --aux covers 95.0% of the used samples" in err
+    closure = json.loads((tmp_path / "o" / "closure.json").read_text())["sources"]
+    entry = closure[d["day"].name]
+    y = effects(entry, "y")
+    assert "bias_step" not in y
+    assert abs(y["auxiliary"]["coefficient"] - COUPLING) < 3 * y["auxiliary"]["sigma"]
+    assert abs(effects(entry, "z")["bias_step"]["epoch"] - (d["t0"] + STEP_AT)) <= 120.0
+
+
+def test_no_step_test_on_a_record_shorter_than_two_revolutions(tmp_path):
+    """Clean 3000 s day (QA case): an eclipse transition was "found" as a 2.6e-8 step."""
+    day = tmp_path / "ACC1B_2012-05-05_B_02.asc"
+    code, _, err = invoke(
+        "simulate", "grace", "--date", "2012-05-05", "--satellite", "B", "--duration", 3000,
+        "--out", day,
+    )  # fmt: skip
+    assert code == 0, err
+    code, _, err = invoke("grace-bias", day, "--close-loop", "--out", tmp_path / "o", "-q")
+    assert code == 0, err
+    entry = json.loads((tmp_path / "o" / "closure.json").read_text())["sources"][day.name]
+    for ax in "xyz":
+        assert "bias_step" not in effects(entry, ax)
+        assert "bias_step" not in entry[ax]["candidates"]
+        assert "shorter than two revolutions" in entry[ax]["note"]

@@ -453,6 +453,8 @@ def diagnose(
     for o in outcomes:
         if not o.ok:
             _err(o.message)
+        elif o.warnings and not quiet:
+            _err(f"{o.path}: warning: {'; '.join(o.warnings)}")
     good = [o for o in outcomes if o.ok]
     if good:
         jpath, mpath = write_closure_reports(out, good)

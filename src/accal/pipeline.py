@@ -426,9 +426,10 @@ def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutco
             )
     if close_loop:
         fits_before = estimate(fit_series, opts)
-        fit_series, closure, extra_outputs = close_the_loop(
+        fit_series, closure, extra_outputs, notes = close_the_loop(
             path, series, fit_series, use, opts, out_dir / stem
         )
+        series = _with_warnings(series, *notes)
     fits = estimate(fit_series, opts)
     if close_loop:
         truth = load_truth(opts.truth, series, opts.reference is not None) if opts.truth else {}
@@ -554,7 +555,12 @@ def _effect_label(e: Any) -> str:
 
 
 def load_aux(path: Path, t: np.ndarray) -> dict[str, np.ndarray]:
-    """Housekeeping channels of ``path`` interpolated onto ``t`` (NaN where not covered)."""
+    """Housekeeping channels of ``path`` interpolated onto ``t``.
+
+    Holes inside a channel's span are bridged linearly; before its first and after
+    its last value it is NaN (not covered).  Channels covering under 90 % of ``t``,
+    or constant, are left out; none covering 90 % is an error.
+    """
     from accal.io.housekeeping import read_housekeeping
 
     hk = read_housekeeping(path)
@@ -567,8 +573,11 @@ def load_aux(path: Path, t: np.ndarray) -> dict[str, np.ndarray]:
         # a channel must cover the day and vary to be a candidate regressor
         if ok.mean() < 0.9 or np.ptp(v[ok]) == 0:
             continue
-        if not ok.all():  # short holes: bridge linearly (the closure needs finite regressors)
-            v[~ok] = np.interp(t[~ok], t[ok], v[ok])
+        inner = ~ok & (t > t[ok][0]) & (t < t[ok][-1])
+        if inner.any():  # holes inside the channel's span: bridged linearly
+            v[inner] = np.interp(t[inner], t[ok], v[ok])
+        # before/after its span the channel stays NaN: the closure leaves those samples
+        # out (no extrapolated temperature to fit a coupling on)
         out[k] = v
     if coverage < 0.9:
         from accal.timescale import gps_to_date
@@ -618,25 +627,38 @@ def load_truth(path: Path, series: AccSeries, reference: bool) -> dict[str, dict
         raise ValidationError(f"{path}: not a readable truth file ({exc})") from None
 
 
-def closure_candidates(opts: GraceBiasOptions) -> tuple[tuple[str, ...], str]:
+def closure_candidates(
+    opts: GraceBiasOptions, span: float | None = None
+) -> tuple[tuple[str, ...], str]:
     """Candidate effects for a ``grace-bias`` closure, and a note on what is left out.
 
     Without ``--reference`` the fitted series is the raw acceleration, whose
     non-gravitational signal (drag, radiation pressure) varies slowly over the
     day: a polynomial drift beyond the declared order cannot be told from that
     signal, so the polynomial candidates are only tried on ``raw − reference``.
-    Steps, auxiliary couplings and periodic terms have signatures of their own.
+    Steps, auxiliary couplings and periodic terms have signatures of their own,
+    except on a record shorter than two revolutions (``span`` [s] below twice
+    ``orbit_period``): there a step cannot be told from the signal's own jumps
+    (radiation pressure switching at eclipse entry and exit), which only the
+    next revolution would show to repeat, so steps are left out too.
     """
     from accal.closure import DEFAULT_CANDIDATES
 
     if opts.reference is not None:
         return tuple(DEFAULT_CANDIDATES), ""
-    kept = tuple(c for c in DEFAULT_CANDIDATES if c not in ("quadratic_drift", "cubic_drift"))
-    return kept, (
+    drop = {"quadratic_drift", "cubic_drift"}
+    note = (
         "no --reference: quadratic/cubic drift not tested (not separable from the slow "
         "variation of the non-gravitational signal); periodic and unexplained structure "
         "include the real signal"
     )
+    if span is not None and opts.orbit_period and span < 2 * opts.orbit_period:
+        drop.add("bias_step")
+        note += (
+            f"; record shorter than two revolutions ({span:.0f} s): bias steps not tested "
+            "either (eclipse transitions of the radiation pressure look like steps)"
+        )
+    return tuple(c for c in DEFAULT_CANDIDATES if c not in drop), note
 
 
 def close_the_loop(
@@ -646,7 +668,7 @@ def close_the_loop(
     use: np.ndarray,
     opts: GraceBiasOptions,
     prefix: Path,
-) -> tuple[AccSeries, dict[str, Any], list[Path]]:
+) -> tuple[AccSeries, dict[str, Any], list[Path], list[str]]:
     """Close the loop on every axis and return the series to refit.
 
     For each axis, :func:`accal.closure.close_loop` analyses the residual of the
@@ -665,6 +687,9 @@ def close_the_loop(
         "model": model label}}``.
     outputs : list of Path
         Plots written.
+    warnings : list of str
+        What the user should know (e.g. ``--aux`` not covering every used sample:
+        the closure then uses the samples it covers).
     """
     from accal.closure import close_loop
     from accal.closure.report import to_markdown
@@ -676,7 +701,22 @@ def close_the_loop(
     }
     if opts.aux is not None:
         aux.update(load_aux(opts.aux, series.time))
-    candidates, note = closure_candidates(opts)
+    # a coupling is only known where its channel is: the closure uses those samples
+    warnings: list[str] = []
+    covered = np.ones(len(series), bool)
+    for v in aux.values():
+        covered &= np.isfinite(v)
+    n_out = int(np.count_nonzero(use & ~covered))
+    if n_out:
+        warnings.append(
+            f"--aux covers {1 - n_out / max(int(use.sum()), 1):.1%} of the used samples: the "
+            f"closure analyses those only ({n_out} samples outside it keep the plain fit's "
+            "treatment and get no coupling correction)"
+        )
+    use_cl = use & covered
+    t_used = fit_series.time[use_cl]
+    span = float(t_used[-1] - t_used[0]) if t_used.size else 0.0
+    candidates, note = closure_candidates(opts, span)
     out: dict[str, Any] = {}
     plots: list[Path] = []
     cols = []
@@ -685,7 +725,7 @@ def close_the_loop(
         res = close_loop(
             fit_series.time,
             y,
-            valid=use,
+            valid=use_cl,
             base=f"poly{opts.order}",
             aux=aux or None,
             alpha=opts.alpha,
@@ -696,7 +736,7 @@ def close_the_loop(
         labels = [f"poly{opts.order}"]
         for e, m in effect_models(res):
             if e.name in INSTRUMENT_EFFECTS:
-                inst += m
+                inst += m if e.name != "auxiliary" else np.where(covered, m, 0.0)
                 labels.append(_effect_label(e))
         # the true errors are those of the refitted estimators (see _before_after): the
         # closure's own base coefficients share their design with periodic terms
@@ -714,7 +754,7 @@ def close_the_loop(
         f"accal {__version__}: close_loop(alpha={opts.alpha}) removed "
         + "; ".join(f"{ax}: {out[ax]['model']}" for ax in series.axes)
     )
-    return fit_series, out, plots
+    return fit_series, out, plots, warnings
 
 
 def _plot_closure(res: Any, prefix: Path, ax: str) -> list[Path]:
@@ -1376,7 +1416,7 @@ def diagnose_dir(
             order = int(meta.get("order", 1))
             opts = GraceBiasOptions(order=order, close_loop=True, aux=aux, alpha=alpha)
             name = str(meta.get("source") or p.name.split(".calibrated.")[0])
-            _, closure, plots = close_the_loop(
+            _, closure, plots, notes = close_the_loop(
                 Path(name), series, series, series.valid, opts, out_dir / output_stem(Path(name))
             )
             outcomes.append(
@@ -1386,6 +1426,7 @@ def diagnose_dir(
                     n_samples=len(series),
                     outputs=tuple(plots),
                     closure={ax: c["summary"] for ax, c in closure.items()},
+                    warnings=tuple(notes),
                 )
             )
         except AccalError as exc:
