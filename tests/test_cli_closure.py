@@ -159,6 +159,11 @@ def test_diagnose_previous_run_reports_without_rewriting(undeclared, tmp_path):
     assert "bias_step" in effects(entry, "z")
     assert "auxiliary" in effects(entry, "y")
     assert "bias_step" in out
+    # it says what a --close-loop re-run would remove; it removed nothing
+    assert entry["z"]["would_remove"][0].startswith("bias_step@")
+    assert "removed_from_calibrated" not in entry["z"]
+    md = (tmp_path / "diagnose" / "closure.md").read_text()
+    assert "Removed from calibrated" not in md and "Would remove (re-run grace-bias" in md
 
 
 def test_diagnose_empty_directory_is_a_clear_error(tmp_path):

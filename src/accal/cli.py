@@ -457,7 +457,7 @@ def diagnose(
             _err(f"{o.path}: warning: {'; '.join(o.warnings)}")
     good = [o for o in outcomes if o.ok]
     if good:
-        jpath, mpath = write_closure_reports(out, good)
+        jpath, mpath = write_closure_reports(out, good, diagnose=True)
         if not quiet:
             for o in good:
                 for ax, entry in o.closure.items():

@@ -1297,8 +1297,21 @@ def _commit(
     return table
 
 
-def write_closure_reports(out_dir: Path, outcomes: Sequence[FileOutcome]) -> tuple[Path, Path]:
+def _as_diagnosis(summary: dict[str, Any]) -> dict[str, Any]:
+    """A closure entry of ``accal diagnose``: nothing was removed, ``would_remove`` says what."""
+    out = dict(summary)
+    out["would_remove"] = out.pop("removed_from_calibrated", [])
+    return out
+
+
+def write_closure_reports(
+    out_dir: Path, outcomes: Sequence[FileOutcome], *, diagnose: bool = False
+) -> tuple[Path, Path]:
     """Merge this run's closure results into ``OUT/closure.json`` and ``OUT/closure.md``.
+
+    With ``diagnose`` (``accal diagnose``: the calibrated files are only read) the
+    report says which instrument effects a ``grace-bias --close-loop`` re-run would
+    remove, instead of claiming they were removed.
 
     Layout of ``closure.json``: ``{"accal_version": ..., "sources": {SOURCE: {AXIS:
     entry}}}`` where ``entry`` is :meth:`accal.closure.ClosureResult.to_dict` plus
@@ -1323,9 +1336,15 @@ def write_closure_reports(out_dir: Path, outcomes: Sequence[FileOutcome]) -> tup
         "# accal closure report",
         "",
         f"{len(sources)} input(s); per input and axis: the effects the bias + drift model "
-        "lacked, their significance, and the coefficients before/after.  Effects listed under "
-        "'removed from calibrated' were subtracted from the calibrated series; periodic terms "
-        "and unexplained structure are reported only.",
+        "lacked, their significance, and the coefficients before/after.  "
+        + (
+            "accal diagnose read the calibrated files and changed nothing: the effects under "
+            "'would remove' are those `accal grace-bias --close-loop` would subtract"
+            if diagnose
+            else "Effects listed under 'removed from calibrated' were subtracted from the "
+            "calibrated series"
+        )
+        + "; periodic terms and unexplained structure are reported only.",
         "",
     ]
     for src, axes in sources.items():
@@ -1333,6 +1352,15 @@ def write_closure_reports(out_dir: Path, outcomes: Sequence[FileOutcome]) -> tup
             md = entry.get("markdown") or f"## {src} axis {ax}\n"
             lines.append(md.rstrip())
             lines += _estimates_markdown(entry.get("estimates") or {})
+            if "would_remove" in entry:  # from accal diagnose
+                would = entry.get("would_remove") or []
+                lines += [
+                    "",
+                    "Would remove (re-run grace-bias --close-loop; the calibrated file is "
+                    f"unchanged): {', '.join(would) or 'nothing'}.",
+                    "",
+                ]
+                continue
             removed = entry.get("removed_from_calibrated") or []
             lines += ["", f"Removed from calibrated: {', '.join(removed) or 'nothing'}.", ""]
     from accal.io.writers import atomic_path
@@ -1425,7 +1453,7 @@ def diagnose_dir(
                     True,
                     n_samples=len(series),
                     outputs=tuple(plots),
-                    closure={ax: c["summary"] for ax, c in closure.items()},
+                    closure={ax: _as_diagnosis(c["summary"]) for ax, c in closure.items()},
                     warnings=tuple(notes),
                 )
             )
