@@ -50,3 +50,20 @@ def test_demod_report_has_axes_notes_and_a_psd(platform, tmp_path):
     assert res.stats_after.freq.size > 10 and np.all(np.isfinite(res.stats_after.psd))
     paths = plot_closure(res, tmp_path / "r.png", tmp_path / "p.png", tmp_path / "e.png")
     assert all(p.stat().st_size > 10_000 for p in paths)
+
+
+def test_removed_effects_say_which_member(sim):
+    """An effect added then eliminated names its epoch/frequency/lag and its p at admission."""
+    import dataclasses
+
+    from accal.closure.select import Effect
+
+    d = sim(3, step=(0.4, 2e-9), n=43200, dt=2.0)
+    res = close_loop(d["t"], d["y"], candidates=("bias_step",))
+    gone = Effect("bias_step", None, float("nan"), float("nan"), 1e-5, epoch=1.5e8)
+    line = Effect("periodic", "line", float("nan"), float("nan"), 2e-3, frequency=1e-3)
+    out = result_to_dict(dataclasses.replace(res, removed=(gone, line)))
+    assert out["removed"] == [
+        {"name": "bias_step", "channel": None, "p_accept": 1e-5, "epoch": 1.5e8},
+        {"name": "periodic", "channel": "line", "p_accept": 2e-3, "frequency": 1e-3},
+    ]

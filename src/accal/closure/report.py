@@ -7,7 +7,8 @@ its caller gives.  ``result_to_dict`` is the ``closure.json`` layout::
                   "epoch", "frequency", "lag", "tau", "details"}, ...],
      "unexplained": [...same keys, name "unexplained"...],
      "notes": [{"name", "channel", "note"}, ...],   # candidates not testable here
-     "removed": [{"name", "channel"}, ...],         # added, then eliminated
+     "removed": [{"name", "channel", "p_accept", "epoch"/"frequency"/"lag"/"tau"}, ...],
+                                                    # added, then eliminated
      "base": [{"name", "before", "sigma_before", "after", "sigma_after",
                "change", "sigma_change", "change_significant"}, ...],
      "channels": [...] (several data channels, e.g. ["y", "z"]),
@@ -97,7 +98,24 @@ def result_to_dict(result: ClosureResult, truth: dict[str, float] | None = None)
         "effects": [_effect_dict(e) for e in result.effects],
         "unexplained": [_effect_dict(e) for e in result.unexplained],
         "notes": list(result.notes),
-        "removed": [{"name": e.name, "channel": e.channel} for e in result.removed],
+        "removed": [
+            {
+                "name": e.name,
+                "channel": e.channel,
+                "p_accept": e.significance,  # of the test that admitted it
+                **{
+                    k: float(v)
+                    for k, v in (
+                        ("epoch", e.epoch),
+                        ("frequency", e.frequency),
+                        ("lag", e.lag),
+                        ("tau", e.tau),
+                    )
+                    if v is not None
+                },
+            }
+            for e in result.removed
+        ],
         "base": [
             {
                 "name": b.name,

@@ -688,7 +688,18 @@ def close_loop(
     labels = bbase.column_labels() + tuple(lb for pr, *_ in found for lb in pr.labels)
     effects = _effects(found, fit.gamma, v_ww, span, t0)
     removed_eff = tuple(
-        Effect(pr.name, pr.channel, float("nan"), float("nan"), pa, details={"removed": True})
+        Effect(
+            pr.name,
+            pr.channel,
+            float("nan"),
+            float("nan"),
+            pa,
+            epoch=pr.params.get("epoch"),
+            frequency=pr.params.get("frequency"),
+            lag=pr.params.get("lag"),
+            tau=pr.params.get("tau"),
+            details={"removed": True},
+        )
         for pr, pa, _ in removed
     )
     scale = bbase.column_scale()
