@@ -311,15 +311,18 @@ def plot_closure(
     fig = Figure(figsize=(7, 4.5))
     ax = fig.subplots()
     for st, lab in ((result.stats_before, "before"), (result.stats_after, "after")):
-        if st.freq.size > 1:
-            ax.loglog(st.freq[1:], np.sqrt(st.psd[1:]), lw=0.8, label=lab)
+        asd = np.sqrt(st.psd[1:]) if st.freq.size > 1 else np.zeros(0)
+        ok = asd > 0  # an exact fit (a residual of zeros) has nothing to draw on a log scale
+        if ok.any():
+            ax.loglog(st.freq[1:][ok], asd[ok], lw=0.8, label=lab)
     for e in result.effects:
         if e.frequency:
             ax.axvline(e.frequency, color="k", ls=":", lw=0.8)
     ax.set_xlabel("frequency [Hz]")
     ax.set_ylabel("residual ASD [m/s²/√Hz]")
     ax.set_title("residual amplitude spectral density", fontsize=10)
-    ax.legend(loc="best")
+    if ax.get_lines():
+        ax.legend(loc="best")
     fig.tight_layout()
     psd_path = Path(psd_path)
     fig.savefig(psd_path, dpi=110)
