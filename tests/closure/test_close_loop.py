@@ -271,3 +271,22 @@ def test_no_orbit_term_on_a_record_shorter_than_a_revolution():
     for k in range(3):
         res = close_loop(s.time, s.acc[:, k], valid=s.valid, orbit_period=ORBIT)
         assert not [e for e in res.effects if e.channel == "orbit"], res.effects
+
+
+def test_step_epoch_not_pulled_to_an_eclipse_edge():
+    """QA case: GRACE-FO D y axis, a −3e-9 m/s² step at 40,000 s came out at 40,960 s.
+
+    That is an eclipse edge (solar pressure switching), orbit-periodic structure the
+    orbit harmonics do not hold; the epoch scan now runs with the residual's
+    orbit-phase template removed.
+    """
+    from accal.simulate.grace import simulate_grace_day
+
+    sim = simulate_grace_day(date="2021-02-14", satellite="D")
+    tau = sim.time - sim.time[0]
+    y = sim.raw[:, 1] - 3e-9 * (tau >= 40000.0)
+    res = close_loop(sim.time, y, valid=sim.valid, orbit_period=ORBIT)
+    step = [e for e in res.effects if e.name == "bias_step"]
+    assert len(step) == 1
+    assert abs(step[0].epoch - (sim.time[0] + 40000.0)) <= 60.0
+    assert abs(step[0].coefficient + 3e-9) < 3 * step[0].sigma
