@@ -259,13 +259,17 @@ def test_aux_covering_part_of_the_day_is_used_where_it_is(undeclared, tmp_path):
     d = undeclared
     temp = pd.read_parquet(d["aux"])
     part = tmp_path / "temperature_95.csv"
-    temp[temp["time"] < temp["time"].iloc[0] + 0.95 * DURATION].to_csv(part, index=False)
+    temp = temp[temp["time"] < temp["time"].iloc[0] + 0.95 * DURATION].assign(heater=1.0)
+    temp.to_csv(part, index=False)
     code, _, err = invoke(
         "grace-bias", d["day"], "--close-loop", "--aux", part, "--method", "lsq",
         "--out", tmp_path / "o",
     )  # fmt: skip
     assert code == 0, err
-    assert f"{d['day']}: warning: --aux covers 95.0% of the used samples" in err
+    assert (
+        f"{d['day']}: warning: --aux channel(s) constant over the data, not tested: heater" in err
+    )
+    assert "--aux covers 95.0% of the used samples" in err
     closure = json.loads((tmp_path / "o" / "closure.json").read_text())["sources"]
     entry = closure[d["day"].name]
     y = effects(entry, "y")

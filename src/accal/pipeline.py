@@ -554,24 +554,30 @@ def _effect_label(e: Any) -> str:
     return e.name
 
 
-def load_aux(path: Path, t: np.ndarray) -> dict[str, np.ndarray]:
-    """Housekeeping channels of ``path`` interpolated onto ``t``.
+def load_aux(path: Path, t: np.ndarray) -> tuple[dict[str, np.ndarray], list[str]]:
+    """Housekeeping channels of ``path`` interpolated onto ``t``, and what was left out.
 
     Holes inside a channel's span are bridged linearly; before its first and after
     its last value it is NaN (not covered).  Channels covering under 90 % of ``t``,
-    or constant, are left out; none covering 90 % is an error.
+    or constant, are left out (named in the returned notes); none covering 90 % is
+    an error.
     """
     from accal.io.housekeeping import read_housekeeping
 
     hk = read_housekeeping(path)
     out = {}
     coverage = 0.0
+    constant, short = [], []
     for k, v in hk.on(t).items():
         v = np.asarray(v, dtype=np.float64)
         ok = np.isfinite(v)
         coverage = max(coverage, float(ok.mean()))
         # a channel must cover the day and vary to be a candidate regressor
-        if ok.mean() < 0.9 or np.ptp(v[ok]) == 0:
+        if ok.mean() < 0.9:
+            short.append(f"{k} ({ok.mean():.0%})")
+            continue
+        if np.ptp(v[ok]) == 0:
+            constant.append(k)
             continue
         inner = ~ok & (t > t[ok][0]) & (t < t[ok][-1])
         if inner.any():  # holes inside the channel's span: bridged linearly
@@ -587,7 +593,12 @@ def load_aux(path: Path, t: np.ndarray) -> dict[str, np.ndarray]:
             f"({gps_to_date(float(t[0]))} ... {gps_to_date(float(t[-1]))}, GPS days); "
             "give the housekeeping of the same day(s)"
         )
-    return out
+    notes = []
+    if constant:
+        notes.append(f"--aux channel(s) constant over the data, not tested: {', '.join(constant)}")
+    if short:
+        notes.append(f"--aux channel(s) covering under 90 %, not tested: {', '.join(short)}")
+    return out, notes
 
 
 def load_truth(path: Path, series: AccSeries, reference: bool) -> dict[str, dict[str, float]]:
@@ -699,10 +710,11 @@ def close_the_loop(
         for k, v in series.aux.items()
         if k.startswith("ang_accl")  # angular accelerations; not the L1B fit residuals
     }
-    if opts.aux is not None:
-        aux.update(load_aux(opts.aux, series.time))
-    # a coupling is only known where its channel is: the closure uses those samples
     warnings: list[str] = []
+    if opts.aux is not None:
+        channels, warnings = load_aux(opts.aux, series.time)
+        aux.update(channels)
+    # a coupling is only known where its channel is: the closure uses those samples
     covered = np.ones(len(series), bool)
     for v in aux.values():
         covered &= np.isfinite(v)
