@@ -540,3 +540,31 @@ def test_diagnose_demod_directory(undeclared_run, tmp_path):
     assert any(
         abs(e["epoch"] - step_at) <= 60 for e in closure["effects"] if e["name"] == "bias_step"
     )
+
+
+def test_demod_close_loop_sigmas_stay_honest(tmp_path):
+    """QA case: with a found coupling the per-period sigmas came out 27 % low (std z 1.46).
+
+    The closure estimated the noise PSD of a residual left by the per-period base; the
+    sigmas now use the demodulation's own noise model (--psd), before and after.
+    """
+    from accal.pipeline_demod import write_simulated_gap
+
+    run = tmp_path / "temp.parquet"
+    _, truth = write_simulated_gap(
+        run, days=1.0, tau=600.0, mask=200.0, seed=1, temperature_coupling=2e-8
+    )
+    out = tmp_path / "out"
+    code, _, err = invoke(
+        "demod", run, "--tau", 600, "--mask", 200, "--close-loop", "--out", out, "-q"
+    )
+    assert code == 0, err
+    closure = json.loads((out / "closure.json").read_text())["sources"]["temp.parquet"]
+    assert "auxiliary" in {e["name"] for e in closure["effects"]}
+    df = pd.read_parquet(out / "periods.parquet").merge(
+        pd.read_parquet(truth), on="period", suffixes=("", "_true")
+    )
+    for ax in "YZ":
+        z = (df[f"a_{ax}"] - df[f"a_{ax}_true"]) / df[f"sigma_{ax}"]
+        assert 0.85 < float(np.std(z)) < 1.2, (ax, float(np.std(z)))
+        assert float((df[f"sigma_{ax}"] / df[f"sigma_{ax}_before"]).median()) >= 0.98

@@ -966,6 +966,8 @@ def close_run(
         bias_aux=bias_aux or None,
         aux=aux or None,
         alpha=opts.alpha,
+        # sigmas before/after with the demodulation's own noise model (--psd)
+        noise_psd=load_psd(opts.psd),
     )
     res, periods = dc
     entry = res.to_dict()
@@ -1403,6 +1405,7 @@ def diagnose_demod_dir(
                 bias_model=o.get("bias_model", "affine"),
                 resample=rs is not None,
                 gap_factor=float(rs.get("gap_factor", 2.0)) if rs else 2.0,
+                psd=str(o.get("psd") or "microstar"),
                 close_loop=True,
                 alpha=alpha,
             )

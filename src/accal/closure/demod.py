@@ -215,6 +215,7 @@ def close_loop_demod(
     orbit_period: float | None = None,
     catchall_knots: int = 24,
     options: dict[str, Any] | None = None,
+    noise_psd: Any = None,
 ) -> DemodClosure:
     """Close the loop on rotating-platform data with the demodulation model as base.
 
@@ -249,7 +250,7 @@ def close_loop_demod(
     min_fraction : float
         A period is used when it has at least this fraction of the median number of
         rest samples per period.
-    alpha, max_effects, orbit_period, catchall_knots, options
+    alpha, max_effects, orbit_period, catchall_knots, options, noise_psd
         As in :func:`accal.closure.close_loop` (``options["settle_taus"]``: time
         constants searched by ``intra_period_shape`` [s]; ``options["max_lag"]``:
         longest auxiliary lag searched, default ``τ/2``: the per-period bias absorbs
@@ -413,6 +414,7 @@ def close_loop_demod(
         options={"max_lag": 0.5 * float(tau), **(options or {}), "platform": info},
         channel=chan,
         channel_names=("y", "z"),
+        noise_psd=noise_psd,
     )
     return DemodClosure(res, _periods(res, names, n_per, q, fs, float(t[0]), counts))
 
