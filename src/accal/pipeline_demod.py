@@ -834,7 +834,7 @@ def process_run(
     plots: list[Path] = []
     if opts.close_loop:
         step = info.step if info.resample is not None else None
-        closure, extended, plots = close_run(path, opts, targets[0].parent, step=step)
+        closure, extended, plots = close_run(path, opts, targets[0].parent, step=step, psd=psd)
         rows, units = apply_closure(rows, units, extended)
         summary["closure"] = {
             k: closure[k] for k in ("effects", "unexplained", "rms_before", "rms_after", "model")
@@ -893,7 +893,7 @@ def process_run(
 
 
 def close_run(
-    path: Path, opts: DemodOptions, out_dir: Path, *, step: float | None = None
+    path: Path, opts: DemodOptions, out_dir: Path, *, step: float | None = None, psd: Any = None
 ) -> tuple[dict[str, Any], Any, list[Path]]:
     """Close the loop on one run with the demodulation model as base.
 
@@ -918,6 +918,9 @@ def close_run(
     step : float, optional
         With ``opts.resample``: the grid step the demodulation used [s]; default
         :func:`accal.estimators.resample.nominal_step` of the run.
+    psd : PSD, optional
+        The noise model already loaded from ``opts.psd`` (:func:`load_psd`), for the
+        per-period sigmas; loaded here when not given.
 
     Returns
     -------
@@ -967,7 +970,7 @@ def close_run(
         aux=aux or None,
         alpha=opts.alpha,
         # sigmas before/after with the demodulation's own noise model (--psd)
-        noise_psd=load_psd(opts.psd),
+        noise_psd=psd if psd is not None else load_psd(opts.psd),
     )
     res, periods = dc
     entry = res.to_dict()
