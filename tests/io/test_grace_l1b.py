@@ -202,6 +202,16 @@ def test_header_but_no_data(samples, tmp_path):
     assert e.value.line == 31
 
 
+@pytest.mark.parametrize("records", [b"\xef\xbb\xbf\n", b"\xef\xbb\xbf\n\n", b"\xef\xbb\xbf"])
+def test_header_and_only_a_byte_order_mark(samples, tmp_path, records):
+    # found by the deep fuzz run: pyarrow skips a BOM at the start of the records,
+    # which left an empty series instead of an error
+    head, _ = _data_lines(samples["grace_a"])
+    with pytest.raises(FormatError, match="header but no data|truncated last line") as e:
+        read_grace_acc1b(_write(tmp_path, "".join(head).encode() + records))
+    assert e.value.line == 31
+
+
 def test_no_end_of_header(samples, tmp_path):
     text = samples["grace_a"].read_bytes().replace(b"END OF HEADER", b"END OF HEADR")
     with pytest.raises(FormatError, match="no end-of-header marker"):

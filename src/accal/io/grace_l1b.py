@@ -458,15 +458,15 @@ def _locate_bad_line(
     return FormatError(f"cannot parse data records{why}", path)
 
 
-def _check_last_line(data: bytes, first_line: int, path: Path) -> None:
+def _check_last_line(raw: bytes, start: int, first_line: int, path: Path) -> None:
     """Accept a last record without its newline only if it is complete (else FormatError).
 
+    ``raw[start:]`` are the records, ``first_line`` the file line of the first.
     The record is complete when it has all fields and ends with the fixed-width
     8-character 0/1 ``qualflg``: a cut anywhere in the line leaves fewer fields or
     a shorter last field.  Only the last line is looked at (and copied).
     """
-    start = data.rfind(b"\n") + 1
-    last = data[start:].rstrip(b"\r")
+    last = raw[raw.rfind(b"\n", start) + 1 :].rstrip(b"\r")
     fields = last.split()
     flag = fields[-1] if fields else b""
     if not (
@@ -476,20 +476,30 @@ def _check_last_line(data: bytes, first_line: int, path: Path) -> None:
         and not flag.strip(b"01")
     ):
         raise FormatError(
-            "truncated last line (no newline at end of file)", path, first_line + data.count(b"\n")
+            "truncated last line (no newline at end of file)",
+            path,
+            first_line + raw.count(b"\n", start),
         )
 
 
-def _parse_ascii(data: bytes, first_line: int, path: Path) -> dict[str, Any]:
+_NON_SPACE = re.compile(rb"\S")
+
+
+def _parse_ascii(raw: bytes, start: int, first_line: int, path: Path) -> dict[str, Any]:
+    """Parse the ASCII records ``raw[start:]`` (``first_line``: file line of the first).
+
+    The records are handed to pyarrow as a slice of ``raw`` (a day file is ~9 MB:
+    no copy); the error paths, which need the records as bytes, slice them.
+    """
     import pyarrow as pa
     import pyarrow.csv as pacsv
 
-    if not data or data.isspace():
+    if _NON_SPACE.search(raw, start) is None:
         raise FormatError("header but no data records", path, first_line)
-    if not data.endswith(b"\n"):
-        _check_last_line(data, first_line, path)
-    nl = data.find(b"\n")
-    first = data[:nl].rstrip(b"\r")
+    if not raw.endswith(b"\n"):
+        _check_last_line(raw, start, first_line, path)
+    nl = raw.find(b"\n", start)
+    first = raw[start : nl if nl >= 0 else len(raw)].rstrip(b"\r")
     double = b"  " in first
     names = list(COLUMNS[:11]) + (["_blank", "qualflg"] if double else ["qualflg"])
     types = {n: pa.float64() for n in COLUMNS[2:11]}
@@ -498,7 +508,7 @@ def _parse_ascii(data: bytes, first_line: int, path: Path) -> dict[str, Any]:
         types["_blank"] = pa.null()
     try:
         table = pacsv.read_csv(
-            pa.py_buffer(data),
+            pa.py_buffer(raw).slice(start),
             read_options=csv_read_options(column_names=names, block_size=1 << 22),
             parse_options=pacsv.ParseOptions(
                 delimiter=" ", quote_char=False, double_quote=False, ignore_empty_lines=True
@@ -514,19 +524,21 @@ def _parse_ascii(data: bytes, first_line: int, path: Path) -> dict[str, Any]:
             ),
         )
     except (pa.ArrowException, ValueError) as exc:
-        raise _locate_bad_line(data, first_line, len(names), path, str(exc)) from None
+        raise _locate_bad_line(raw[start:], first_line, len(names), path, str(exc)) from None
+    if table.num_rows == 0:  # only what pyarrow skips (e.g. a byte-order mark, blank lines)
+        raise FormatError("header but no data records", path, first_line)
     out: dict[str, Any] = {}
     for name in COLUMNS[:11]:
         if name == "GRACE_id":
             continue
         col = table.column(name)
         if col.null_count:
-            raise _locate_bad_line(data, first_line, len(names), path)
+            raise _locate_bad_line(raw[start:], first_line, len(names), path)
         arr = arrow_to_numpy(col)
         if not np.isfinite(arr).all():
-            raise _locate_bad_line(data, first_line, len(names), path)
+            raise _locate_bad_line(raw[start:], first_line, len(names), path)
         out[name] = arr
-    line_of = row_to_line(data, first_line)
+    line_of = row_to_line(raw, first_line, text_line=1)
     check_gps_time(out["gps_time"], path, line_of)
     out["GRACE_id"] = table.column("GRACE_id")
     out["qualflg"] = bits_from_strings(table.column("qualflg"), path, first_line, line_of=line_of)
@@ -734,8 +746,11 @@ def read_grace_acc1b(path: str | Path, *, invalid_bits: int = DEFAULT_INVALID_BI
     raw = read_bytes(path)
     flavour, header, data_start, first_line = _split_header(raw, path)
     info = (_interpret_gracefo if flavour == "gracefo" else _interpret_grace)(header, path)
-    data = raw[data_start:]
-    cols = _parse_binary(data, path) if info["binary"] else _parse_ascii(data, first_line, path)
+    cols = (
+        _parse_binary(raw[data_start:], path)
+        if info["binary"]
+        else _parse_ascii(raw, data_start, first_line, path)
+    )
     warn, letter = _check_ids(cols["GRACE_id"], info["letter"], path, cols["line_of"])
     time = cols["gps_time"]
     warn += _check_header_span(time, info["meta"], path, cols["line_of"])
