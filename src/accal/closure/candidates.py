@@ -46,6 +46,7 @@ __all__ = [
     "intra_period_shape",
     "periodic",
     "quadratic_drift",
+    "scan_multiplicity",
 ]
 
 #: Names an effect can carry in a result (``closure.json``).
@@ -322,8 +323,11 @@ def bias_step(ctx: Context) -> list[Proposal]:
     (O(n p), block by block for a block base).  Repeated over iterations, this is
     binary segmentation with a multiplicity-corrected threshold as penalty.  The
     multiplicity is ``step_tests`` (default 200: epochs closer than 0.5 % of the span
-    are not independent tests).  With several data channels the step has one size
-    per channel and the scan sums the channels' powers.
+    are not independent tests), or the scan's own, :func:`scan_multiplicity`, when
+    that is larger: with a per-block base (one bias per demodulation period) a step
+    is seen only inside its block, and every block is a scan of its own, so a day of
+    144 periods is ~10⁴ tests, not 200.  With several data channels the step has one
+    size per channel and the scan sums the channels' powers.
     """
     t = ctx.t
     n = t.size
@@ -359,7 +363,78 @@ def bias_step(ctx: Context) -> list[Proposal]:
         (ctx.t_all >= epoch).astype(np.float64)[:, None], (f"step@{epoch!r}",)
     )
     m_tests = float(min(ctx.options.get("step_tests", 200), ok.sum()))
-    return [Proposal("bias_step", None, cols, labs, m_tests, {"epoch": epoch}, axes=axes)]
+    block = ctx.basis.block
+    if ctx.basis.n_blocks > 1:  # a scan in every block holding candidate epochs
+        counts = np.bincount(block[masks[0] & (block >= 0)], minlength=ctx.basis.n_blocks)
+        scanned = np.unique(block[ok & (block >= 0)])
+        fractions = 1.0 / np.maximum(counts[scanned], 1)
+    else:  # one scan over the record, epochs at least min_segment from the ends
+        fractions = np.array([min_seg / max(n, 1)])
+    level = float(ctx.options.get("alpha", 0.01)) / float(ctx.options.get("families", 1))
+    m_scan = scan_multiplicity(fractions, len(masks), level)
+    return [
+        Proposal(
+            "bias_step",
+            None,
+            cols,
+            labs,
+            max(m_tests, m_scan),
+            {"epoch": epoch},
+            axes=axes,
+        )
+    ]
+
+
+def scan_multiplicity(fractions: NDArray[np.float64], k: int, level: float) -> float:
+    """Bonferroni factor of change-point scans, at the decision boundary.
+
+    The largest standardized step statistic over the epochs of a segment, with
+    epochs from a fraction ``ε`` of the segment to ``1 − ε``, exceeds ``x²`` (χ²
+    with ``k`` channels) with probability (Siegmund's approximation for the
+    standardized CUSUM of a Brownian bridge, James, James & Siegmund 1987, leading
+    term)::
+
+        P(max > x²) ≈ xᵏ e^(−x²/2) / (2^(k/2) Γ(k/2)) · ln((1 − ε)² / ε²)
+
+    summed over the segments scanned.  The factor returned is that probability
+    divided by the single-epoch ``P(χ²_k > x²)`` at the ``x²`` where the scan's
+    probability equals ``level`` (alpha over the candidate families), so a step's
+    corrected p-value is right where the decision is taken.
+
+    Checked by simulation (white noise, 390-sample segments with an affine base
+    per segment, as a 600 s demodulation period with a 200 s rotation mask): the
+    approximation is 1.2-1.7x conservative at x² = 16-25.
+
+    Parameters
+    ----------
+    fractions : ndarray
+        ``ε`` of every segment scanned (``1/L`` for a segment of ``L`` samples).
+    k : int
+        Channels the step statistic sums (its χ² degrees of freedom).
+    level : float
+        Corrected significance level of the whole scan.
+
+    Returns
+    -------
+    float
+        The factor (at least 1).
+    """
+    from scipy import optimize, special, stats
+
+    eps = np.clip(np.asarray(fractions, dtype=np.float64), 1e-12, 0.5)
+    logs = float(np.sum(2.0 * np.log((1.0 - eps) / eps)))
+    if logs <= 0.0 or not 0.0 < level < 1.0:
+        return 1.0
+    c = 2.0 ** (k / 2.0) * special.gamma(k / 2.0)
+
+    def excess(x2: float) -> float:  # log P(scan max > x2) - log level
+        return k / 2.0 * np.log(x2) - x2 / 2.0 - np.log(c) + np.log(logs) - np.log(level)
+
+    lo = max(float(k), 1.0)  # the tail formula holds beyond the mode
+    if excess(lo) <= 0.0:
+        return 1.0
+    x2 = optimize.brentq(excess, lo, 1e4)
+    return float(max(1.0, level / stats.chi2.sf(x2, k)))
 
 
 def _harmonic_cols(tau: NDArray[np.float64], freqs: list[float]) -> NDArray[np.float64]:

@@ -597,7 +597,12 @@ def close_loop(
         y_u=y_u,
         aux=aux_all,
         orbit_period=orbit_period,
-        options={**opts, "enabled": tuple(n for n, _ in builders)},
+        options={
+            **opts,
+            "enabled": tuple(n for n, _ in builders),
+            "alpha": alpha,
+            "families": _families(builders, aux_all, orbit_period),
+        },
         builders=builders,
         chan_all=chan_all,
         names=names,
