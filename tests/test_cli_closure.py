@@ -293,3 +293,44 @@ def test_no_step_test_on_a_record_shorter_than_two_revolutions(tmp_path):
         assert "bias_step" not in effects(entry, ax)
         assert "bias_step" not in entry[ax]["candidates"]
         assert "shorter than two revolutions" in entry[ax]["note"]
+
+
+def test_noise_free_difference_reports_the_effects_and_not_its_rounding(tmp_path):
+    """The injected day against the day it was made from: raw − reference is the effect.
+
+    A step on y and a quadratic on z come back exactly; before the resolution floor
+    the step's rounding residual (3e-24 m/s²) was reported as "unexplained".
+    """
+    from dataclasses import replace
+
+    from accal.io.grace_l1b import read_grace_acc1b, write_grace_acc1b
+
+    base = tmp_path / "ACC1B_2005-01-01_A_02.asc"
+    code, _, err = invoke(
+        "simulate", "grace", "--out", base, "--seed", 5, "--duration", 3 * 5600,
+    )  # fmt: skip
+    assert code == 0, err
+    s = read_grace_acc1b(base)
+    tau = s.time - s.time[0]
+    acc = s.acc.copy()
+    acc[:, 1] += 2e-9 * (tau >= 7000.0)
+    acc[:, 2] += 1e-8 * ((tau - tau[-1] / 2) / (tau[-1] / 2)) ** 2
+    inj = tmp_path / "inj" / base.name
+    inj.parent.mkdir()
+    write_grace_acc1b(replace(s, acc=acc), inj)
+    code, _, err = invoke(
+        "grace-bias", inj, "--reference", base, "--close-loop", "--out", tmp_path / "o", "-q"
+    )
+    assert code == 0, err
+    entry = json.loads((tmp_path / "o" / "closure.json").read_text())["sources"][base.name]
+    assert effects(entry, "x") == {} and entry["x"]["unexplained"] == []
+    step = effects(entry, "y")["bias_step"]
+    assert step["coefficient"] == pytest.approx(2e-9, rel=1e-9)
+    assert step["epoch"] - s.time[0] == 7000.0
+    assert set(effects(entry, "y")) == {"bias_step"}
+    quad = effects(entry, "z")["quadratic_drift"]
+    assert quad["coefficient"] == pytest.approx(1e-8 / (tau[-1] / 2) ** 2, rel=1e-9)
+    assert set(effects(entry, "z")) == {"quadratic_drift"}
+    for ax in "xyz":
+        assert entry[ax]["unexplained"] == []
+        assert any("numerical resolution" in n["note"] for n in entry[ax]["notes"])

@@ -743,6 +743,7 @@ def close_the_loop(
             alpha=opts.alpha,
             orbit_period=opts.orbit_period,
             candidates=candidates,
+            resolution=_resolution(series, fit_series, ax),
         )
         inst = np.zeros(len(series))
         labels = [f"poly{opts.order}"]
@@ -1307,6 +1308,21 @@ def _commit(
             manifest.entries.pop(manifest.key(o.path), None)
     manifest.save()
     return table
+
+
+def _resolution(series: AccSeries, fit_series: AccSeries, ax: str) -> float:
+    """Numerical resolution of the closure's data on axis ``ax`` [m/s²].
+
+    float64 epsilon times the largest magnitude of the raw axis (and of raw −
+    reference): a text file's 16-17 significant digits resolve no better.
+    """
+    big = 0.0
+    for s in (series, fit_series):
+        a = np.abs(s.axis(ax))
+        a = a[np.isfinite(a)]
+        if a.size:
+            big = max(big, float(a.max()))
+    return float(np.finfo(np.float64).eps * big)
 
 
 def _as_diagnosis(summary: dict[str, Any]) -> dict[str, Any]:

@@ -415,6 +415,8 @@ def close_loop_demod(
         channel=chan,
         channel_names=("y", "z"),
         noise_psd=noise_psd,
+        # rounding of the measurements (a noise-free simulation leaves nothing else)
+        resolution=float(np.finfo(np.float64).eps * np.nanmax(np.abs(y_s[use_s]))),
     )
     return DemodClosure(res, _periods(res, names, n_per, q, fs, float(t[0]), counts))
 

@@ -217,7 +217,8 @@ def to_markdown(
             f"{_fmt(u.frequency, 'Hz')} — {u.details.get('reason', '')}"
         )
     for n in result.notes:
-        lines.append(f"- {n['name']} ({n['channel']}): {n['note']}")
+        ch = f" ({n['channel']})" if n.get("channel") is not None else ""
+        lines.append(f"- {n['name']}{ch}: {n['note']}")
     if result.removed:
         names = ", ".join(f"{e.name} ({e.channel})" for e in result.removed)
         lines.append(f"- added and later eliminated (stood in for another effect): {names}")

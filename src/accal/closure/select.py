@@ -483,6 +483,7 @@ def close_loop(
     channel: ArrayLike | None = None,
     channel_names: Sequence[str] | None = None,
     noise_psd: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = None,
+    resolution: float | None = None,
 ) -> ClosureResult:
     """Find the effects a linear base model lacks, add them and refit.
 
@@ -533,6 +534,13 @@ def close_loop(
         rich base (the demodulation's per-period columns) under red noise came out
         low after effects were added: per-period sigmas 27 % under the true scatter.
         The tests always use the estimate.
+    resolution : float, optional
+        Numerical resolution of ``y`` [m/s²], e.g. float64 epsilon times the
+        largest raw value when ``y`` is raw − reference.  Once the residual's RMS is
+        within :data:`RESOLUTION_FACTOR` of it the residual is rounding, not
+        noise: the search stops and no ``unexplained`` structure is reported (a
+        noise-free raw − reference otherwise had its rounding reported as a
+        1.9e-27 m/s² "unexplained" component); a note says so.
 
     Returns
     -------
@@ -611,9 +619,27 @@ def close_loop(
         alpha=alpha,
         beta=beta,
     )
+    floor = RESOLUTION_FACTOR * float(resolution) if resolution and resolution > 0 else 0.0
+
+    def at_floor(state) -> bool:
+        """True (and noted) when the residual of ``state`` is rounding only."""
+        rms = float(np.sqrt(np.mean(state[1].resid ** 2)))
+        if rms > floor:
+            return False
+        _note(
+            search.notes,
+            "closure",
+            None,
+            f"residual RMS {rms:.2g} m/s² is at the data's numerical resolution "
+            f"({float(resolution):.2g} m/s²): nothing left to test",
+        )
+        return True
+
     iterations = 0
     seen = {search.model_key()}
     while len(search.found) < max_effects and iterations < 3 * max_effects:
+        if floor and at_floor(search.state(search.found)):
+            break
         iterations += 1
         if not search.step() or search.model_key() in seen:
             break
@@ -621,7 +647,7 @@ def close_loop(
 
     def smooth_test(state):
         """The catch-all test of the model ``state`` (None if disabled or nothing left)."""
-        if not catchall_knots or catchall_knots < 3:
+        if not catchall_knots or catchall_knots < 3 or (floor and at_floor(state)):
             return None, None
         b, f, lv = state
         zt = b.complement(_split_cols(_catchall(t_u, catchall_knots), chan_u, names))
@@ -811,6 +837,9 @@ def _note(notes: dict, name: str, channel: str | None, text: str, params=None) -
             d["details"] = dict(params)
         notes[key] = d
 
+
+#: A residual within this factor of the data's numerical resolution is rounding.
+RESOLUTION_FACTOR = 10.0
 
 _PAIR_FACTOR = 10.0  # pairs are tested at alpha/10: per-step FWER <= 1.1 alpha
 _PAIR_ANCHORS = 3
