@@ -298,7 +298,7 @@ def test_no_step_test_on_a_record_shorter_than_two_revolutions(tmp_path):
 def test_noise_free_difference_reports_the_effects_and_not_its_rounding(tmp_path):
     """The injected day against the day it was made from: raw − reference is the effect.
 
-    A step on y and a quadratic on z come back exactly; before the resolution floor
+    An exponential decay on x, a step on y and a quadratic on z come back exactly; before the resolution floor
     the step's rounding residual (3e-24 m/s²) was reported as "unexplained".
     """
     from dataclasses import replace
@@ -313,6 +313,7 @@ def test_noise_free_difference_reports_the_effects_and_not_its_rounding(tmp_path
     s = read_grace_acc1b(base)
     tau = s.time - s.time[0]
     acc = s.acc.copy()
+    acc[:, 0] += 3e-9 * np.exp(-tau / 3000.0)
     acc[:, 1] += 2e-9 * (tau >= 7000.0)
     acc[:, 2] += 1e-8 * ((tau - tau[-1] / 2) / (tau[-1] / 2)) ** 2
     inj = tmp_path / "inj" / base.name
@@ -323,7 +324,11 @@ def test_noise_free_difference_reports_the_effects_and_not_its_rounding(tmp_path
     )
     assert code == 0, err
     entry = json.loads((tmp_path / "o" / "closure.json").read_text())["sources"][base.name]
-    assert effects(entry, "x") == {} and entry["x"]["unexplained"] == []
+    expo = effects(entry, "x")["exponential_drift"]
+    assert set(effects(entry, "x")) == {"exponential_drift"}
+    assert expo["coefficient"] == pytest.approx(3e-9, rel=1e-9)
+    assert expo["tau"] == pytest.approx(3000.0, rel=1e-9)
+    assert entry["x"]["model"] == "poly1+exponential_drift(tau=3000 s)"
     step = effects(entry, "y")["bias_step"]
     assert step["coefficient"] == pytest.approx(2e-9, rel=1e-9)
     assert step["epoch"] - s.time[0] == 7000.0

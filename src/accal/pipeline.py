@@ -532,7 +532,13 @@ def _size(path: Path) -> int:
 #: Effects removed from the calibrated series (instrument effects).  Periodic
 #: terms and unexplained structure are reported but kept: at orbit frequencies
 #: they are as likely to be real non-gravitational signal as instrument error.
-INSTRUMENT_EFFECTS = ("quadratic_drift", "cubic_drift", "bias_step", "auxiliary")
+INSTRUMENT_EFFECTS = (
+    "quadratic_drift",
+    "cubic_drift",
+    "exponential_drift",
+    "bias_step",
+    "auxiliary",
+)
 
 
 def effect_models(result: Any) -> list[tuple[Any, np.ndarray]]:
@@ -549,6 +555,8 @@ def _effect_label(e: Any) -> str:
         return f"bias_step@{gps}GPS"
     if e.name == "auxiliary":
         return f"auxiliary({e.channel})"
+    if e.name == "exponential_drift" and e.tau is not None:
+        return f"exponential_drift(tau={e.tau:.0f} s)"
     if e.name == "periodic" and e.frequency is not None:
         return f"periodic({e.frequency:.4g} Hz)"
     return e.name
@@ -657,9 +665,9 @@ def closure_candidates(
 
     if opts.reference is not None:
         return tuple(DEFAULT_CANDIDATES), ""
-    drop = {"quadratic_drift", "cubic_drift"}
+    drop = {"quadratic_drift", "cubic_drift", "exponential_drift"}
     note = (
-        "no --reference: quadratic/cubic drift not tested (not separable from the slow "
+        "no --reference: quadratic/cubic/exponential drift not tested (not separable from the slow "
         "variation of the non-gravitational signal); periodic and unexplained structure "
         "include the real signal"
     )

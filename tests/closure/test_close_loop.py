@@ -58,6 +58,32 @@ def test_cubic_drift_found(sim):
     assert abs(err["drift"]["after"]) < 0.1 * abs(err["drift"]["before"])
 
 
+@pytest.mark.parametrize(("amp", "tau"), [(3e-9, 3600.0), (1e-9, 900.0), (-2e-9, 15000.0)])
+def test_exponential_drift_found_with_its_time_constant(sim, amp, tau):
+    """A decaying bias from the start: named, not taken for a step or a polynomial."""
+    d = sim(8, **DAY)
+    el = d["t"] - d["t"][0]
+    d["y"] = d["y"] + amp * np.exp(-el / tau)
+    res = _run(d)
+    assert _names(res) == ["exponential_drift"]
+    e = res.effects[0]
+    assert abs(e.coefficient - amp) < 3 * e.sigma
+    # measured: T within 0.2-3 % (the noise, not the search grid, sets it)
+    assert e.tau == pytest.approx(tau, rel=0.05)
+    err = _err(res, d)
+    assert abs(err["bias"]["after"]) < 0.2 * abs(err["bias"]["before"])
+
+
+def test_exponential_drift_noise_free_is_exact():
+    t = np.arange(0.0, 86400.0, 2.0)
+    y = 1e-7 + 1e-12 * t + 5e-9 * np.exp(-t / 7200.0)
+    res = close_loop(t, y, resolution=np.finfo(float).eps * 1e-7)
+    assert _names(res) == ["exponential_drift"] and res.unexplained == ()
+    e = res.effects[0]
+    assert e.coefficient == pytest.approx(5e-9, rel=1e-9)
+    assert e.tau == pytest.approx(7200.0, rel=1e-9)
+
+
 def test_bias_step_found_at_right_epoch(sim):
     d = sim(3, step=(0.4, 2e-9), **DAY)
     res = _run(d)

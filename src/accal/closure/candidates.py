@@ -43,6 +43,7 @@ __all__ = [
     "auxiliary",
     "bias_step",
     "cubic_drift",
+    "exponential_drift",
     "intra_period_shape",
     "periodic",
     "quadratic_drift",
@@ -53,6 +54,7 @@ __all__ = [
 EFFECT_NAMES = (
     "quadratic_drift",
     "cubic_drift",
+    "exponential_drift",
     "bias_step",
     "periodic",
     "auxiliary",
@@ -284,6 +286,111 @@ def cubic_drift(ctx: Context) -> list[Proposal]:
     if not ctx.has_label("t^2") and "quadratic_drift" in ctx.options.get("enabled", ()):
         return []
     return _poly_proposal(ctx, "cubic_drift", (2, 3))
+
+
+#: Shortest and longest time constants of :func:`exponential_drift` [s].  The longest
+#: is also capped at :data:`EXP_SPAN_FRACTION` of the record's span: a slower decay
+#: is a low-order polynomial over the record (a quadratic + an exponential of
+#: T = 0.8 span, 1.7e-8 m/s², took the place of a true cubic drift).
+EXP_TAU_RANGE = (120.0, 86400.0)
+EXP_SPAN_FRACTION = 0.25
+#: Ratio between neighbouring time constants searched.
+EXP_TAU_STEP = 1.4
+
+
+def exponential_drift(ctx: Context) -> list[Proposal]:
+    """A decaying bias ``A·exp(−(t − t0)/T)`` from the first sample (one ``A`` per channel).
+
+    The settling of an accelerometer after switch-on, a heater or mode change, or
+    a calibration manoeuvre at the start of the record: a drift shape no
+    polynomial of low order follows (a 5e-9 m/s², 2 h decay went unnamed as
+    "unexplained", a 1e-9 m/s², 50 min one was taken for a bias step).  ``T`` is
+    searched on a log grid (:data:`EXP_TAU_RANGE`, ratio :data:`EXP_TAU_STEP`,
+    capped at :data:`EXP_SPAN_FRACTION` of the span) for the most explained power, then refined between the
+    grid's neighbours (:func:`_refine_tau`); the multiplicity is the number of
+    grid values.  Only one exponential per model.
+    """
+    if any(lb.startswith("exp:") for lb in ctx.labels):
+        return []
+    steps = np.diff(ctx.t)
+    steps = steps[steps > 0]
+    dt = float(np.median(steps)) if steps.size else 1.0
+    lo = max(EXP_TAU_RANGE[0], 10.0 * dt)
+    hi = min(EXP_TAU_RANGE[1], EXP_SPAN_FRACTION * ctx.span)
+    if hi <= lo:
+        return []
+    n_tau = int(np.ceil(np.log(hi / lo) / np.log(EXP_TAU_STEP))) + 1
+    taus = np.geomspace(lo, hi, n_tau)  # both ends, ratio <= EXP_TAU_STEP
+    el = ctx.t - ctx.t0
+    z = np.exp(-el[None, :] / taus[:, None])
+    power = np.zeros(taus.size)
+    for m in ctx.channel_masks():  # one amplitude per channel: the powers add
+        power += _row_power(ctx, z * m)
+    if not np.any(power > 0):
+        return []
+    k = int(np.argmax(power))
+    tau = _refine_tau(ctx, el, float(taus[max(k - 1, 0)]), float(taus[min(k + 1, taus.size - 1)]))
+    col = np.exp(-(ctx.t_all - ctx.t0) / tau)
+    cols, labs, axes = ctx.split(col[:, None], (f"exp:{tau!r}",))
+    return [
+        Proposal(
+            "exponential_drift",
+            None,
+            cols,
+            labs,
+            float(taus.size),
+            {"tau": tau},
+            axes=axes,
+        )
+    ]
+
+
+def _refine_tau(ctx: Context, el: NDArray[np.float64], lo: float, hi: float) -> float:
+    """The time constant of most explained power in ``[lo, hi]`` (bounded search on ln T).
+
+    The grid's step (40 %) left a 5 % error in T, and the misfit was then taken up
+    by a spurious step or polynomial.
+    """
+    from scipy.optimize import minimize_scalar
+
+    masks = ctx.channel_masks()
+
+    def neg_power(log_tau: float) -> float:
+        z = np.exp(-el / np.exp(log_tau))[None, :]
+        return -float(sum(_row_power(ctx, z * m)[0] for m in masks))
+
+    if hi <= lo:
+        return lo
+    res = minimize_scalar(
+        neg_power, bounds=(np.log(lo), np.log(hi)), method="bounded", options={"xatol": 1e-5}
+    )
+    tau = float(np.exp(res.x))
+    # Gauss-Newton on (A_c, T): the power is flat at its maximum, so the bounded
+    # search stops at ~1e-7 relative; a noise-free exponential needs T to rounding
+    r = ctx.residual
+    for _ in range(8):
+        e = np.exp(-el / tau)
+        a_c, d_col = [], np.zeros_like(e)
+        for m in masks:
+            x = e * m
+            xt = x - ctx.basis.project(x)
+            nrm = float(xt @ xt)
+            a = float(xt @ r) / nrm if nrm > 0 else 0.0
+            a_c.append(x)
+            d_col += a * (el / tau**2) * e * m  # ∂(A_c e^(−el/T))/∂T
+        cols = np.column_stack([*a_c, d_col])
+        ct = cols - ctx.basis.project(cols)
+        norms = np.linalg.norm(ct, axis=0)
+        if not np.all(norms > 0):
+            break
+        coef, *_ = np.linalg.lstsq(ct / norms, r, rcond=None)  # columns of ~1 and ~A/T
+        step = float(coef[-1] / norms[-1])
+        if not np.isfinite(step) or abs(step) > 0.5 * tau:
+            break
+        tau = min(max(tau + step, lo), hi)
+        if abs(step) <= 1e-13 * tau:
+            break
+    return tau
 
 
 def _without_orbit_template(ctx: Context, masks: list[NDArray[np.bool_]]) -> NDArray[np.float64]:
@@ -926,6 +1033,7 @@ def intra_period_shape(ctx: Context) -> list[Proposal]:
 BUILDERS: dict[str, Builder] = {
     "quadratic_drift": quadratic_drift,
     "cubic_drift": cubic_drift,
+    "exponential_drift": exponential_drift,
     "bias_step": bias_step,
     "periodic": periodic,
     "auxiliary": auxiliary,
