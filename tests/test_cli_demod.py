@@ -238,7 +238,8 @@ def test_psd_file_and_bad_psd(tmp_path):
     code, _, err = invoke(
         "demod", run, "--tau", 60, "--mask", 20, "--out", tmp_path / "p", "--psd", psd
     )
-    assert code == 1 and f"accal: {psd}: PSD table values must be positive" in err
+    # a bad --psd table is a bad option value: exit 2 (as a missing one), one line
+    assert code == 2 and err.splitlines() == [f"accal: {psd}: PSD table values must be positive"]
     assert not (tmp_path / "p").exists()
 
 

@@ -12,6 +12,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 from click.testing import CliRunner
@@ -236,3 +237,197 @@ def test_colliding_stems_are_a_usage_error_before_anything_runs(run_csv, tmp_pat
     )  # fmt: skip
     assert code == 2 and "would both write run.summary.json" in err
     assert not out.exists()
+
+
+# --- 5. second QA pass: cumulative --out, formats, σ, jitter, warnings, messages ----------
+
+
+def _copy(run: Path, dest: Path) -> Path:
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    dest.write_bytes(run.read_bytes())
+    return dest
+
+
+def test_rerun_into_the_same_out_leaves_no_stale_summary_for_diagnose(run_csv, tmp_path):
+    """A run alone (summary.json), then with another run (a.summary.json): one summary each.
+
+    The first summary.json (method ls) used to stay, and diagnose analysed run a twice,
+    once with the stale options; a summary planted from an earlier run is ignored too.
+    """
+    a, b = _copy(run_csv, tmp_path / "in" / "a.csv"), _copy(run_csv, tmp_path / "in" / "b.csv")
+    out = tmp_path / "out"
+    common = ("--tau", TAU, "--mask", MASK, "--out", out, "-q")
+    assert invoke("demod", a, *common)[0] == 0
+    stale = json.loads((out / "summary.json").read_text())
+    code, _, err = invoke("demod", a, b, *common, "--method", "gls")
+    assert code == 0, err
+    assert sorted(p.name for p in out.glob("*summary*")) == [
+        "a.summary.json", "a.summary.md", "b.summary.json", "b.summary.md",
+    ]  # fmt: skip
+    # an earlier run's summary of a (another name, other options): not current
+    (out / "old.summary.json").write_text(json.dumps(stale))
+    code, text, err = invoke("diagnose", out)
+    assert code == 0, err
+    assert [ln.split(":")[0] for ln in text.splitlines()] == ["a.csv", "b.csv"]
+    assert set(json.loads((out / "diagnose" / "closure.json").read_text())["sources"]) == {
+        "a.csv",
+        "b.csv",
+    }
+
+
+def test_another_format_into_the_same_out_is_refused(run_csv, tmp_path):
+    out = tmp_path / "out"
+    assert invoke("demod", run_csv, "--tau", TAU, "--mask", MASK, "--out", out, "-q")[0] == 0
+    code, _, err = invoke(
+        "demod", run_csv, "--tau", TAU, "--mask", MASK, "--out", out, "--format", "csv", "-q"
+    )
+    assert code == 2
+    assert err.splitlines() == [
+        f"accal: {out / 'periods.parquet'}: the periods table of this --out is in --format "
+        "parquet; use --format parquet there, or another --out for --format csv"
+    ]
+    assert not (out / "periods.csv").exists()
+
+
+def test_sigma_of_the_mean_with_every_other_period_dropped(run_csv, tmp_path):
+    """Odd periods at π/2 and 3π/2 only (dropped): no kept pair is 1 period apart.
+
+    Rd[1] is then unknown and σ of the mean was null; it needs only the lags the kept
+    periods have (0, 2, 4, ...).  The standard σ over --integration (consecutive
+    periods) cannot be computed: null, with the reason.
+    """
+    df = _rows(run_csv)
+    odd = (df["time"] // TAU).astype(int) % 2 == 1
+    df.loc[odd, "theta"] += np.pi / 2
+    run = tmp_path / "alt.csv"
+    write_table(df, run, units={"theta": "rad"})
+    out = tmp_path / "out"
+    code, _, err = invoke("demod", run, "--tau", TAU, "--mask", MASK, "--out", out, "-q")
+    assert code == 0, err
+    s = json.loads((out / "summary.json").read_text())
+    assert s["n_kept"] == 30 and s["dropped_periods"] == list(range(1, 60, 2))
+    assert s["Rd"][1] is None and s["Rd"][2] is not None
+    n, rd = s["n_kept"], s["Rd"]
+    expected = np.sqrt((n * rd[0] + 2 * sum((n - k) * rd[2 * k] for k in (1, 2))) / n**2)
+    assert s["mean"]["sigma"] == pytest.approx(expected, rel=1e-12)
+    assert s["sigma_T"]["run"]["sigma"] == s["mean"]["sigma"]
+    std = s["sigma_T"]["standard"]
+    assert std["sigma"] is None and "Rd[1] is unknown" in std["note"]
+    assert "n/a (not computed: Rd[1] is unknown" in (out / "summary.md").read_text()
+
+
+def _jittered(run_csv: Path, path: Path) -> Path:
+    """The run with ±1 ms timing jitter, the last sample early, the first one late."""
+    df = _rows(run_csv)
+    rng = np.random.default_rng(1)
+    t = df["time"].to_numpy() + rng.uniform(-1e-3, 1e-3, len(df))
+    t[0], t[-1] = df["time"].iloc[0] + 5e-4, df["time"].iloc[-1] - 5e-4
+    df["time"] = t
+    write_table(df, path, units={"theta": "rad"})
+    return path
+
+
+def test_jitter_with_resample_keeps_the_last_period(run_csv, tmp_path):
+    """The grid ended one point short of the jittered last sample: period 59 vanished."""
+    run = _jittered(run_csv, tmp_path / "jit.csv")
+    out = tmp_path / "out"
+    args = ("demod", run, "--tau", TAU, "--mask", MASK, "--resample", "--out", out, "-q")
+    code, _, err = invoke(*args)
+    assert code == 0, err
+    s = json.loads((out / "summary.json").read_text())
+    assert (s["n_periods"], s["n_kept"]) == (60, 60)
+    rs = s["input"]["resample"]
+    assert rs["n_grid"] == 3600 and rs["n_end_held"] == 1
+    assert "1 grid point after the last sample took its value" in err
+
+
+@pytest.mark.parametrize("case", ["affine", "jitter"])
+def test_leakage_of_a_valid_pattern_is_no_warning(run_csv, tmp_path, case):
+    """Eq. 16 leakage 0.09 (affine signal) or 0.13 (jitter + resample): the joint fit
+    removes the bias, --tau is the pattern's period: no misleading '--tau?' warning."""
+    run, extra = run_csv, ["--signal-model", "affine"]
+    if case == "jitter":
+        run, extra = _jittered(run_csv, tmp_path / "jit.csv"), ["--resample"]
+    out = tmp_path / "out"
+    code, _, err = invoke("demod", run, "--tau", TAU, "--mask", MASK, *extra, "--out", out, "-q")
+    assert code == 0, err
+    s = json.loads((out / "summary.json").read_text())
+    assert s["leakage_max"] > 1e-2 and s["pattern"]["rotation_shift"] == 0.0
+    assert "eq. 16" not in err and "--tau" not in err and "rotations move" not in err
+
+
+def test_tau_not_matching_the_pattern_says_which_tau(run_csv, tmp_path):
+    out = tmp_path / "out"
+    code, _, err = invoke("demod", run_csv, "--tau", TAU - 1, "--mask", MASK, "--out", out)
+    assert code == 0, err
+    assert (
+        "the rotations move by +1 s from one period to the next: the pattern repeats every "
+        "60 s, not --tau 59 s; give --tau 60 (or fix the time column); eq. 16 leakage up to"
+    ) in err
+    assert json.loads((out / "summary.json").read_text())["pattern"]["repeats_every"] == 60.0
+
+
+@pytest.mark.parametrize("command", ["demod", "budget"])
+def test_missing_psd_file_is_a_usage_error(run_csv, tmp_path, command):
+    missing = tmp_path / "nope.csv"
+    out = tmp_path / "out"
+    if command == "demod":
+        args = ("demod", run_csv, "--tau", TAU, "--mask", MASK, "--out", out)
+    else:
+        args = ("budget", "--tau", 600, "--mask", 200)
+    code, _, err = invoke(*args, "--psd", missing)
+    assert code == 2
+    assert err.splitlines() == [f"accal: {missing}: no such file"]
+    assert not out.exists()
+
+
+def test_diagnose_on_a_directory_with_nothing_usable_names_both_kinds(run_csv, tmp_path):
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    code, _, err = invoke("diagnose", empty)
+    assert code == 1
+    assert err.splitlines() == [
+        f"accal: {empty}: no *.calibrated.parquet or *.calibrated.csv file (accal grace-bias "
+        "output) and no periods.parquet or periods.csv with summary.json or "
+        "<stem>.summary.json (accal demod output) to diagnose"
+    ]
+    # a periods table whose summaries are gone: what is missing, and for which run
+    out = tmp_path / "out"
+    assert invoke("demod", run_csv, "--tau", TAU, "--mask", MASK, "--out", out, "-q")[0] == 0
+    (out / "summary.json").unlink()
+    code, _, err = invoke("diagnose", out)
+    assert code == 1
+    assert err.splitlines() == [
+        f"accal: {out}: warning: run.csv: rows in periods.parquet but no current summary "
+        f"(summary.json now belongs to another run); re-run accal demod on it into {out} to "
+        "diagnose it",
+        f"accal: {out}: no accal demod summary (summary.json or <stem>.summary.json) naming a "
+        "run of its periods table to diagnose",
+    ]
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        (["--mask", "0"], "--mask (masking time TM) must be in (0, --tau) s"),
+        (["--mask", "700"], "--mask (masking time TM) must be in (0, --tau) s"),
+        (["--mask", "201"], "no calibration pattern for --tau 600 s, --mask 201 s, --fs 1 Hz"),
+    ],
+)
+def test_simulate_gap_bad_mask_names_the_option(tmp_path, options, message):
+    code, _, err = invoke("simulate", "gap", *options, "--out", tmp_path / "r.parquet")
+    assert code == 2, err
+    assert [x for x in err.splitlines() if x.startswith("Error:")][0].startswith(
+        f"Error: {message}"
+    )
+    assert not list(tmp_path.iterdir())
+
+
+def test_text_run_named_parquet_is_read_with_a_warning(run_csv, tmp_path):
+    run = _copy(run_csv, tmp_path / "run.parquet")
+    out = tmp_path / "out"
+    code, _, err = invoke("demod", run, "--tau", TAU, "--mask", MASK, "--out", out, "-q")
+    assert code == 0, err
+    assert f"accal: {run}: warning: named .parquet but is text: read as CSV" in err.splitlines()
+    s = json.loads((out / "summary.json").read_text())
+    assert s["input"]["warnings"] == ["named .parquet but is text: read as CSV"]

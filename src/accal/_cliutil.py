@@ -141,6 +141,12 @@ def fail(msg: str) -> None:
     sys.exit(1)
 
 
+def usage_fail(msg: str) -> None:
+    """Print the one-line error of a bad option value (a file it names) and exit with status 2."""
+    err(msg)
+    sys.exit(2)
+
+
 def alpha_option(f: Any) -> Any:
     """``--alpha``: false-detection probability per closure selection step (shared)."""
     return click.option(

@@ -427,9 +427,15 @@ def diagnose(
     if any(directory.glob("periods.*")):  # an accal demod output directory
         from accal.pipeline_demod import diagnose_demod_dir
 
-        results = diagnose_demod_dir(directory, out, alpha=alpha)
+        stale: list[str] = []
+        results = diagnose_demod_dir(directory, out, alpha=alpha, warnings=stale)
+        for w in stale:
+            _err(f"{directory}: warning: {w}")
         if not results:
-            _err(f"{directory}: no accal demod summary naming a run file")
+            _err(
+                f"{directory}: no accal demod summary (summary.json or <stem>.summary.json) "
+                "naming a run of its periods table to diagnose"
+            )
             sys.exit(1)
         for src, entry, msg in results:
             if entry is None:
@@ -448,7 +454,11 @@ def diagnose(
         directory, out, aux=aux, alpha=alpha, progress=_progress(quiet, "diagnose")
     )
     if not outcomes:
-        _err(f"{directory}: no *.calibrated.parquet or *.calibrated.csv file to diagnose")
+        _err(
+            f"{directory}: no *.calibrated.parquet or *.calibrated.csv file (accal grace-bias "
+            "output) and no periods.parquet or periods.csv with summary.json or "
+            "<stem>.summary.json (accal demod output) to diagnose"
+        )
         sys.exit(1)
     for o in outcomes:
         if not o.ok:

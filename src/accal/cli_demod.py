@@ -19,6 +19,7 @@ from accal._cliutil import alpha_option, config_option
 from accal._cliutil import err as _err
 from accal._cliutil import fail as _fail
 from accal._cliutil import progress as _progress
+from accal._cliutil import usage_fail as _usage_fail
 
 CONTEXT_SETTINGS = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
 
@@ -131,7 +132,13 @@ def demod(
     and OUT/summary.md with one RUN, OUT/<stem>.summary.json/.md with several.
     """
     from accal.errors import AccalError
-    from accal.pipeline_demod import DemodOptions, output_paths, run_demod
+    from accal.pipeline_demod import (
+        DemodOptions,
+        check_output_format,
+        load_psd,
+        output_paths,
+        run_demod,
+    )
 
     try:
         output_paths(runs, out, fmt)  # a run given twice, colliding stems: usage errors
@@ -154,8 +161,13 @@ def demod(
         )
     except AccalError as exc:
         raise click.UsageError(str(exc)) from None
+    try:  # files named by the options: bad ones are usage errors too, one line naming the file
+        check_output_format(out, fmt)
+        noise = load_psd(psd)
+    except AccalError as exc:
+        _usage_fail(str(exc))
     try:
-        summary = run_demod(runs, out, opts, progress=_progress(quiet, "demod"))
+        summary = run_demod(runs, out, opts, progress=_progress(quiet, "demod"), psd=noise)
     except AccalError as exc:
         _fail(str(exc))
     for o in summary.outcomes:
@@ -286,8 +298,12 @@ def budget(
 ) -> None:
     """Uncertainty budget: Rd[k] and σ over T for τ, or the optimal τ (Fig. 6)."""
     from accal.errors import AccalError
-    from accal.pipeline_demod import budget_report, plot_budget
+    from accal.pipeline_demod import budget_report, load_psd, plot_budget
 
+    try:  # a missing or bad --psd table is a usage error (exit 2), one line naming the file
+        load_psd(psd)
+    except AccalError as exc:
+        _usage_fail(str(exc))
     try:
         rep = budget_report(
             mask, tau=tau, fs=fs, method=method, integration=integration, psd=psd, taus=taus
@@ -366,7 +382,7 @@ def simulate_gap(
     with_x: bool,
 ) -> None:
     """Write a synthetic rotating-platform run (MicroSTAR noise) and its truth table."""
-    from accal.errors import AccalError
+    from accal.errors import AccalError, ValidationError
     from accal.pipeline_demod import write_simulated_gap
 
     try:
@@ -383,6 +399,8 @@ def simulate_gap(
             signal_period=signal_period,
             with_x=with_x,
         )
+    except ValidationError as exc:  # option values (the message names the option)
+        raise click.UsageError(str(exc)) from None
     except AccalError as exc:
         _fail(str(exc))
     click.echo(f"wrote {run} and {truth}", err=True)

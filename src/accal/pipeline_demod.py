@@ -387,6 +387,19 @@ def validated_chunks(stream: Any, opts: DemodOptions, step: float, info: RunInfo
             {k: cols[k] for k in opts.aux_channels},
             valid,
         )
+    if resampler is not None and problem is None:
+        # the grid point just after the last sample (jitter): no last period lost
+        t, cols, valid = resampler.finish()
+        if t.size:
+            info.n_samples += t.size
+            yield DemodChunk(
+                t,
+                cols["m_y"],
+                cols["m_z"],
+                cols["theta"],
+                {k: cols[k] for k in opts.aux_channels},
+                valid,
+            )
     info.warnings = list(stream.warnings)
     if resampler is not None:
         info.resample = resampler.report.as_dict()
@@ -491,6 +504,21 @@ def summarise(
     n = res.a_Y.size
     rd = np.asarray(res.Rd, float)
     n_std = max(1, int(round(opts.integration / res.tau)))
+    # σ of the mean of the kept periods at their own lags (no lag that no pair has)
+    sigma_run = sigma_mean(rd, n, index=res.period_index)
+    sigma_std = sigma_mean(rd, n_std)
+    unknown = [k for k in range(1, min(n_std, rd.size)) if not np.isfinite(rd[k])]
+    std_note = None
+    if unknown:
+        std_note = (
+            f"not computed: Rd[{unknown[0]}] is unknown because no two kept periods are "
+            f"{unknown[0]} period(s) apart ({res.dropped} of {res.n_periods} periods dropped); "
+            f"the mean over {opts.integration:g} s of consecutive periods needs it"
+        )
+    shift = float(getattr(res, "rotation_shift", float("nan")))
+    # a shift of a few samples: the pattern's period is tau + shift; a large one says
+    # only that the pattern does not repeat every tau
+    near = bool(np.isfinite(shift) and abs(shift) / res.fs < SHIFT_NEAR * res.tau)
     dropped = sorted(set(range(res.n_periods)) - set(res.period_index.tolist()))
     mt = res.masked_time
     measured = float(np.median(mt))
@@ -520,6 +548,7 @@ def summarise(
             "axes": info.axes,
             "aux_channels": info.aux_channels,
             "chunk_rows": int(opts.chunk_rows),
+            "warnings": list(info.warnings),
         },
         "options": {
             "tau": opts.tau,
@@ -544,22 +573,30 @@ def summarise(
             "tolerance": MASK_RTOL,
         },
         "leakage_max": res.max_leakage,
+        "pattern": {
+            "rotation_shift": shift / res.fs if np.isfinite(shift) else None,
+            "repeats_every": res.tau + shift / res.fs if near else None,
+            "units": "s (median shift of the rotations from one period to the next: 0 when "
+            "the rotation pattern repeats every tau; the period it repeats with)",
+        },
         "Rd": rd.tolist(),
         "Rd_units": "m^2/s^4 (autocovariance of a_Y per period lag, eq. 23)",
         "sigma_T": {
-            "run": {"T": n * res.tau, "n_periods": n, "sigma": sigma_mean(rd, n)},
+            "run": {"T": n * res.tau, "n_periods": n, "sigma": sigma_run},
             "standard": {
                 "T": n_std * res.tau,
                 "n_periods": n_std,
-                "sigma": sigma_mean(rd, n_std),
+                "sigma": float("nan") if std_note else sigma_std,
+                "note": std_note,
             },
-            "units": "m/s^2 (1 sigma of the mean over T, full Rd[k])",
+            "units": "m/s^2 (1 sigma of the mean over T, full Rd[k]; the run's at the lags "
+            "of its kept periods)",
         },
         "mean": {
             "a_Y": float(np.mean(res.a_Y)),
             "a_Z": float(np.mean(res.a_Z)),
-            "sigma": sigma_mean(rd, n),
-            "units": "m/s^2 (plain mean of the kept periods)",
+            "sigma": sigma_run,
+            "units": "m/s^2 (plain mean of the kept periods; sigma at their own lags)",
         },
         "scatter": scatter,
     }
@@ -650,14 +687,19 @@ def find_run(summary: dict[str, Any], summary_path: Path) -> Path:
     )
 
 
-#: Eq. 16 leakage above which the summary warns (a pattern designed for the
-#: period gives ~1e-15; a pattern of period 600 s demodulated with --tau 599 gives 0.3).
-LEAKAGE_WARN = 1e-3
+#: Shift of the rotations from one period to the next above which --tau is taken not
+#: to match the pattern [samples]: 0 for a pattern that repeats every τ (also with a
+#: four-angle pattern, an affine signal model, or jittered and resampled timing), 1
+#: for a 600 s pattern demodulated with --tau 599 at 1 Hz.
+SHIFT_WARN = 0.5
+#: A shift shorter than this fraction of τ gives the pattern's period (τ + shift);
+#: a longer one only says that the pattern does not repeat every τ.
+SHIFT_NEAR = 1 / 8
 
 
 def summary_warnings(summary: dict[str, Any]) -> tuple[str, ...]:
     """Findings of a summary worth a line on stderr."""
-    w = []
+    w = list(summary["input"].get("warnings") or [])
     m = summary["mask"]
     if m["mismatch"]:
         w.append(
@@ -666,20 +708,37 @@ def summary_warnings(summary: dict[str, Any]) -> tuple[str, ...]:
         )
     if summary["dropped"]:
         w.append(f"{summary['dropped']} of {summary['n_periods']} periods dropped")
-    leak = summary.get("leakage_max")
-    aux_bias = "+" in str(summary.get("options", {}).get("bias_model", ""))  # aux leaks by nature
-    if not aux_bias and leak is not None and np.isfinite(leak) and leak > LEAKAGE_WARN:
+    # eq. 16 leakage alone is no fault: the joint fit of eq. 17 (chosen whenever it is not
+    # ~0) removes the bias whatever the pattern (four angles, an affine signal model, jitter
+    # give some).  What is wrong is a --tau that is not the pattern's period: then the
+    # rotations move from one period to the next.
+    pat = summary.get("pattern") or {}
+    shift, tau = pat.get("rotation_shift"), summary["options"]["tau"]
+    fs = summary["input"]["fs"]
+    if shift is not None and np.isfinite(shift) and abs(shift) * fs > SHIFT_WARN:
+        leak = summary.get("leakage_max")
+        leak_text = (
+            f"; eq. 16 leakage up to {leak:.2g}, removed by the joint fit of eq. 17"
+            if leak is not None and np.isfinite(leak) and leak > 1e-9
+            else ""
+        )
+        every = pat.get("repeats_every")
+        if every is not None:
+            what = f"the pattern repeats every {every:.9g} s, not --tau {tau:g} s; give --tau {every:.9g}"
+        else:
+            what = f"the pattern does not repeat every --tau {tau:g} s; give --tau its period"
         w.append(
-            f"eq. 16 leakage up to {leak:.2g}: the rotation pattern does not cancel a constant "
-            "bias on its own (does --tau match the pattern's period?); the joint fit of eq. 17 "
-            "still removes it"
+            f"the rotations move by {shift:+.9g} s from one period to the next: {what} "
+            f"(or fix the time column){leak_text}"
         )
     rs = summary["input"].get("resample")
     if rs:
+        held = rs.get("n_end_held", 0)
         w.append(
             f"resampled onto a {rs['step']:.9g} s grid: {rs['n_interpolated']} samples "
             f"interpolated, {rs['n_gap']} in {rs['n_gaps']} gap(s) marked invalid "
             f"(largest gap {rs['largest_gap']:.9g} s)"
+            + (f", {held} grid point after the last sample took its value" if held else "")
         )
     return tuple(w)
 
@@ -719,7 +778,11 @@ def summary_markdown(s: dict[str, Any]) -> str:
         f"| σ of the mean over the run ({s['sigma_T']['run']['T']:g} s) | "
         f"{e(s['sigma_T']['run']['sigma'])} m/s² |",
         f"| σ of the mean over {s['sigma_T']['standard']['T']:g} s | "
-        f"{e(s['sigma_T']['standard']['sigma'])} m/s² |",
+        + (
+            f"n/a ({s['sigma_T']['standard']['note']}) |"
+            if s["sigma_T"]["standard"].get("note")
+            else f"{e(s['sigma_T']['standard']['sigma'])} m/s² |"
+        ),
         f"| mean a_Y, a_Z | {e(s['mean']['a_Y'])}, {e(s['mean']['a_Z'])} m/s² |",
         f"| scatter/σ (Y, Z) | {e(s['scatter']['Y']['ratio'])}, {e(s['scatter']['Z']['ratio'])} |",
     ]
@@ -810,6 +873,60 @@ def output_paths(paths: Sequence[Path], out_dir: Path, fmt: str) -> list[tuple[P
     return out
 
 
+def check_output_format(out_dir: Path, fmt: str) -> None:
+    """Refuse a ``--format`` other than that of the periods table already in ``out_dir``.
+
+    The periods table is cumulative: a second one in the other format beside it
+    would split the directory's rows in two tables (as ``grace-bias`` refuses a
+    second ``bias_drift`` table).
+
+    Raises
+    ------
+    ValidationError
+        One line naming the existing table.
+    """
+    other = "csv" if fmt == "parquet" else "parquet"
+    table = Path(out_dir) / f"periods.{other}"
+    if table.exists():
+        raise ValidationError(
+            f"{table}: the periods table of this --out is in --format {other}; use --format "
+            f"{other} there, or another --out for --format {fmt}"
+        )
+
+
+def summary_source(path: Path) -> str | None:
+    """File name of the run a ``summary.json`` is about, or None if it is not a demod summary."""
+    try:
+        s = json.loads(Path(path).read_text())
+        return Path(s["source"]).name if isinstance(s, dict) and "options" in s else None
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+def remove_stale_summaries(out_dir: Path, source: str, keep: Path) -> list[Path]:
+    """Remove the summaries of ``source`` in ``out_dir`` other than ``keep`` (and their .md).
+
+    A run that is re-run into the same directory under another summary name
+    (``summary.json`` alone, ``<stem>.summary.json`` with others) replaces its
+    rows in the periods table; its old summaries describe rows that are gone.
+
+    Returns
+    -------
+    list of Path
+        The files removed.
+    """
+    gone = []
+    for sp in sorted(Path(out_dir).glob("*summary.json")):
+        if sp.name == keep.name or summary_source(sp) != source:
+            continue
+        md = sp.with_name(sp.name[: -len(".json")] + ".md")
+        for f in (sp, md):
+            with contextlib.suppress(FileNotFoundError):
+                f.unlink()
+                gone.append(f)
+    return gone
+
+
 def process_run(
     path: Path, targets: tuple[Path, Path, Path], opts: DemodOptions, psd: Any
 ) -> RunOutcome:
@@ -859,6 +976,7 @@ def process_run(
         "n_kept": int(res.a_Y.size),
         "accal_version": __version__,
         "history": history,
+        "summary": targets[1].name,  # the source's current summary (accal diagnose)
     }
 
     def table_meta(old: dict[str, Any]) -> dict[str, Any]:
@@ -881,6 +999,7 @@ def process_run(
         )
         tmp[1].write_text(json.dumps(_nan_to_none(summary), indent=2, default=_json_default) + "\n")
         tmp[2].write_text(summary_markdown(summary))
+    remove_stale_summaries(targets[1].parent, path.name, targets[1])
     if closure is not None:
         write_demod_closure(targets[0].parent, path.name, closure)
     return RunOutcome(
@@ -900,7 +1019,8 @@ def close_run(
     The run is read whole (:func:`accal.io.rawlog.read_rawlog`) and, with
     ``opts.resample``, resampled as the demodulation resampled it
     (:func:`accal.estimators.resample.resample_uniform` onto ``t0 + k·step``, gaps
-    longer than ``opts.gap_factor`` steps kept as invalid samples); the declared
+    longer than ``opts.gap_factor`` steps kept as invalid samples, the grid point
+    just after the last sample held); the declared
     model is the per-period signal (``--signal-model``) and affine bias (plus the
     ``--bias-model`` channels, eq. 18); every other auxiliary channel is offered
     to the ``auxiliary`` candidate, with the platform candidates (angle offset,
@@ -946,7 +1066,9 @@ def close_run(
         from accal.estimators.resample import nominal_step, resample_uniform
 
         grid_step = step if step is not None else nominal_step(time, opts.tau)
-        time, cols, valid, _ = resample_uniform(time, cols, grid_step, gap_factor=opts.gap_factor)
+        time, cols, valid, _ = resample_uniform(
+            time, cols, grid_step, gap_factor=opts.gap_factor, hold_end=True
+        )
     theta = cols["theta"]
     chans = {k: v for k, v in cols.items() if k not in ("m_y", "m_z", "theta")}
     bias_aux = {c: chans[c] for c in opts.aux_channels if c in chans}
@@ -1105,6 +1227,7 @@ def run_demod(
     opts: DemodOptions,
     *,
     progress: Callable[[Iterable[Path]], Iterable[Path]] | None = None,
+    psd: Any = None,
 ) -> DemodRunSummary:
     """Demodulate every run file; failures are recorded, not raised.
 
@@ -1118,6 +1241,8 @@ def run_demod(
         Options.
     progress : callable, optional
         Wraps the iterable of paths (e.g. ``tqdm``).
+    psd : PSD, optional
+        The noise model already loaded from ``opts.psd`` (:func:`load_psd`).
 
     Returns
     -------
@@ -1126,14 +1251,17 @@ def run_demod(
     Raises
     ------
     AccalError
-        Before any input is processed: unreadable ``--psd`` table, colliding output names.
+        Before any input is processed: unreadable ``--psd`` table, colliding output
+        names, a periods table of the other ``--format`` in ``out_dir``.
     """
     from accal.batch import OutputLock, RunLog, remove_stale_temporaries
 
     start = _time.perf_counter()
     paths = [Path(p) for p in paths]
     targets = output_paths(paths, out_dir, opts.fmt)
-    psd = load_psd(opts.psd)
+    check_output_format(out_dir, opts.fmt)
+    if psd is None:
+        psd = load_psd(opts.psd)
     out_dir.mkdir(parents=True, exist_ok=True)
     outcomes: list[RunOutcome] = []
     pairs = list(zip(paths, targets, strict=True))
@@ -1333,12 +1461,30 @@ def write_simulated_gap(out: Path, **params: Any) -> tuple[Path, Path]:
     needs a few hundred MB; shorter ones are one block, identical to
     :func:`~accal.simulate.gap.simulate_gap`'s record.
     """
+    from accal.estimators.design import design_pattern
     from accal.io.chunked import chunked_table_writer
     from accal.simulate.gap import simulate_gap_chunks
 
     out = Path(out)
     if out.name.lower().endswith(".gz"):
         raise ValidationError(f"{out}: compressed output is not supported; use .parquet or .csv")
+    # option errors name the options (design_pattern's own messages say tm, tau)
+    tau, mask, fs = (float(params.get(k, d)) for k, d in (("tau", 600), ("mask", 200), ("fs", 1)))
+    if not 0 < fs < np.inf or not 0 < tau < np.inf:
+        raise ValidationError(
+            f"--tau and --fs must be positive and finite, got --tau {tau:g} s, --fs {fs:g} Hz"
+        )
+    if not 0 < mask < tau:
+        raise ValidationError(
+            f"--mask (masking time TM) must be in (0, --tau) s for a calibration pattern, got "
+            f"--mask {mask:g} s for --tau {tau:g} s"
+        )
+    try:
+        design_pattern(tau, mask, fs, kind=params.get("kind", "fig2"))
+    except ValidationError as exc:
+        raise ValidationError(
+            f"no calibration pattern for --tau {tau:g} s, --mask {mask:g} s, --fs {fs:g} Hz: {exc}"
+        ) from None
     fmt = "csv" if out.suffix.lower() == ".csv" else "parquet"
     truth_path = out.with_name(f"{out.stem}.truth{out.suffix or '.parquet'}")
     run_units = {
@@ -1371,16 +1517,105 @@ def write_simulated_gap(out: Path, **params: Any) -> tuple[Path, Path]:
     return out, truth_path
 
 
+#: Options of a source that a summary and the periods table metadata must share.
+_SOURCE_OPTIONS = ("tau", "mask", "method", "signal_model", "bias_model", "psd")
+
+
+def current_summaries(
+    directory: Path, warnings: list[str] | None = None
+) -> list[tuple[Path, dict[str, Any]]]:
+    """The summaries of a demod output directory that describe its current periods table.
+
+    The table's metadata (``accal.meta["sources"]``) lists every source whose rows
+    it holds, with the name of the summary its last run wrote.  A summary is
+    current when it is that one; summaries left by earlier runs (a source re-run
+    under another summary name, with other options, or a source whose rows are no
+    longer in the table) are ignored.  Tables of older accal versions do not name
+    the summary: a summary is then current when its options are the table's for
+    its source (the newest one if several are).
+
+    Parameters
+    ----------
+    directory : Path
+        The ``accal demod --out`` directory.
+    warnings : list of str, optional
+        Appended to: sources of the table left without a current summary.
+
+    Returns
+    -------
+    list of (Path, dict)
+        The summary files and their content, sorted by file name.
+    """
+    from accal.io.writers import read_table_metadata
+
+    directory = Path(directory)
+    tables = sorted(directory.glob("periods.*"), key=lambda q: q.stat().st_mtime)
+    sources: dict[str, Any] | None = None
+    if tables:
+        with contextlib.suppress(Exception):  # unreadable metadata: every summary counts
+            meta = read_table_metadata(tables[-1])[1]
+            if isinstance(meta.get("sources"), dict):
+                sources = meta["sources"]
+    found: dict[str, tuple[Path, dict[str, Any]]] = {}
+    for sp in sorted(directory.glob("*summary.json")):
+        try:
+            s = json.loads(sp.read_text())
+            name = Path(s["source"]).name
+            o = s["options"]
+            if not isinstance(o, dict):
+                continue
+        except (OSError, ValueError, KeyError, TypeError, AttributeError):
+            continue  # not a demod summary
+        if sources is not None:
+            meta = sources.get(name)
+            if not isinstance(meta, dict):
+                continue  # its rows are no longer in the table
+            if "summary" in meta:
+                if meta["summary"] != sp.name:
+                    continue  # an earlier run's summary
+            elif any(meta.get(k, o.get(k)) != o.get(k) for k in _SOURCE_OPTIONS):
+                continue  # older table: not the options of the rows
+        old = found.get(name)
+        if old is None or sp.stat().st_mtime > old[0].stat().st_mtime:
+            found[name] = (sp, s)
+    if warnings is not None and sources is not None:
+        for name in sorted(set(sources) - set(found)):
+            want = sources[name].get("summary") if isinstance(sources[name], dict) else None
+            warnings.append(
+                f"{name}: rows in {tables[-1].name} but no current summary"
+                + (f" ({want} now belongs to another run)" if want else "")
+                + f"; re-run accal demod on it into {directory} to diagnose it"
+            )
+    return sorted(found.values(), key=lambda x: x[0].name)
+
+
 def diagnose_demod_dir(
-    directory: Path, out_dir: Path, *, alpha: float = 0.01
+    directory: Path,
+    out_dir: Path,
+    *,
+    alpha: float = 0.01,
+    warnings: list[str] | None = None,
 ) -> list[tuple[Path, dict[str, Any] | None, str]]:
     """Close the loop on the runs of an earlier ``accal demod`` output directory.
 
-    Each ``summary.json``/``<stem>.summary.json`` names its run file and options;
-    the run is re-read (it must still exist; found by :func:`find_run`, from any
-    working directory), resampled as it was, and analysed with the same declared
-    model.  The periods table is not changed (re-run ``demod --close-loop`` for
-    that); ``closure.json``/``closure.md`` and plots go to ``out_dir``.
+    Each current ``summary.json``/``<stem>.summary.json`` (:func:`current_summaries`:
+    the ones that describe the periods table as it is) names its run file and
+    options; the run is re-read (it must still exist; found by :func:`find_run`,
+    from any working directory), resampled as it was, and analysed with the same
+    declared model.  The periods table is not changed (re-run ``demod
+    --close-loop`` for that); ``closure.json``/``closure.md`` and plots go to
+    ``out_dir``.
+
+    Parameters
+    ----------
+    directory : Path
+        The ``accal demod --out`` directory.
+    out_dir : Path
+        Where the reports go.
+    alpha : float
+        False-detection probability per selection step.
+    warnings : list of str, optional
+        Appended to: sources of the periods table without a current summary.
 
     Returns
     -------
@@ -1390,14 +1625,10 @@ def diagnose_demod_dir(
     """
     directory, out_dir = Path(directory), Path(out_dir)
     results: list[tuple[Path, dict[str, Any] | None, str]] = []
-    for sp in sorted(directory.glob("*summary.json")):
-        try:
-            s = json.loads(sp.read_text())
-            src = Path(s["source"])
-            o = s["options"]
-            rs = (s.get("input") or {}).get("resample")
-        except (OSError, ValueError, KeyError, TypeError, AttributeError):
-            continue  # not a demod summary
+    for sp, s in current_summaries(directory, warnings):
+        src = Path(s["source"])
+        o = s["options"]
+        rs = (s.get("input") or {}).get("resample") if isinstance(s.get("input"), dict) else None
         rs = rs if isinstance(rs, dict) and rs else None  # the resampling report, if resampled
         try:
             src = find_run(s, sp)

@@ -197,3 +197,49 @@ def test_non_numeric_value_names_its_line_or_row(tmp_path, rows):
     df.astype({"time": float, "m_z": float, "theta": float}).to_parquet(pq_path)
     with pytest.raises(FormatError, match=r"row 13: column 'm_y' is not numeric.*'oops'"):
         read_rawlog(pq_path)
+
+
+def _parquet_with_time(tmp_path, time) -> object:
+    n = len(time)
+    df = pd.DataFrame({"time": time, "m_y": np.zeros(n), "m_z": np.zeros(n), "theta": np.zeros(n)})
+    p = tmp_path / "t.parquet"
+    df.to_parquet(p)
+    return p
+
+
+@pytest.mark.parametrize("rows", [None, 7, 12])  # whole file, chunks of 7 and of 12 rows
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({12: np.nan}, r"row 13: time: missing or non-finite value"),
+        ({12: 11.0}, r"row 13: time is not strictly increasing: 11 s after 11 s"),
+        ({12: 10.5}, r"row 13: time is not strictly increasing: 10\.5 s after 11 s"),
+    ],
+    ids=["nan", "duplicate", "backwards"],
+)
+def test_parquet_time_errors_name_the_row(tmp_path, rows, change, message):
+    """CSV messages give the line; Parquet ones gave nothing to find the bad time by."""
+    t = np.arange(20.0)
+    for i, v in change.items():
+        t[i] = v
+    p = _parquet_with_time(tmp_path, t)
+    with pytest.raises(FormatError, match=rf"t\.parquet: {message}"):
+        list(open_rawlog(p, rows=rows)) if rows else read_rawlog(p)
+
+
+@pytest.mark.parametrize("rows", [None, 2])
+def test_content_that_does_not_match_the_name_is_a_warning(tmp_path, rows):
+    """A text file named .parquet is read as CSV (the content decides), with a warning."""
+    text = tmp_path / "run.parquet"
+    text.write_text(CSV)
+    stream = open_rawlog(text, rows=rows)
+    assert stream.warnings == ["named .parquet but is text: read as CSV"]
+    list(stream)  # a pass keeps it
+    assert stream.warnings == ["named .parquet but is text: read as CSV"]
+    assert read_rawlog(text).report.warnings == ("named .parquet but is text: read as CSV",)
+    binary = tmp_path / "run.csv"
+    write_table(pd.read_csv(tmp_path / "run.parquet", comment="#"), binary, fmt="parquet")
+    assert open_rawlog(binary, rows=rows).warnings == ["named .csv but is Parquet: read as Parquet"]
+    right = tmp_path / "ok.csv"
+    right.write_text(CSV)
+    assert open_rawlog(right, rows=rows).warnings == []

@@ -130,6 +130,11 @@ class DemodResult:
         Sampling frequency [Hz].
     method, solver, signal_model : str
         What was computed.
+    rotation_shift : float
+        Median shift of the rotation layout (the masked samples) from one period
+        to the next [samples]: 0 when the pattern repeats every τ; ``d`` when it
+        repeats every ``τ + d/fs`` (``--tau`` does not match the pattern).  NaN
+        with fewer than two periods.
     """
 
     period_index: NDArray[np.int64]
@@ -160,6 +165,7 @@ class DemodResult:
     method: str
     solver: str
     signal_model: str
+    rotation_shift: float = float("nan")
 
     @property
     def max_leakage(self) -> float:
@@ -714,6 +720,40 @@ def _scan_block(st: _Setup, blk: _Block) -> tuple[NDArray, NDArray, NDArray]:
     return n_used, keep, _leakage(va, vb, c * m, s * m, m)
 
 
+def _layout_shifts(rest: NDArray, prev: NDArray | None) -> tuple[NDArray, NDArray]:
+    """Shift of each period's rotation layout against the period before it [samples].
+
+    The circular cross-correlation of the masked samples (``~rest``) of
+    consecutive periods peaks at the shift ``d`` by which the rotations moved:
+    0 when the pattern repeats every τ, ``d`` when it repeats every ``τ + d/fs``.
+    Circular, so a rotation that leaves the end of a period and comes back at
+    its start does not break the estimate.
+
+    Parameters
+    ----------
+    rest : ndarray of bool, shape (P, q)
+        Rest masks of consecutive periods.
+    prev : ndarray of complex or None
+        Spectrum of the mask of the period before the first one (from the previous block).
+
+    Returns
+    -------
+    shifts : ndarray of int
+        One per pair of consecutive periods, in ``(-q/2, q/2]``.
+    last : ndarray of complex
+        Spectrum of the last period's mask (``prev`` of the next block).
+    """
+    q = rest.shape[1]
+    spec = np.fft.rfft((~rest).astype(np.float64), axis=1)
+    if prev is not None:
+        spec = np.concatenate([prev[None, :], spec])
+    if spec.shape[0] < 2:
+        return np.empty(0, np.int64), spec[-1]
+    xc = np.fft.irfft(spec[1:] * np.conj(spec[:-1]), n=q, axis=1)
+    shift = np.argmax(np.round(xc, 6), axis=1)  # rounding: ties (no rotation) go to 0
+    return np.where(shift > q // 2, shift - q, shift).astype(np.int64), spec[-1]
+
+
 def _estimate_block(st: _Setup, blk: _Block, solver: str, cache: dict) -> dict[str, Any]:
     """Pass 2: per-period estimates, weights and covariances of one block."""
     pa, q, tau = st.pa, st.q, st.tau
@@ -913,12 +953,16 @@ def demodulate_stream(
     cutter = None
     st = None
     n_per, n_keep, best, leak_max = 0, 0, 0, 0.0
+    shifts: list[NDArray] = []
+    last_spec: NDArray | None = None
 
     def scan(blk: _Block | None) -> None:
-        nonlocal n_per, n_keep, best, leak_max
+        nonlocal n_per, n_keep, best, leak_max, last_spec
         if blk is None:
             return
         n_used, keep, leak = _scan_block(st, blk)
+        sh, last_spec = _layout_shifts(blk.rest, last_spec)
+        shifts.append(sh)
         n_per += n_used.size
         n_keep += int(keep.sum())
         best = max(best, int(n_used.max()))
@@ -956,6 +1000,7 @@ def demodulate_stream(
             f"no period has enough unmasked samples at both θ = 0 and π (need {st.need:g} of "
             f"{st.q}; best period has {best})"
         )
+    all_shifts = np.concatenate(shifts) if shifts else np.empty(0)
     if method == "gls":
         used = "gls-eq17"
     elif solver == "auto":
@@ -1050,6 +1095,7 @@ def demodulate_stream(
         method=method,
         solver=used,
         signal_model=signal_model,
+        rotation_shift=float(np.median(all_shifts)) if all_shifts.size else float("nan"),
     )
 
 
@@ -1186,28 +1232,44 @@ def demodulate_table(table: Mapping[str, ArrayLike], **kwargs) -> DemodResult:
     )
 
 
-def sigma_mean(rd: ArrayLike, n: int) -> float:
-    """σ of the mean of ``n`` consecutive per-period values with autocovariance ``rd`` (Fig. 5).
+def sigma_mean(rd: ArrayLike, n: int, *, index: ArrayLike | None = None) -> float:
+    """σ of the mean of ``n`` per-period values with autocovariance ``rd`` (Fig. 5).
 
-    ``Var = (n Rd[0] + 2 Σ_{k=1}^{n-1} (n-k) Rd[k]) / n²``; lags beyond ``len(rd)``
-    are taken as 0.
+    Consecutive periods: ``Var = (n Rd[0] + 2 Σ_{k=1}^{n-1} (n-k) Rd[k]) / n²``.
+    With ``index`` (the periods kept when some were dropped):
+    ``Var = (n Rd[0] + 2 Σ_k c_k Rd[k]) / n²`` where ``c_k`` counts the pairs of
+    kept periods ``k`` apart, so only the lags that occur are needed (every
+    other period dropped: no odd lag).  Lags beyond ``len(rd)`` are taken as 0.
 
     Parameters
     ----------
     rd : array_like
-        Rd[k] [m² s⁻⁴].
+        Rd[k] [m² s⁻⁴]; NaN for a lag no pair of kept periods had (unknown).
     n : int
-        Number of periods averaged.
+        Number of periods averaged (``len(index)`` when given).
+    index : array_like of int, optional
+        Increasing period indices of the averaged values.
 
     Returns
     -------
     float
-        [m s⁻²]
+        [m s⁻²]; NaN when a lag that occurs has an unknown ``Rd``.
     """
     rd = np.asarray(rd, float)
-    n = int(n)
-    k = np.arange(1, min(n, rd.size))
-    var = (n * rd[0] + 2.0 * np.sum((n - k) * rd[k])) / n**2
+    if index is None:
+        n = int(n)
+        k = np.arange(1, min(n, rd.size))
+        counts = (n - k).astype(float)
+    else:
+        idx = np.asarray(index, np.int64)
+        n = idx.size
+        k = np.arange(1, min(int(idx[-1] - idx[0]) + 1 if n else 1, rd.size))
+        counts = np.array([np.count_nonzero(np.isin(idx + j, idx)) for j in k], dtype=float)
+        k = k[counts > 0]
+        counts = counts[counts > 0]
+    if n < 1:
+        return float("nan")
+    var = (n * rd[0] + 2.0 * np.sum(counts * rd[k])) / n**2
     return float(np.sqrt(var))
 
 

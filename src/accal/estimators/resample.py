@@ -11,6 +11,10 @@ last sample of a chunk over to the next, and gives the same grid and values
 whatever the chunking: a grid point is always interpolated between the same two
 samples with the same arithmetic.
 
+At the end of the record a grid point at most half a step after the last
+sample takes its value (:meth:`UniformResampler.finish`), so that jitter does
+not cut the last sample off.
+
 Linear interpolation does not low-pass: it suits timing jitter and a few lost
 samples, not decimation.
 """
@@ -35,6 +39,9 @@ SNAP = 1e-9
 STEP_SNAP_RTOL = 1e-4
 #: Steps averaged per window when estimating the nominal step.
 WINDOW = 64
+#: A grid point at most this many steps after the last sample takes its value
+#: (:meth:`UniformResampler.finish`): jitter must not cost the record's last sample.
+END_HOLD = 0.5
 
 
 @dataclass(frozen=True)
@@ -55,6 +62,10 @@ class ResampleReport:
         Grid points interpolated between two samples at most ``gap_factor`` steps apart.
     n_gap : int
         Grid points inside gaps: marked invalid (NaN), never interpolated.
+    n_end_held : int
+        Grid points after the last input sample (by at most ``END_HOLD`` step,
+        0 or 1) that took its value, so that timing jitter does not shorten the
+        record by a sample (and its last period).
     n_gaps : int
         Input steps longer than ``gap_factor`` grid steps.
     largest_gap : float
@@ -72,6 +83,7 @@ class ResampleReport:
     n_gaps: int
     largest_gap: float
     gap_factor: float
+    n_end_held: int = 0
 
     def as_dict(self) -> dict[str, float | int]:
         """The report as a plain dict (JSON-ready)."""
@@ -133,7 +145,8 @@ class UniformResampler:
     -----
     Call :meth:`push` with consecutive chunks (times strictly increasing across
     chunks); the grid starts at the first sample and ends at the last grid point
-    not after the last sample pushed so far.
+    not after the last sample pushed so far; :meth:`finish` then adds the grid
+    point just after the last sample when it is within ``END_HOLD`` step of it.
     """
 
     def __init__(self, step: float, *, gap_factor: float = GAP_FACTOR) -> None:
@@ -146,6 +159,7 @@ class UniformResampler:
         self._last_t: float | None = None
         self._last_v: dict[str, float] = {}
         self._n_in = self._n_exact = self._n_interp = self._n_gap = self._n_gaps = 0
+        self._n_held = 0
         self._largest = 0.0
 
     def push(
@@ -217,6 +231,37 @@ class UniformResampler:
         self._n_interp += int(g.size - exact.sum() - gap.sum())
         return g, out, ~gap
 
+    def finish(
+        self,
+    ) -> tuple[NDArray[np.float64], dict[str, NDArray[np.float64]], NDArray[np.bool_]]:
+        """End of the record: the grid point just after the last sample, if close enough.
+
+        A grid point at most ``END_HOLD`` step after the last sample takes the
+        last sample's values (its nearest sample): with timing jitter the last
+        sample falls before its grid point about every other record, and the
+        grid would otherwise end one point short (a whole period lost for a
+        record of whole periods).  Counted in ``n_end_held``.  Call once, after
+        the last :meth:`push`.
+
+        Returns
+        -------
+        grid, values, valid
+            As :meth:`push` (empty or one point).
+        """
+        names = list(self._last_v)
+        if self._t0 is None or self._last_t is None:
+            return np.empty(0), {n: np.empty(0) for n in names}, np.empty(0, bool)
+        g = self._t0 + self._k * self.step
+        if g - self._last_t > END_HOLD * self.step:
+            return np.empty(0), {n: np.empty(0) for n in names}, np.empty(0, bool)
+        self._k += 1
+        self._n_held += 1
+        return (
+            np.array([g]),
+            {n: np.array([self._last_v[n]]) for n in names},
+            np.ones(1, bool),
+        )
+
     @property
     def report(self) -> ResampleReport:
         """Counts so far."""
@@ -230,6 +275,7 @@ class UniformResampler:
             n_gaps=self._n_gaps,
             largest_gap=self._largest,
             gap_factor=self.gap_factor,
+            n_end_held=self._n_held,
         )
 
 
@@ -239,6 +285,7 @@ def resample_uniform(
     step: float,
     *,
     gap_factor: float = GAP_FACTOR,
+    hold_end: bool = False,
 ) -> tuple[NDArray[np.float64], dict[str, NDArray[np.float64]], NDArray[np.bool_], ResampleReport]:
     """Resample a whole record onto ``t[0] + k·step`` (see the module notes).
 
@@ -253,6 +300,10 @@ def resample_uniform(
     gap_factor : float
         Input steps longer than ``gap_factor·step`` are gaps: their grid points
         are marked invalid (NaN), never interpolated.
+    hold_end : bool
+        Add the grid point just after the last sample when it is within
+        ``END_HOLD`` step (:meth:`UniformResampler.finish`), as ``accal demod
+        --resample`` does.
 
     Returns
     -------
@@ -266,4 +317,8 @@ def resample_uniform(
     """
     r = UniformResampler(step, gap_factor=gap_factor)
     g, v, ok = r.push(time, columns)
+    g1, v1, ok1 = r.finish() if hold_end else (np.empty(0), {}, np.empty(0, bool))
+    if g1.size:
+        g, ok = np.concatenate([g, g1]), np.concatenate([ok, ok1])
+        v = {n: np.concatenate([x, v1[n]]) for n, x in v.items()}
     return g, v, ok, r.report

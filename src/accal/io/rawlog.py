@@ -50,6 +50,9 @@ UNITS = {
 }
 #: Declared units of θ that mean degrees (refused: give radians).
 DEGREE_UNITS = ("deg", "degree", "degrees", "°")
+#: File-name suffixes that promise Parquet, and text (a mismatch is a warning).
+PARQUET_SUFFIXES = (".parquet", ".pq")
+TEXT_SUFFIXES = (".csv", ".txt")
 #: Columns of a PSD table (``--psd FILE``): frequency [Hz] and two-sided PSD [m² s⁻⁴ Hz⁻¹].
 PSD_COLUMNS = ("f", "S")
 
@@ -106,7 +109,8 @@ class RawlogStream:
     file_meta : dict
         The file's own metadata.
     warnings : list of str
-        Findings of the last pass (non-numeric columns ignored).
+        Findings: a name that says another format than the content
+        (:func:`name_mismatch`), and of the last pass (non-numeric columns ignored).
     """
 
     def __init__(self, path: str | Path, rows: int | None = STREAM_ROWS) -> None:
@@ -145,11 +149,24 @@ class RawlogStream:
                 if k not in REQUIRED_COLUMNS and k not in OPTIONAL_COLUMNS
             }
         )
-        self.warnings: list[str] = []
+        #: Findings about the file itself (kept by every pass).
+        self.file_warnings: list[str] = []
+        parquet = (self._stream.kind != "csv") if rows is not None else not first_line
+        named = name_mismatch(self.path, parquet=parquet)
+        if named:
+            self.file_warnings.append(named)
+        self.warnings: list[str] = list(self.file_warnings)
 
     def _line(self, row: int) -> int | None:
         # CSV: 1-based line of data row ``row``; Parquet has no lines (first_line = 0)
         return self.first_line + int(row) if self.first_line else None
+
+    def _row_error(self, msg: str, row: int) -> FormatError:
+        """FormatError about data row ``row`` (0-based): its CSV line, or ``row N:`` (Parquet)."""
+        line = self._line(row)
+        if line is None:
+            return FormatError(f"row {int(row) + 1}: {msg}", self.path)
+        return FormatError(msg, self.path, line)
 
     def _tables(self) -> Iterator[tuple[int, object]]:
         if self.rows is None:
@@ -164,7 +181,7 @@ class RawlogStream:
         path = self.path
         last_t: float | None = None
         aux_names: list[str] | None = None
-        self.warnings = []
+        self.warnings = list(self.file_warnings)
         for row0, table in self._tables():
 
             def csv_line(i: int, row0: int = row0) -> int:
@@ -179,23 +196,19 @@ class RawlogStream:
             time = cols["time"]
             bad = np.flatnonzero(~np.isfinite(time))
             if bad.size:
-                raise FormatError(
-                    "time: missing or non-finite value", path, self._line(row0 + bad[0])
-                )
+                raise self._row_error("time: missing or non-finite value", row0 + bad[0])
             if last_t is not None and time[0] <= last_t:
-                raise FormatError(
+                raise self._row_error(
                     f"time is not strictly increasing: {time[0]:.9g} s after {last_t:.9g} s",
-                    path,
-                    self._line(row0),
+                    row0,
                 )
             back = np.flatnonzero(np.diff(time) <= 0)
             if back.size:
                 i = int(back[0]) + 1
-                raise FormatError(
+                raise self._row_error(
                     f"time is not strictly increasing: {time[i]:.9g} s after {time[i - 1]:.9g} s "
                     f"({back.size} such step(s))",
-                    path,
-                    self._line(row0 + i),
+                    row0 + i,
                 )
             last_t = float(time[-1])
             acc = []
@@ -222,6 +235,34 @@ class RawlogStream:
             yield RawlogChunk(row0, time, np.column_stack(acc), cols["theta"], aux, self.axes)
 
 
+def name_mismatch(path: str | Path, *, parquet: bool) -> str | None:
+    """The warning for a file whose name says another format than its content, or None.
+
+    The readers go by the content (Parquet by its magic bytes, anything else is
+    CSV), as for gzip; a ``.parquet`` file that is text, or a ``.csv`` file that
+    is Parquet, is read all the same, with this warning.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+    parquet : bool
+        Whether its content is Parquet.
+
+    Returns
+    -------
+    str or None
+        ``"named .parquet but is text: read as CSV"`` (or the converse).
+    """
+    name = Path(path).name.lower().removesuffix(".gz")
+    suffix = name[name.rfind(".") :] if "." in name else ""
+    if not parquet and suffix in PARQUET_SUFFIXES:
+        return f"named {suffix} but is text: read as CSV"
+    if parquet and suffix in TEXT_SUFFIXES:
+        return f"named {suffix} but is Parquet: read as Parquet"
+    return None
+
+
 def open_rawlog(path: str | Path, *, rows: int | None = STREAM_ROWS) -> RawlogStream:
     """Open a rotating-platform run file for reading in chunks.
 
@@ -244,7 +285,7 @@ def open_rawlog(path: str | Path, *, rows: int | None = STREAM_ROWS) -> RawlogSt
         On opening: unreadable or corrupt file, missing columns (all listed), θ
         declared in degrees.  While iterating: non-numeric required columns,
         non-finite or not strictly increasing time (checked across chunks, with
-        the CSV line).
+        the CSV line or the Parquet row).
     """
     return RawlogStream(path, rows)
 
