@@ -14,8 +14,10 @@ Two kinds of "noise":
   distinct quadratic cases on one day (reversal × sign).
 
 Every run offers all candidates, a temperature-like channel and the orbit period.
+Exponential drifts from the first sample have T log-uniform in 600-10,000 s.
 A detection is the right kind of effect (for steps: within 2 % of the day of the
-true epoch; for couplings: the right channel); "any report" counts runs that
+true epoch; for couplings: the right channel; for exponentials: T within
+0.7-1.4 of the truth); "any report" counts runs that
 reported anything (e.g. the wrong kind, or ``unexplained``).
 
 Run: ``python benchmarks/closure_detection.py [--source sim|swarm|both] [--trials N]``
@@ -42,11 +44,13 @@ SIZES = {
         "bias_step": [5e-11, 1e-10, 2e-10, 4e-10],  # [m/s²]
         "quadratic_drift": [5e-21, 1e-20, 2e-20, 4e-20],  # [m/s⁴]
         "auxiliary": [1.25e-11, 2.5e-11, 5e-11, 1e-10],  # [m/s² per K]
+        "exponential_drift": [2.5e-11, 5e-11, 1e-10, 2e-10],  # [m/s²], T 600-10,000 s
     },
     "swarm": {
         "bias_step": [1e-7, 3e-7, 1e-6, 3e-6],
         "quadratic_drift": [1e-17, 3e-17, 1e-16, 3e-16],
         "auxiliary": [3e-8, 1e-7, 3e-7, 1e-6],
+        "exponential_drift": [1e-7, 3e-7, 1e-6, 3e-6],
     },
 }
 
@@ -95,6 +99,9 @@ def inject(kind: str, size: float, t, y, rng, orbit: float):
     elif kind == "auxiliary":
         lag = rng.uniform(0.0, 1800.0)
         y = y + sign * size * np.interp(tau - lag, tau, temp)
+    elif kind == "exponential_drift":
+        epoch = float(np.exp(rng.uniform(np.log(600.0), np.log(10000.0))))  # its T [s]
+        y = y + sign * size * np.exp(-tau / epoch)
     return y, {"temp": temp}, epoch
 
 
@@ -105,6 +112,8 @@ def detected(res, kind: str, epoch, span: float) -> bool:
         if kind == "bias_step" and abs(e.epoch - epoch) > 0.02 * span:
             continue
         if kind == "auxiliary" and e.channel != "temp":
+            continue
+        if kind == "exponential_drift" and not 0.7 < e.tau / epoch < 1.4:  # epoch holds T
             continue
         return True
     return False

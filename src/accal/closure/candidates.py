@@ -330,6 +330,11 @@ def exponential_drift(ctx: Context) -> list[Proposal]:
         return []
     k = int(np.argmax(power))
     tau = _refine_tau(ctx, el, float(taus[max(k - 1, 0)]), float(taus[min(k + 1, taus.size - 1)]))
+    if tau > hi / EXP_TAU_STEP**0.1:
+        # the power still grows at the cap: a polynomial-like trend, not a decay (on
+        # the real Swarm storm day an exponential of T = span/4, 2.4e-6 m/s², took
+        # the place of an injected quadratic drift); the polynomial candidates hold it
+        return []
     col = np.exp(-(ctx.t_all - ctx.t0) / tau)
     cols, labs, axes = ctx.split(col[:, None], (f"exp:{tau!r}",))
     return [
