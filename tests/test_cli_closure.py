@@ -144,6 +144,18 @@ def test_close_loop_with_reference_finds_the_quadratic(undeclared, tmp_path):
     # the step on z is found on raw - reference too
     assert "bias_step" in effects(closure, "z")
     assert closure["x"]["rms_after"] < closure["x"]["rms_before"]
+    # the table's sigma carries the uncertainty of the removed quadratic: the refit
+    # alone gave a drift sigma ~6x too small (QA); now it is the closure's own
+    import pyarrow.parquet as pq
+
+    rows = pq.read_table(tmp_path / "bias_drift.parquet").to_pylist()
+    x = next(r for r in rows if r["axis"] == "x" and r["method"] == "lsq")
+    base = {b["name"]: b for b in closure["x"]["base"]}
+    for q in ("bias", "drift"):
+        assert base[q]["sigma_after"] > 1.2 * base[q]["sigma_plain"]  # the quadratic costs
+        assert x[f"{q}_sigma"] == pytest.approx(base[q]["sigma_after"], rel=0.3)
+        assert e[q]["sigma_after"] == x[f"{q}_sigma"]
+        assert abs(e[q]["true_error_after"]) < 3 * x[f"{q}_sigma"]
 
 
 def test_diagnose_previous_run_reports_without_rewriting(undeclared, tmp_path):

@@ -9,7 +9,7 @@ its caller gives.  ``result_to_dict`` is the ``closure.json`` layout::
      "notes": [{"name", "channel", "note"}, ...],   # candidates not testable here
      "removed": [{"name", "channel", "p_accept", "epoch"/"frequency"/"lag"/"tau"}, ...],
                                                     # added, then eliminated
-     "base": [{"name", "before", "sigma_before", "after", "sigma_after",
+     "base": [{"name", "before", "sigma_before", "after", "sigma_after", "sigma_plain",
                "change", "sigma_change", "change_significant"}, ...],
      "channels": [...] (several data channels, e.g. ["y", "z"]),
      "rms_before", "rms_after", "t0", "n_used", "iterations",
@@ -126,6 +126,7 @@ def result_to_dict(result: ClosureResult, truth: dict[str, float] | None = None)
                 "change": b.change,
                 "sigma_change": b.sigma_change,
                 "change_significant": b.change_significant,
+                "sigma_plain": b.sigma_plain,
             }
             for b in result.base
         ],

@@ -38,6 +38,7 @@ PSD.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -142,6 +143,9 @@ class BaseCoefficient:
     ``sigma_change`` is the uncertainty of the difference of the two (correlated)
     linear estimators, evaluated under the final residual's noise.  NaN for a
     coefficient the data do not determine (a block without used samples).
+    ``sigma_plain`` is the base-only fit's σ under that same noise: ``sigma_after² −
+    sigma_plain²`` is what estimating the effects adds (a refit that subtracts the
+    effects as if known adds it back; see ``accal.pipeline``).
     """
 
     name: str
@@ -151,6 +155,7 @@ class BaseCoefficient:
     sigma_after: float
     change: float
     sigma_change: float
+    sigma_plain: float = float("nan")
 
     @property
     def change_significant(self) -> bool:
@@ -674,6 +679,50 @@ def close_loop(
     w_smooth, zt_smooth = smooth_test(search.state(search.found))
     if w_smooth is not None and w_smooth.pvalue < alpha and search.backward(max_effects):
         w_smooth, zt_smooth = smooth_test(search.state(search.found))
+    lag = max(
+        (
+            float(f.prop.params.get("lag") or 0.0)
+            for f in search.found
+            if f.prop.name == "auxiliary"
+        ),
+        default=0.0,
+    )
+    if lag > 0 and not opts.get("_after_lag"):
+        # A lagged channel is unknown for the first `lag` seconds (its regressor holds
+        # the first value there); that flat start was fitted as an exponential
+        # settling or a step (QA: 3e-9 m/s²/K at 1500 s lag gave both, bias error
+        # 7e-10 -> -6e-10).  Redo the search without the first `max_lag` seconds:
+        # there every lag searched is known (leaving out only the found lag biased
+        # the re-search to lags shorter than it: 1206 s + a 300 s low-pass for 1500 s)
+        lead = float(opts.get("max_lag", min(span / 20.0, 3600.0)))
+        later = use & (t_all >= t0 + lead)
+        if int(later.sum()) >= MIN_SAMPLES:
+            res = close_loop(
+                t_all,
+                y_all,
+                base=base,
+                aux=aux,
+                valid=later,
+                candidates=candidates,
+                alpha=alpha,
+                max_effects=max_effects,
+                orbit_period=orbit_period,
+                catchall_knots=catchall_knots,
+                options={**opts, "_after_lag": lead},
+                channel=channel,
+                channel_names=channel_names,
+                noise_psd=noise_psd,
+                resolution=resolution,
+            )
+            note = {
+                "name": "auxiliary",
+                "channel": None,
+                "note": f"the first {lead:.0f} s left out of the analysis: a lagged coupling "
+                f"was found ({lag:.0f} s in the first search), and a lagged channel is "
+                "unknown before the record starts",
+                "details": {"left_out": lead},
+            }
+            return dataclasses.replace(res, notes=(*res.notes, note))
     found = [
         (f.prop, p, {**f.info, "p_accept": f.p_adj})
         for f, p in zip(search.found, search.final_p(), strict=True)
@@ -722,6 +771,7 @@ def close_loop(
     var0 = np.full((nb, p), np.nan)
     var1 = np.full((nb, p), np.nan)
     vard = np.full((nb, p), np.nan)
+    varp = np.full((nb, p), np.nan)
     has = seg_of >= 0
     sg = seg_of[has]
     base_cov[has] = cov_b[sg]
@@ -729,8 +779,9 @@ def close_loop(
     var0[has] = np.einsum("sii->si", v_ll0[sg])
     var1[has] = np.einsum("sii->si", cov_b[sg])
     vard[has] = np.einsum("sii->si", cov_d[sg])
+    varp[has] = np.einsum("sii->si", v_ll[sg])  # base alone, final noise
     ident = np.isfinite(fit0.beta.reshape(nb, p))
-    for arr in (var0, var1, vard):
+    for arr in (var0, var1, vard, varp):
         arr[~ident] = np.nan
 
     # ------------------------------------------------------------------ unexplained
@@ -764,6 +815,7 @@ def close_loop(
     sd = np.sqrt(np.maximum(var0.ravel(), 0.0)) * scale
     s1 = np.sqrt(np.maximum(var1.ravel(), 0.0)) * scale
     sdd = np.sqrt(np.maximum(vard.ravel(), 0.0)) * scale
+    spl = np.sqrt(np.maximum(varp.ravel(), 0.0)) * scale
     base_out = tuple(
         BaseCoefficient(
             nm,
@@ -773,6 +825,7 @@ def close_loop(
             float(s1[j]),
             float((b1[j] - b0[j]) * scale[j]),
             float(sdd[j]),
+            float(spl[j]),
         )
         for j, nm in enumerate(bbase.column_names())
     )
