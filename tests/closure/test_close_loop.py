@@ -338,3 +338,18 @@ def test_lagged_coupling_start_is_not_an_exponential_or_a_step(sim, lag):
     e = res.effects[names.index("auxiliary")]
     assert abs(e.coefficient - 3e-9) < 3 * e.sigma
     assert any(n["note"].startswith("the first 3600 s left out") for n in res.notes)
+
+
+@pytest.mark.parametrize(("first", "second"), [(1e-9, -1e-9), (1e-9, 1e-9)])
+def test_two_steps_that_mask_each_other_are_both_found(sim, first, second):
+    """QA: a +1e-9/-1e-9 box gave only `unexplained` (each step alone had p 1.0: the
+    other one inflated the low-frequency noise estimate); found as a pair now."""
+    d = sim(31, **DAY)
+    el = d["t"] - d["t"][0]
+    d["y"] = d["y"] + first * (el >= 25000.0) + second * (el >= 60000.0)
+    res = _run(d)
+    assert _names(res) == ["bias_step", "bias_step"] and res.unexplained == ()
+    got = sorted((e.epoch - d["t"][0], e.coefficient, e.sigma) for e in res.effects)
+    truth = [(25000.0, first), (60000.0, second)]
+    for (epoch, c, s), (e_true, c_true) in zip(got, truth, strict=True):
+        assert epoch == e_true and abs(c - c_true) < 3 * s

@@ -1056,6 +1056,14 @@ class _Search:
             (e for e in tested if self.alpha <= e[0] < _PAIR_GATE and e[1] > top_sig),
             key=lambda e: -e[1],
         )[:_PAIR_ANCHORS]
+        top = max((e[1] for e in tested), default=0.0)
+        for e in tested:
+            # two steps (a box: +1e-9 then -1e-9) mask each other completely: the one
+            # left out inflates the low-frequency noise estimate, so the other is not
+            # even suggestive (p 1.0); the step that explains the most power anchors a
+            # pair whatever its p (the pair is still tested at alpha/10)
+            if e[2].name == "bias_step" and e[0] >= _PAIR_GATE and e[1] >= top > top_sig:
+                masked = [*masked[: _PAIR_ANCHORS - 1], e]
         pair = self._best_pair(basis, fit, lev, masked) if masked else None
         if pair is not None and pair[-1] > top_sig and self._add_pair(pair):
             return True
