@@ -178,6 +178,33 @@ def test_diagnose_previous_run_reports_without_rewriting(undeclared, tmp_path):
     assert "Removed from calibrated" not in md and "Would remove (re-run grace-bias" in md
 
 
+def test_diagnose_uses_the_reference_of_the_run(undeclared, tmp_path):
+    """QA: diagnose analysed the calibrated series alone ('no --reference: not tested')
+    after a run with --reference; it now subtracts the run's reference again."""
+    d = undeclared
+    assert invoke("grace-bias", d["day"], "--reference", d["ref"], "--out", tmp_path, "-q")[0] == 0
+    code, _, err = invoke("diagnose", tmp_path)
+    assert code == 0, err
+    entry = json.loads((tmp_path / "diagnose" / "closure.json").read_text())["sources"]
+    entry = entry[d["day"].name]
+    quad = effects(entry, "x")["quadratic_drift"]  # only tested on raw - reference
+    assert abs(quad["coefficient"] - QUAD) < 3 * quad["sigma"]
+    assert "no --reference" not in (entry["x"].get("note") or "")
+    assert "bias_step" in effects(entry, "z")
+    # a reference that is gone: analysed without it, and said so
+    moved = tmp_path / "moved"
+    moved.mkdir()
+    ref = Path(d["ref"])
+    gone = moved / ref.name
+    ref.rename(gone)
+    try:
+        code, _, err = invoke("diagnose", tmp_path, "--out", tmp_path / "d2")
+    finally:
+        gone.rename(ref)
+    assert code == 0, err
+    assert f"--reference {ref}, which is gone" in err
+
+
 def test_diagnose_empty_directory_is_a_clear_error(tmp_path):
     code, _, err = invoke("diagnose", tmp_path)
     assert code == 1

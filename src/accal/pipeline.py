@@ -1478,6 +1478,41 @@ def find_bias_drift(directory: Path) -> Path:
     return max(found, key=lambda p: p.stat().st_mtime_ns)
 
 
+def _diagnosis_input(
+    series: AccSeries, run: dict[str, Any]
+) -> tuple[AccSeries, Path | None, list[str]]:
+    """The series ``accal diagnose`` analyses: calibrated − reference when the run had one.
+
+    The calibrated series is ``scale · (raw − trend)``; a run with ``--reference``
+    fitted ``raw − reference``, so its residual is ``calibrated / scale −
+    reference`` (the reference named in the manifest, read again).  Returns the
+    series, the reference path (None without one) and warnings.
+    """
+    from accal.calibration import parse_scale
+
+    ref = run.get("reference")
+    path = ref.get("path") if isinstance(ref, dict) else ref
+    if not path:
+        return series, None, []
+    ref_path = Path(str(path))
+    if not ref_path.is_file():
+        return (
+            series,
+            None,
+            [
+                f"the run used --reference {ref_path}, which is gone: analysed without it "
+                "(polynomial drifts not tested)"
+            ],
+        )
+    scale = parse_scale(run.get("scale"), series.satellite)
+    raw = series
+    if scale is not None:
+        s = np.asarray(scale, dtype=np.float64)[: len(series.axes)]
+        raw = series.replace(acc=series.acc / s[None, :])
+    ref_series = read_input(ref_path, GraceBiasOptions(columns=run.get("columns") or {}))
+    return subtract_reference(raw, ref_series, ref_path), ref_path, []
+
+
 def diagnose_dir(
     directory: Path,
     out_dir: Path,
@@ -1494,6 +1529,7 @@ def diagnose_dir(
     ``out_dir``; the caller writes ``closure.json``/``closure.md``
     (:func:`write_closure_reports`).
     """
+    from accal.batch import Manifest
     from accal.io.tables import read_table_series
     from accal.io.writers import read_table_metadata
 
@@ -1504,17 +1540,31 @@ def diagnose_dir(
         for p in directory.iterdir()
         if p.name.endswith((".calibrated.parquet", ".calibrated.csv"))
     )
+    runs = {  # the options each calibrated file was made with (grace-bias's manifest)
+        out: e.get("options") or {}
+        for e in Manifest.load(directory).entries.values()
+        for out in e.get("outputs", ())
+    }
     outcomes = []
     for p in progress(files, total=len(files)) if progress else files:
         try:
             _, meta = read_table_metadata(p)
             series = read_table_series(p)
             order = int(meta.get("order", 1))
-            opts = GraceBiasOptions(order=order, close_loop=True, aux=aux, alpha=alpha)
             name = str(meta.get("source") or p.name.split(".calibrated.")[0])
-            _, closure, plots, notes = close_the_loop(
-                Path(name), series, series, series.valid, opts, out_dir / output_stem(Path(name))
+            fit_series, ref_path, extra = _diagnosis_input(series, runs.get(p.name) or {})
+            opts = GraceBiasOptions(
+                order=order, close_loop=True, aux=aux, alpha=alpha, reference=ref_path
             )
+            _, closure, plots, notes = close_the_loop(
+                Path(name),
+                series,
+                fit_series,
+                fit_series.valid,
+                opts,
+                out_dir / output_stem(Path(name)),
+            )
+            notes = [*extra, *notes]
             outcomes.append(
                 FileOutcome(
                     Path(name),
