@@ -353,3 +353,21 @@ def test_two_steps_that_mask_each_other_are_both_found(sim, first, second):
     truth = [(25000.0, first), (60000.0, second)]
     for (epoch, c, s), (e_true, c_true) in zip(got, truth, strict=True):
         assert epoch == e_true and abs(c - c_true) < 3 * s
+
+
+def test_outlier_burst_is_left_out_not_fitted_as_steps(sim):
+    """QA: 50 samples of 5e-8 m/s² (kurtosis 856); with pairs of steps allowed it came
+    out as two bias steps of ±2.9e-9 m/s².  Outliers are left out of the analysis."""
+    d = sim(41, **DAY)
+    d["y"] = d["y"].copy()
+    d["y"][20000:20050] += 5e-8
+    res = _run(d)
+    assert res.effects == () and res.unexplained == ()
+    note = next(n for n in res.notes if n["name"] == "outliers")
+    assert note["details"]["n"] >= 50
+    assert note["details"]["first"] == d["t"][20000]
+
+
+def test_clean_day_has_no_outliers(sim):
+    res = _run(sim(42, **DAY))
+    assert not any(n["name"] == "outliers" for n in res.notes)
