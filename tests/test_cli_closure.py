@@ -378,3 +378,10 @@ def test_noise_free_difference_reports_the_effects_and_not_its_rounding(tmp_path
     for ax in "xyz":
         assert entry[ax]["unexplained"] == []
         assert any("numerical resolution" in n["note"] for n in entry[ax]["notes"])
+    # the calibrated file's history says what was removed
+    from accal.io.writers import read_table_metadata
+
+    _, meta = read_table_metadata(tmp_path / "o" / f"{base.stem}.calibrated.parquet")
+    assert any(
+        "removed (x: exponential_drift(tau=3000 s); y: bias_step@" in h for h in meta["history"]
+    ), meta["history"]

@@ -869,7 +869,14 @@ def _with_effect_uncertainty(
 
 def _with_effects_removed(series: AccSeries, closure: dict[str, Any]) -> AccSeries:
     cols = [series.axis(ax) - closure[ax]["instrument"] for ax in series.axes]
-    return series.replace(acc=np.column_stack(cols))
+    removed = "; ".join(
+        f"{ax}: {', '.join(closure[ax]['summary'].get('removed_from_calibrated') or []) or 'nothing'}"
+        for ax in series.axes
+        if ax in closure
+    )
+    return series.replace(acc=np.column_stack(cols)).with_history(
+        f"accal {__version__}: instrument effects found by close_loop removed ({removed})"
+    )
 
 
 def _write_json(path: Path, obj: Any, *, sync: bool = True) -> None:
