@@ -367,7 +367,7 @@ def _refine_tau(ctx: Context, el: NDArray[np.float64], lo: float, hi: float) -> 
     if hi <= lo:
         return lo
     res = minimize_scalar(
-        neg_power, bounds=(np.log(lo), np.log(hi)), method="bounded", options={"xatol": 1e-5}
+        neg_power, bounds=(np.log(lo), np.log(hi)), method="bounded", options={"xatol": 1e-3}
     )
     tau = float(np.exp(res.x))
     # Gauss-Newton on (A_c, T): the power is flat at its maximum, so the bounded
@@ -804,20 +804,24 @@ def auxiliary(ctx: Context) -> list[Proposal]:
                 ctx.cache[key] = _first_order(xf, tu, tc)
             return ctx.cache[key]
 
+        grid_best = []
         for tc in taus:
             h = filtered(tc)
             for j, lag in enumerate(lags):
                 z[j] = np.interp(t_u - lag, tu, h)
             pw = sum(_row_power(ctx, z * m if len(masks) > 1 else z) for m in masks)
             j = int(np.argmax(pw))
-            lag, p_best = float(lags[j]), float(pw[j])
-            if lags.size > 1:  # between the grid's lags, for every time constant: a
-                # 1500 s lag fell between grid lags and 1212 s + a 300 s low-pass won
+            grid_best.append((float(pw[j]), float(lags[j]), float(tc)))
+        top = max(g[0] for g in grid_best)
+        for p_best, lag, tc in grid_best:
+            if lags.size > 1 and p_best >= 0.8 * top:
+                # between the grid's lags, for every competitive time constant: a 1500 s
+                # lag fell between grid lags and 1212 s + a 300 s low-pass won
                 lag, p_best = _refine_lag(
-                    ctx, tu, h, lag, float(lags[1] - lags[0]), max_lag, p_best
+                    ctx, tu, filtered(tc), lag, float(lags[1] - lags[0]), max_lag, p_best
                 )
             if p_best > best[0]:
-                best = (p_best, lag, float(tc))
+                best = (p_best, lag, tc)
         _, lag, tc = best
         col = np.interp(t_all - lag, tu, filtered(tc))
         col = col - col[ctx.use].mean()
@@ -864,7 +868,7 @@ def _refine_lag(
     lo, hi = max(0.0, lag - step), min(top, lag + step)
     if hi <= lo:
         return lag, power
-    res = minimize_scalar(neg_power, bounds=(lo, hi), method="bounded", options={"xatol": 0.01})
+    res = minimize_scalar(neg_power, bounds=(lo, hi), method="bounded", options={"xatol": 0.5})
     return (float(res.x), float(-res.fun)) if -res.fun > power else (lag, power)
 
 
