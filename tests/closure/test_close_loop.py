@@ -407,3 +407,18 @@ def test_lagged_coupling_after_a_data_gap_makes_no_steps(sim):
     assert "auxiliary" in names and "bias_step" not in names
     e = res.effects[names.index("auxiliary")]
     assert abs(e.coefficient - 3e-9) < 3 * e.sigma and e.lag == pytest.approx(600.0, abs=2.0)
+
+
+@pytest.mark.parametrize(("a", "b"), [(1000.0, 85000.0), (30000.0, 31000.0)])
+def test_steps_near_the_ends_and_close_together(sim, a, b):
+    """QA: a step 1000 s from the start was outside the scanned epochs (2 % of the day
+    from either end) and came out as an exponential, table bias error 2e-9 at z = 179;
+    steps 1000 s apart were not resolved.  Epochs are scanned to 0.5 % of the span."""
+    d = sim(42, **DAY)
+    el = d["t"] - d["t"][0]
+    d["y"] = d["y"] + 2e-9 * (el >= a) - 1e-9 * (el >= b)
+    res = _run(d)
+    assert _names(res) == ["bias_step", "bias_step"]
+    got = sorted((e.epoch - d["t"][0], e.coefficient, e.sigma) for e in res.effects)
+    for (epoch, c, s), (e_true, c_true) in zip(got, [(a, 2e-9), (b, -1e-9)], strict=True):
+        assert epoch == e_true and abs(c - c_true) < 3 * s

@@ -445,7 +445,7 @@ def bias_step(ctx: Context) -> list[Proposal]:
     n = t.size
     masks = ctx.channel_masks()
     n_time = n // len(masks)
-    min_seg = int(ctx.options.get("min_segment", max(10, n_time // 50))) * len(masks)
+    min_seg = int(ctx.options.get("min_segment", max(10, n_time // 200))) * len(masks)
     if n < 2 * min_seg + 2:
         return []
     r = _without_orbit_template(ctx, masks)
