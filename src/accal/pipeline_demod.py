@@ -292,6 +292,13 @@ def sampling_step(stream: Any, opts: DemodOptions) -> float:
     raise ValidationError("need at least 3 samples, got 0")  # pragma: no cover (reader raises)
 
 
+def _chunk(t: np.ndarray, cols: dict[str, np.ndarray], valid: Any, aux: Sequence[str]) -> Any:
+    """A :class:`DemodChunk` of the validated columns (``aux``: channels carried along)."""
+    from accal.estimators.demod import DemodChunk
+
+    return DemodChunk(t, cols["m_y"], cols["m_z"], cols["theta"], {k: cols[k] for k in aux}, valid)
+
+
 def validated_chunks(stream: Any, opts: DemodOptions, step: float, info: RunInfo) -> Iterator[Any]:
     """Check a run chunk by chunk and turn it into demodulation chunks.
 
@@ -318,7 +325,6 @@ def validated_chunks(stream: Any, opts: DemodOptions, step: float, info: RunInfo
     ------
     accal.estimators.demod.DemodChunk
     """
-    from accal.estimators.demod import DemodChunk
     from accal.estimators.resample import UniformResampler
 
     info.n_input = info.n_samples = 0
@@ -379,27 +385,13 @@ def validated_chunks(stream: Any, opts: DemodOptions, step: float, info: RunInfo
         else:
             valid = None
         info.n_samples += t.size
-        yield DemodChunk(
-            t,
-            cols["m_y"],
-            cols["m_z"],
-            cols["theta"],
-            {k: cols[k] for k in opts.aux_channels},
-            valid,
-        )
+        yield _chunk(t, cols, valid, opts.aux_channels)
     if resampler is not None and problem is None:
         # the grid point just after the last sample (jitter): no last period lost
         t, cols, valid = resampler.finish()
         if t.size:
             info.n_samples += t.size
-            yield DemodChunk(
-                t,
-                cols["m_y"],
-                cols["m_z"],
-                cols["theta"],
-                {k: cols[k] for k in opts.aux_channels},
-                valid,
-            )
+            yield _chunk(t, cols, valid, opts.aux_channels)
     info.warnings = list(stream.warnings)
     if resampler is not None:
         info.resample = resampler.report.as_dict()

@@ -591,6 +591,26 @@ def close_loop(
     builders = _resolve(candidates)
     opts = dict(options or {})
 
+    def again(valid_again: NDArray[np.bool_], **extra: Any) -> ClosureResult:
+        """The same analysis on other samples (outliers or a lagged channel's start left out)."""
+        return close_loop(
+            t_all,
+            y_all,
+            base=base,
+            aux=aux,
+            valid=valid_again,
+            candidates=candidates,
+            alpha=alpha,
+            max_effects=max_effects,
+            orbit_period=orbit_period,
+            catchall_knots=catchall_knots,
+            options={**opts, **extra},
+            channel=channel,
+            channel_names=channel_names,
+            noise_psd=noise_psd,
+            resolution=resolution,
+        )
+
     t_u, y_u = t_all[use], y_all[use]
     chan_u = None if chan_all is None else chan_all[use]
     t0 = float(t_u[0])
@@ -610,45 +630,13 @@ def close_loop(
         if bad.any():
             later = use.copy()
             later[np.flatnonzero(use)[bad]] = False
-            res = close_loop(
-                t_all,
-                y_all,
-                base=base,
-                aux=aux,
-                valid=later,
-                candidates=candidates,
-                alpha=alpha,
-                max_effects=max_effects,
-                orbit_period=orbit_period,
-                catchall_knots=catchall_knots,
-                options={**opts, "_screened": True},
-                channel=channel,
-                channel_names=channel_names,
-                noise_psd=noise_psd,
-                resolution=resolution,
-            )
+            res = again(later, _screened=True)
             decay = [e for e in res.effects if e.name == "exponential_drift" and e.tau]
             if decay and float(t_u[bad].max()) <= t0 + 5.0 * float(decay[0].tau):
                 # the "outliers" are the start of a fast decay the closure found without
                 # them (1e-8 m/s², T = 120 s: its first 350 s were screened and its
                 # amplitude came out 5.9e-10): analyse them with it
-                return close_loop(
-                    t_all,
-                    y_all,
-                    base=base,
-                    aux=aux,
-                    valid=use,
-                    candidates=candidates,
-                    alpha=alpha,
-                    max_effects=max_effects,
-                    orbit_period=orbit_period,
-                    catchall_knots=catchall_knots,
-                    options={**opts, "_screened": True},
-                    channel=channel,
-                    channel_names=channel_names,
-                    noise_psd=noise_psd,
-                    resolution=resolution,
-                )
+                return again(use, _screened=True)
             note = {
                 "name": "outliers",
                 "channel": None,
@@ -759,23 +747,7 @@ def close_loop(
                 g_end = tu_[k + 1]
                 later &= ~((t_all >= g_end) & (t_all < g_end + lead))
         if int(later.sum()) >= MIN_SAMPLES:
-            res = close_loop(
-                t_all,
-                y_all,
-                base=base,
-                aux=aux,
-                valid=later,
-                candidates=candidates,
-                alpha=alpha,
-                max_effects=max_effects,
-                orbit_period=orbit_period,
-                catchall_knots=catchall_knots,
-                options={**opts, "_after_lag": lead},
-                channel=channel,
-                channel_names=channel_names,
-                noise_psd=noise_psd,
-                resolution=resolution,
-            )
+            res = again(later, _after_lag=lead)
             note = {
                 "name": "auxiliary",
                 "channel": None,
