@@ -849,8 +849,6 @@ def _with_effect_uncertainty(
     sigma_plain²``); that is added to the refit's variance of the same
     coefficient, for every method.
     """
-    import dataclasses as dc
-
     out = dict(fits)
     for (ax, m), fit in fits.items():
         entry = closure.get(ax)
@@ -863,7 +861,7 @@ def _with_effect_uncertainty(
             if after is None or plain is None or not np.isfinite(after * plain):
                 continue
             cov[k, k] += max(0.0, after**2 - plain**2)
-        out[(ax, m)] = dc.replace(fit, cov=cov)
+        out[(ax, m)] = dataclasses.replace(fit, cov=cov)
     return out
 
 

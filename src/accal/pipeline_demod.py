@@ -886,13 +886,21 @@ def check_output_format(out_dir: Path, fmt: str) -> None:
         )
 
 
-def summary_source(path: Path) -> str | None:
-    """File name of the run a ``summary.json`` is about, or None if it is not a demod summary."""
+def load_summary(path: Path) -> tuple[str, dict[str, Any]] | None:
+    """(run file name, content) of a demod ``summary.json``, or None if it is not one."""
     try:
         s = json.loads(Path(path).read_text())
-        return Path(s["source"]).name if isinstance(s, dict) and "options" in s else None
+        if isinstance(s, dict) and isinstance(s.get("options"), dict):
+            return Path(s["source"]).name, s
     except (OSError, ValueError, KeyError, TypeError):
-        return None
+        pass
+    return None
+
+
+def summary_source(path: Path) -> str | None:
+    """File name of the run a ``summary.json`` is about, or None if it is not a demod summary."""
+    got = load_summary(path)
+    return None if got is None else got[0]
 
 
 def remove_stale_summaries(out_dir: Path, source: str, keep: Path) -> list[Path]:
@@ -1550,14 +1558,11 @@ def current_summaries(
                 sources = meta["sources"]
     found: dict[str, tuple[Path, dict[str, Any]]] = {}
     for sp in sorted(directory.glob("*summary.json")):
-        try:
-            s = json.loads(sp.read_text())
-            name = Path(s["source"]).name
-            o = s["options"]
-            if not isinstance(o, dict):
-                continue
-        except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        got = load_summary(sp)
+        if got is None:
             continue  # not a demod summary
+        name, s = got
+        o = s["options"]
         if sources is not None:
             meta = sources.get(name)
             if not isinstance(meta, dict):

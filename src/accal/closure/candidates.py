@@ -322,10 +322,7 @@ def exponential_drift(ctx: Context) -> list[Proposal]:
     n_tau = int(np.ceil(np.log(hi / lo) / np.log(EXP_TAU_STEP))) + 1
     taus = np.geomspace(lo, hi, n_tau)  # both ends, ratio <= EXP_TAU_STEP
     el = ctx.t - ctx.t0
-    z = np.exp(-el[None, :] / taus[:, None])
-    power = np.zeros(taus.size)
-    for m in ctx.channel_masks():  # one amplitude per channel: the powers add
-        power += _row_power(ctx, z * m)
+    power = _channel_power(ctx, np.exp(-el[None, :] / taus[:, None]))  # one A per channel
     if not np.any(power > 0):
         return []
     k = int(np.argmax(power))
@@ -361,8 +358,7 @@ def _refine_tau(ctx: Context, el: NDArray[np.float64], lo: float, hi: float) -> 
     masks = ctx.channel_masks()
 
     def neg_power(log_tau: float) -> float:
-        z = np.exp(-el / np.exp(log_tau))[None, :]
-        return -float(sum(_row_power(ctx, z * m)[0] for m in masks))
+        return -float(_channel_power(ctx, np.exp(-el / np.exp(log_tau))[None, :])[0])
 
     if hi <= lo:
         return lo
@@ -371,19 +367,19 @@ def _refine_tau(ctx: Context, el: NDArray[np.float64], lo: float, hi: float) -> 
     )
     tau = float(np.exp(res.x))
     # Gauss-Newton on (A_c, T): the power is flat at its maximum, so the bounded
-    # search stops at ~1e-7 relative; a noise-free exponential needs T to rounding
+    # search stops at its tolerance; a noise-free exponential needs T to rounding
     r = ctx.residual
     for _ in range(8):
         e = np.exp(-el / tau)
-        a_c, d_col = [], np.zeros_like(e)
+        per_chan, d_col = [], np.zeros_like(e)
         for m in masks:
             x = e * m
             xt = x - ctx.basis.project(x)
             nrm = float(xt @ xt)
             a = float(xt @ r) / nrm if nrm > 0 else 0.0
-            a_c.append(x)
+            per_chan.append(x)
             d_col += a * (el / tau**2) * e * m  # ∂(A_c e^(−el/T))/∂T
-        cols = np.column_stack([*a_c, d_col])
+        cols = np.column_stack([*per_chan, d_col])
         ct = cols - ctx.basis.project(cols)
         norms = np.linalg.norm(ct, axis=0)
         if not np.all(norms > 0):
@@ -783,10 +779,9 @@ def auxiliary(ctx: Context) -> list[Proposal]:
     t_u = ctx.t
     # filter and shift on the distinct sample times (channels share them)
     tu, first = np.unique(t_all, return_index=True)
-    max_lag = float(ctx.options.get("max_lag", min(ctx.span / 20.0, 3600.0)))
-    lags = np.linspace(0.0, max_lag, int(ctx.options.get("n_lags", 31)))
+    top_lag = max_lag(ctx.options, ctx.span)
+    lags = np.linspace(0.0, top_lag, int(ctx.options.get("n_lags", 31)))
     taus = tuple(ctx.options.get("aux_taus", (0.0, 300.0, 1000.0, 3000.0)))
-    masks = ctx.channel_masks()
     z = np.empty((lags.size, t_u.size))  # lagged regressors on the used samples, row by row
     for name, x in ctx.aux.items():
         if ctx.has_label(f"aux:{name}"):
@@ -809,7 +804,7 @@ def auxiliary(ctx: Context) -> list[Proposal]:
             h = filtered(tc)
             for j, lag in enumerate(lags):
                 z[j] = np.interp(t_u - lag, tu, h)
-            pw = sum(_row_power(ctx, z * m if len(masks) > 1 else z) for m in masks)
+            pw = _channel_power(ctx, z)
             j = int(np.argmax(pw))
             grid_best.append((float(pw[j]), float(lags[j]), float(tc)))
         top = max(g[0] for g in grid_best)
@@ -818,7 +813,7 @@ def auxiliary(ctx: Context) -> list[Proposal]:
                 # between the grid's lags, for every competitive time constant: a 1500 s
                 # lag fell between grid lags and 1212 s + a 300 s low-pass won
                 lag, p_best = _refine_lag(
-                    ctx, tu, filtered(tc), lag, float(lags[1] - lags[0]), max_lag, p_best
+                    ctx, tu, filtered(tc), lag, float(lags[1] - lags[0]), top_lag, p_best
                 )
             if p_best > best[0]:
                 best = (p_best, lag, tc)
@@ -858,18 +853,29 @@ def _refine_lag(
     """
     from scipy.optimize import minimize_scalar
 
-    masks = ctx.channel_masks()
     t_u = ctx.t
 
     def neg_power(lg: float) -> float:
-        z = np.interp(t_u - lg, tu, h)[None, :]
-        return -float(sum(_row_power(ctx, z * m if len(masks) > 1 else z)[0] for m in masks))
+        return -float(_channel_power(ctx, np.interp(t_u - lg, tu, h)[None, :])[0])
 
     lo, hi = max(0.0, lag - step), min(top, lag + step)
     if hi <= lo:
         return lag, power
     res = minimize_scalar(neg_power, bounds=(lo, hi), method="bounded", options={"xatol": 0.5})
     return (float(res.x), float(-res.fun)) if -res.fun > power else (lag, power)
+
+
+def max_lag(options: dict[str, Any], span: float) -> float:
+    """Longest lag :func:`auxiliary` searches [s]: ``options["max_lag"]`` or min(span/20, 1 h)."""
+    return float(options.get("max_lag", min(span / 20.0, 3600.0)))
+
+
+def _channel_power(ctx: Context, z: NDArray[np.float64]) -> NDArray[np.float64]:
+    """:func:`_row_power` of the rows of ``z`` with one coefficient per data channel (summed)."""
+    masks = ctx.channel_masks()
+    if len(masks) == 1:
+        return _row_power(ctx, z)
+    return sum(_row_power(ctx, z * m) for m in masks)
 
 
 def _row_power(ctx: Context, z: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -47,7 +47,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from accal.closure.basis import Basis, BlockBase, FitResult
-from accal.closure.candidates import BUILDERS, Context, Proposal
+from accal.closure.candidates import BUILDERS, Context, Proposal, max_lag
 from accal.closure.residual import (
     Grid,
     ResidualStats,
@@ -648,6 +648,7 @@ def close_loop(
             return dataclasses.replace(res, notes=(note, *res.notes))
     lev0_white = basis0.leverage(grid)
     beta = projection_bias(grid, basis0, fit0.resid, lev0_white)
+    n_families = _families(builders, aux_all, orbit_period)
     search = _Search(
         t_all=t_all,
         use=use,
@@ -662,13 +663,13 @@ def close_loop(
             **opts,
             "enabled": tuple(n for n, _ in builders),
             "alpha": alpha,
-            "families": _families(builders, aux_all, orbit_period),
+            "families": n_families,
         },
         builders=builders,
         chan_all=chan_all,
         names=names,
         base_labels=frozenset(bbase.column_labels()),
-        n_families=_families(builders, aux_all, orbit_period),
+        n_families=n_families,
         alpha=alpha,
         beta=beta,
     )
@@ -735,7 +736,7 @@ def close_loop(
         # 7e-10 -> -6e-10).  Redo the search without the first `max_lag` seconds:
         # there every lag searched is known (leaving out only the found lag biased
         # the re-search to lags shorter than it: 1206 s + a 300 s low-pass for 1500 s)
-        lead = float(opts.get("max_lag", min(span / 20.0, 3600.0)))
+        lead = max_lag(opts, span)
         later = use & (t_all >= t0 + lead)
         # the same after every data gap: the channel was only known at the data's
         # times, so across a gap the lagged regressor was bridged (QA: steps of
@@ -747,7 +748,7 @@ def close_loop(
                 g_end = tu_[k + 1]
                 later &= ~((t_all >= g_end) & (t_all < g_end + lead))
         if int(later.sum()) >= MIN_SAMPLES:
-            res = again(later, _after_lag=lead)
+            res = again(later, _after_lag=lead, _screened=True)  # outliers checked above
             note = {
                 "name": "auxiliary",
                 "channel": None,
