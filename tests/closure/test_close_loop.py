@@ -74,14 +74,57 @@ def test_exponential_drift_found_with_its_time_constant(sim, amp, tau):
     assert abs(err["bias"]["after"]) < 0.2 * abs(err["bias"]["before"])
 
 
-def test_exponential_drift_noise_free_is_exact():
+@pytest.mark.parametrize(("seed", "amp", "tau"), [(8, 3e-9, 30000.0), (10, -5e-9, 60000.0)])
+def test_slow_exponential_is_not_removed_as_polynomial_terms(sim, seed, amp, tau):
+    """A decay slower than span/4 (the forward search's cap) takes the polynomials' place.
+
+    Before, quadratic + cubic were removed instead and the bias kept the decay's
+    amplitude: errors of 2.2e-9 / -4.5e-9 m/s² at σ ~1e-11 (z ~ 100-400).  Measured
+    now: bias errors 4e-11 / 1.2e-10 at z 0.3 / 0.3, T within 0.4 % / 0.1 %.
+    """
+    d = sim(seed, **DAY)
+    el = d["t"] - d["t"][0]
+    d["y"] = d["y"] + amp * np.exp(-el / tau)
+    res = _run(d)
+    assert _names(res) == ["exponential_drift"]
+    e = res.effects[0]
+    assert abs(e.coefficient - amp) < 3 * e.sigma
+    assert {r.name for r in res.removed} >= {"quadratic_drift"}
+    # T's uncertainty is propagated (Jacobian column): T and the bias within 3σ
+    assert abs(e.tau - tau) < 3 * e.details["tau_sigma"]
+    bias = res.base_coefficient("bias")
+    assert abs(_err(res, d)["bias"]["after"]) < 3 * bias.sigma_after
+
+
+def test_time_constant_uncertainty_reaches_the_bias_sigma(sim):
+    """σ(T) from the Gauss-Newton Jacobian; the bias σ includes what T's search costs.
+
+    Without the Jacobian column a 60,000 s decay's bias σ was 4.1e-11 for an error of
+    8.8e-10 (seed 9, z = 21); with it σ = 4.9e-10 (z = 1.8).
+    """
+    d = sim(9, **DAY)
+    el = d["t"] - d["t"][0]
+    d["y"] = d["y"] + -5e-9 * np.exp(-el / 60000.0)
+    res = _run(d)
+    e = res.effects[0]
+    assert e.name == "exponential_drift" and e.details["tau_sigma"] > 0
+    assert abs(e.tau - 60000.0) < 3 * e.details["tau_sigma"]
+    bias = res.base_coefficient("bias")
+    assert bias.sigma_after > 5 * bias.sigma_plain
+    assert abs(_err(res, d)["bias"]["after"]) < 3 * bias.sigma_after
+
+
+@pytest.mark.parametrize(("amp", "tau"), [(5e-9, 7200.0), (3e-9, 50000.0)])
+def test_exponential_drift_noise_free_is_exact(amp, tau):
+    """Also beyond span/4 (50,000 s over a day: the polynomial swap's range)."""
     t = np.arange(0.0, 86400.0, 2.0)
-    y = 1e-7 + 1e-12 * t + 5e-9 * np.exp(-t / 7200.0)
+    y = 1e-7 + 1e-12 * t + amp * np.exp(-t / tau)
     res = close_loop(t, y, resolution=np.finfo(float).eps * 1e-7)
     assert _names(res) == ["exponential_drift"] and res.unexplained == ()
     e = res.effects[0]
-    assert e.coefficient == pytest.approx(5e-9, rel=1e-9)
-    assert e.tau == pytest.approx(7200.0, rel=1e-9)
+    assert e.coefficient == pytest.approx(amp, rel=1e-9)
+    assert e.tau == pytest.approx(tau, rel=1e-9)
+    assert res.base_coefficient("bias").after == pytest.approx(1e-7, rel=1e-12)
 
 
 def test_bias_step_found_at_right_epoch(sim):

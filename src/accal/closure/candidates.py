@@ -294,6 +294,9 @@ def cubic_drift(ctx: Context) -> list[Proposal]:
 #: T = 0.8 span, 1.7e-8 m/s², took the place of a true cubic drift).
 EXP_TAU_RANGE = (120.0, 86400.0)
 EXP_SPAN_FRACTION = 0.25
+#: Longest time constant, as a fraction of the span, of the exponential that may take the
+#: place of polynomial drift terms after the search (``select._Search.smooth_swap``).
+EXP_LONG_FRACTION = 1.0
 #: Ratio between neighbouring time constants searched.
 EXP_TAU_STEP = 1.4
 
@@ -308,7 +311,9 @@ def exponential_drift(ctx: Context) -> list[Proposal]:
     searched on a log grid (:data:`EXP_TAU_RANGE`, ratio :data:`EXP_TAU_STEP`,
     capped at :data:`EXP_SPAN_FRACTION` of the span) for the most explained power, then refined between the
     grid's neighbours (:func:`_refine_tau`); the multiplicity is the number of
-    grid values.  Only one exponential per model.
+    grid values.  Only one exponential per model.  ``options["exp_tau_max"]``
+    overrides the longest T (the selection's polynomial swap searches up to
+    :data:`EXP_LONG_FRACTION` of the span).
     """
     if any(lb.startswith("exp:") for lb in ctx.labels):
         return []
@@ -317,6 +322,7 @@ def exponential_drift(ctx: Context) -> list[Proposal]:
     dt = float(np.median(steps)) if steps.size else 1.0
     lo = max(EXP_TAU_RANGE[0], 10.0 * dt)
     hi = min(EXP_TAU_RANGE[1], EXP_SPAN_FRACTION * ctx.span)
+    hi = float(ctx.options.get("exp_tau_max", hi))  # the polynomial swap searches further
     if hi <= lo:
         return []
     n_tau = int(np.ceil(np.log(hi / lo) / np.log(EXP_TAU_STEP))) + 1

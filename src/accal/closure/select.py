@@ -21,6 +21,11 @@
    was standing in for the new one (e.g. the once-per-orbit part of a temperature
    coupling taken as ``periodic``) and is removed, and its search family may propose
    again; go back to 1, at most ``max_effects`` additions;
+4b. compare the drift terms found (quadratic, cubic, exponential) with one slow
+   exponential settling of T up to twice the span, by Wald statistic less a χ²₁
+   quantile per parameter (:meth:`_Search.smooth_swap`); the final fit carries the
+   Jacobian of every exponential's T, so σ(T) and its cost to the other
+   coefficients are in the covariances (:func:`_with_tau_jacobian`);
 5. finally test a generic smooth basis (piecewise-linear, ``catchall_knots`` knots) on
    top of the final model against the white + 1/f noise model fitted above twice the
    basis' frequencies and extrapolated down (the residual itself cannot tell slow
@@ -433,6 +438,42 @@ def _resolve(candidates: Sequence[str | Callable]) -> list[tuple[str, Callable]]
     return out
 
 
+def _with_tau_jacobian(
+    f: _Found, t_all: NDArray[np.float64], t0: float, use: NDArray[np.bool_], rest: Basis
+) -> _Found:
+    """An exponential settling with the Jacobian of its time constant as extra columns.
+
+    The selection searches ``T`` (:func:`accal.closure.candidates.exponential_drift`)
+    and fits ``A`` with ``T`` held.  Linearised at the fitted ``T``,
+    ``A·exp(−(t−t0)/(T+δ)) ≈ A·e + β·((t−t0)/T)·e`` with ``e = exp(−(t−t0)/T)`` and
+    ``β = A·δ/T``: one more column per channel.  Fitting it with the others is the
+    Gauss-Newton covariance of the nonlinear least-squares problem, so σ(T) =
+    σ(β)·T/|A| and the base coefficients' σ include what not knowing ``T`` costs
+    (a decay of T = 60,000 s over a day had a bias σ 20x too small without it).
+    Other effects, and an exponential whose Jacobian is not independent of the rest of
+    the design (``rest``: the base and the other effects), are returned unchanged.
+    """
+    prop = f.prop
+    if prop.name != "exponential_drift" or not prop.params.get("tau"):
+        return f
+    tau = float(prop.params["tau"])
+    cols = prop.columns
+    jac = cols * ((t_all - t0) / tau)[:, None]
+    aug = Proposal(
+        prop.name,
+        prop.channel,
+        np.column_stack([cols, jac]),
+        (*prop.labels, *(f"d{lb}/dlnT" for lb in prop.labels)),
+        prop.multiplicity,
+        {**prop.params, "jacobian": cols.shape[1]},
+        prop.check_consistency,
+        None if prop.axes is None else (*prop.axes, *prop.axes),
+    )
+    if _independent(rest, aug, use).columns.shape[1] != aug.columns.shape[1]:
+        return f
+    return _Found(aug, f.p_adj, f.info, f.builder)
+
+
 def _independent(basis: Basis, prop: Proposal, use: NDArray[np.bool_], tol: float = 1e-8):
     """``prop`` reduced to columns that are independent of the design and of each other."""
     z = prop.columns[use]
@@ -718,6 +759,7 @@ def close_loop(
         model = np.where(grid.freqs >= f_lo, nz.psd, model)
         return wald_test(grid, f.resid, zt, lv, psd=model, psd_dof=nu), zt
 
+    search.smooth_swap()
     w_smooth, zt_smooth = smooth_test(search.state(search.found))
     if w_smooth is not None and w_smooth.pvalue < alpha and search.backward(max_effects):
         w_smooth, zt_smooth = smooth_test(search.state(search.found))
@@ -758,14 +800,22 @@ def close_loop(
                 "details": {"left_out": lead},
             }
             return dataclasses.replace(res, notes=(*res.notes, note))
+    # the final fit carries the Jacobian of every searched time constant, so that
+    # its uncertainty reaches every σ (an exponential's T was fitted, not known)
+    final = [
+        _with_tau_jacobian(
+            f, t_all, t0, use, search.state([g for g in search.found if g is not f])[0]
+        )
+        for f in search.found
+    ]
     found = [
         (f.prop, p, {**f.info, "p_accept": f.p_adj})
-        for f, p in zip(search.found, search.final_p(), strict=True)
+        for f, p in zip(final, search.final_p(), strict=True)
     ]
     removed = [(f.prop, f.p_adj, f.info) for f in search.removed]
     unexplained = search.unexplained
     notes = search.notes
-    basis, fit, lev = search.state(search.found)
+    basis, fit, lev = search.state(final)
 
     # ------------------------------------------------------------------ covariances
     if noise_psd is not None:
@@ -1010,6 +1060,16 @@ _PAIR_ANCHORS = 3
 _PAIR_GATE = 0.2  # a masked proposal must be suggestive: corrected p < 0.2
 _REFINE_DW = 4.0
 _NO_SEARCH = ("quadratic_drift", "cubic_drift")  # nothing to refine
+
+
+#: How much larger (Wald statistic less the parameter penalty) a slow exponential's score
+#: must be to replace the polynomial drift terms found (:meth:`_Search.smooth_swap`).
+#: Calibrated: quadratic-only days that favoured a slow exponential scored 1-43 (4 of 59
+#: simulated 1/f days; the real Swarm storm day twice, 32-34: the 1/f model extrapolated
+#: to the lowest frequencies underestimates them), simulated slow decays 117-27,000
+#: (one of T = span scored 44).  A margin of 100 is an e^50 likelihood ratio: the choice
+#: stands even if that extrapolation is 2x low.  Below it the polynomial terms stay.
+SWAP_MIN_GAIN = 100.0
 
 
 @dataclass(eq=False)  # compared by identity: the proposal holds arrays
@@ -1321,6 +1381,68 @@ class _Search:
             if not (refined or dropped):
                 break
 
+    def smooth_swap(self) -> bool:
+        """The drift terms found against one slow exponential settling; the better stays.
+
+        The forward search offers time constants up to a quarter of the span only (a
+        slower decay is close to a low-order polynomial over the record, and an
+        exponential had taken a true cubic's place).  So a slow decay (T = 30,000 or
+        60,000 s over a day) was removed as quadratic + cubic, or as a quadratic + a
+        faster exponential, whose constant terms took the decay's amplitude into the
+        bias: errors of 1e-8 and 3e-9 m/s² at z = 130 and 460.  Here the drift terms
+        found (quadratic, cubic, exponential; at least one polynomial) are compared
+        with one exponential of T up to
+        :data:`~accal.closure.candidates.EXP_LONG_FRACTION` × span (not at that cap),
+        both given the other effects, by their Wald statistic less the χ²₁ quantile at
+        ``alpha`` per parameter (an exponential has an amplitude per channel and T):
+        the exponential replaces them when its score is larger by more than
+        :data:`SWAP_MIN_GAIN`.
+        """
+        from scipy import stats
+
+        from accal.closure.candidates import EXP_LONG_FRACTION
+
+        drift = ("quadratic_drift", "cubic_drift", "exponential_drift")
+        smooth = [f for f in self.found if f.prop.name in drift]
+        bi = next((i for i, (n, _) in enumerate(self.builders) if n == "exponential_drift"), None)
+        if bi is None or not any(f.prop.name != "exponential_drift" for f in smooth):
+            return False
+        others = [f for f in self.found if f not in smooth]
+        basis, fit, lev = self.state(others)
+        ctx = self.context(others, basis, fit, lev)
+        ctx = dataclasses.replace(
+            ctx, options={**ctx.options, "exp_tau_max": EXP_LONG_FRACTION * self.span}
+        )
+        props = [p for p, _ in self.propose(ctx, only=bi)]
+        if not props:
+            return False
+        exp = props[0]
+        w_exp = self.test(basis, fit, lev, exp.columns)
+        w_cur = self.test(basis, fit, lev, np.column_stack([f.prop.columns for f in smooth]))
+        if w_exp is None or w_cur is None:
+            return False
+
+        def n_par(props: list[Proposal]) -> int:
+            return sum(p.columns.shape[1] + (p.name == "exponential_drift") for p in props)
+
+        k = float(stats.chi2.isf(self.alpha, 1))
+        gain = (w_exp.stat * w_exp.q - k * n_par([exp])) - (
+            w_cur.stat * w_cur.q - k * n_par([f.prop for f in smooth])
+        )
+        p_adj = self._padj(w_exp, exp.multiplicity)
+        if gain <= SWAP_MIN_GAIN or p_adj >= self.alpha:
+            return False
+        info = {
+            "stat": w_exp.stat,
+            "dof": w_exp.dof,
+            "multiplicity": exp.multiplicity,
+            "replaces": [f.prop.name for f in smooth],
+        }
+        self.removed.extend(smooth)
+        self.found = [*others, _Found(_independent(basis, exp, self.use), p_adj, info, bi)]
+        self._settle(protect_last=True)
+        return True
+
     def model_key(self) -> frozenset:
         """The current set of effects (to stop when a model comes back)."""
         return frozenset((f.prop.name, f.prop.channel, _key(f.prop)) for f in self.found)
@@ -1576,6 +1698,14 @@ def _effects(
         elif prop.name == "exponential_drift":
             kw["tau"] = prop.params["tau"]
             details["t0"] = t0
+            n_e = int(prop.params.get("jacobian", 0))
+            if n_e:  # see _with_tau_jacobian: T + δ, δ = β·T/A
+                i = 0 if axis is None else prop.axes.index(axis)
+                amp, beta = float(c[i]), float(c[n_e + i])
+                s_beta = float(np.sqrt(max(cc[n_e + i, n_e + i], 0.0)))
+                if amp != 0.0:
+                    kw["tau"] = float(prop.params["tau"]) * (1.0 + beta / amp)
+                    details["tau_sigma"] = float(prop.params["tau"]) * s_beta / abs(amp)
         elif prop.name == "intra_period_shape":
             kw["tau"] = prop.params["tau"]
             details.update(prop.params)
