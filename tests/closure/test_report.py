@@ -67,3 +67,18 @@ def test_removed_effects_say_which_member(sim):
         {"name": "bias_step", "channel": None, "p_accept": 1e-5, "epoch": 1.5e8},
         {"name": "periodic", "channel": "line", "p_accept": 2e-3, "frequency": 1e-3},
     ]
+
+
+def test_exponential_time_constant_reported_with_its_sigma():
+    """closure.json carries details.tau_sigma and the Markdown prints τ ± σ(τ)."""
+    rng = np.random.default_rng(4)
+    t = np.arange(0.0, 86400.0, 2.0)
+    y = 1e-7 + 1e-12 * t + 3e-9 * np.exp(-t / 5000.0) + 1e-11 * rng.standard_normal(t.size)
+    res = close_loop(t, y, candidates=("exponential_drift",))
+    e = res.effects[0]
+    assert e.name == "exponential_drift"
+    sig = e.details["tau_sigma"]
+    assert 0 < sig < 0.05 * e.tau and abs(e.tau - 5000.0) < 4 * sig
+    out = json.loads(json.dumps(result_to_dict(res)))
+    assert out["effects"][0]["details"]["tau_sigma"] == sig
+    assert "± " in to_markdown(res).split("exponential_drift", 1)[1].splitlines()[0]

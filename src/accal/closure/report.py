@@ -201,6 +201,8 @@ def to_markdown(
                 ),
                 "",
             )
+            if e.tau is not None and e.details.get("tau_sigma") and where.startswith("τ"):
+                where += f" ± {_fmt(e.details['tau_sigma'])}"
             ax = f"{e.axis or ''} | " if multi else ""
             lines.append(
                 f"| {e.name} | {e.channel or ''} | {ax}{_fmt(e.coefficient)} | {_fmt(e.sigma)} "
