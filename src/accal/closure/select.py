@@ -22,8 +22,9 @@
    coupling taken as ``periodic``) and is removed, and its search family may propose
    again; go back to 1, at most ``max_effects`` additions;
 4b. compare the drift terms found (quadratic, cubic, exponential) with one slow
-   exponential settling of T up to twice the span, by Wald statistic less a χ²₁
-   quantile per parameter (:meth:`_Search.smooth_swap`); the final fit carries the
+   exponential settling of T up to the span, by Wald statistic less a χ²₁ quantile
+   per parameter; the exponential replaces them when its score is larger by more than
+   :data:`SWAP_MIN_GAIN` (:meth:`_Search.smooth_swap`); the final fit carries the
    Jacobian of every exponential's T, so σ(T) and its cost to the other
    coefficients are in the covariances (:func:`_with_tau_jacobian`);
 5. finally test a generic smooth basis (piecewise-linear, ``catchall_knots`` knots) on
@@ -449,7 +450,7 @@ def _with_tau_jacobian(
     ``β = A·δ/T``: one more column per channel.  Fitting it with the others is the
     Gauss-Newton covariance of the nonlinear least-squares problem, so σ(T) =
     σ(β)·T/|A| and the base coefficients' σ include what not knowing ``T`` costs
-    (a decay of T = 60,000 s over a day had a bias σ 20x too small without it).
+    (a decay of T = 60,000 s over a day had a bias σ 12x too small without it).
     Other effects, and an exponential whose Jacobian is not independent of the rest of
     the design (``rest``: the base and the other effects), are returned unchanged.
     """
@@ -1064,10 +1065,10 @@ _NO_SEARCH = ("quadratic_drift", "cubic_drift")  # nothing to refine
 
 #: How much larger (Wald statistic less the parameter penalty) a slow exponential's score
 #: must be to replace the polynomial drift terms found (:meth:`_Search.smooth_swap`).
-#: Calibrated: quadratic-only days that favoured a slow exponential scored 1-43 (4 of 59
-#: simulated 1/f days; the real Swarm storm day twice, 32-34: the 1/f model extrapolated
-#: to the lowest frequencies underestimates them), simulated slow decays 117-27,000
-#: (one of T = span scored 44).  A margin of 100 is an e^50 likelihood ratio: the choice
+#: Calibrated: on quadratic-only days where a slow exponential scored higher it did so by
+#: 1-43 (three simulated 1/f days; the real Swarm storm day twice, 32-34: the 1/f model
+#: extrapolated to the lowest frequencies underestimates them), on simulated slow decays
+#: by 117-27,000 (one of T = span: 44).  A margin of 100 is an e^50 likelihood ratio: the choice
 #: stands even if that extrapolation is 2x low.  Below it the polynomial terms stay.
 SWAP_MIN_GAIN = 100.0
 
