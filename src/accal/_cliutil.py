@@ -165,5 +165,6 @@ def aux_option(f: Any) -> Any:
         type=click.Path(dir_okay=False, path_type=Path),
         default=None,
         help="Housekeeping (AHK1B or a table with 'time') of the same day(s): candidate "
-        "channels for --close-loop (implied in grace-bias).",
+        "channels for --close-loop (implied in grace-bias). A coupling c·x enters as given, "
+        "so the bias is the one at channel value 0.",
     )(f)

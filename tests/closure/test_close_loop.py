@@ -162,9 +162,13 @@ def test_temperature_coupling_with_lag(sim):
     assert abs(e.lag - 600.0) <= 240.0  # lag grid step 90 s; day-scale temperature is smooth
     assert abs(e.coefficient - 3e-9) < 3 * e.sigma + 0.02 * 3e-9
     err = _err(res, d)
-    # the coupling's mean (20 K × 3e-9) is a real offset and stays in the bias; the drift
-    # error it caused goes away (measured 9.1e-15 -> 8.6e-17)
+    # measured: drift error 9.1e-15 -> 8.6e-17; bias 5.9e-8 (the coupling × the 20 K
+    # mean temperature) -> 2.9e-11 (z 0.6): the regressor is not de-meaned, the bias
+    # is the one at channel value 0, as the injected model b + c·T says
     assert abs(err["drift"]["after"]) < 0.05 * abs(err["drift"]["before"])
+    bias = res.base_coefficient("bias")
+    assert abs(err["bias"]["after"]) < 3 * bias.sigma_after
+    assert abs(err["bias"]["after"]) < 1e-3 * abs(err["bias"]["before"])
 
 
 def test_two_effects_temperature_and_step(sim):
@@ -266,8 +270,9 @@ def test_two_effects_with_orbit_candidate(sim):
     assert [e.name for e, _ in parts] == _names(res)
     np.testing.assert_allclose(sum(m for _, m in parts), res.effects_model(), rtol=1e-12, atol=0)
     err = _err(res, d)
-    # measured: drift error 7.6e-14 -> 1.5e-16 (the coupling's mean stays in the bias)
+    # measured: drift error 7.6e-14 -> 1.5e-16, bias 6.4e-8 -> 1.1e-10 (z 2.4)
     assert abs(err["drift"]["after"]) < 0.05 * abs(err["drift"]["before"])
+    assert abs(err["bias"]["after"]) < 0.01 * abs(err["bias"]["before"])
 
 
 def test_lines_off_the_orbit_found_beside_its_harmonics():

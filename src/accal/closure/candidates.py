@@ -825,7 +825,11 @@ def auxiliary(ctx: Context) -> list[Proposal]:
                 best = (p_best, lag, tc)
         _, lag, tc = best
         col = np.interp(t_all - lag, tu, filtered(tc))
-        col = col - col[ctx.use].mean()
+        # not de-meaned: the bias is the one at channel value 0, as the model
+        # ``b + c·x`` says.  A de-meaned regressor left c × mean(x) in the bias (a
+        # 3e-9 m/s²/K coupling to a 20 °C channel: 6e-8 m/s²), so the day-to-day bias
+        # followed the day's mean temperature; the σ of that extrapolation is in the
+        # bias σ (σ(c) × mean(x))
         cc, labs, axes = ctx.split(col[:, None], (f"aux:{name}",))
         out.append(
             Proposal(
