@@ -764,26 +764,27 @@ def close_loop(
     w_smooth, zt_smooth = smooth_test(search.state(search.found))
     if w_smooth is not None and w_smooth.pvalue < alpha and search.backward(max_effects):
         w_smooth, zt_smooth = smooth_test(search.state(search.found))
-    lag = max(
-        (
-            float(f.prop.params.get("lag") or 0.0)
-            for f in search.found
-            if f.prop.name == "auxiliary"
-        ),
-        default=0.0,
-    )
-    if lag > 0 and not opts.get("_after_lag"):
+    couplings = [f.prop.params for f in search.found if f.prop.name == "auxiliary"]
+    lag = max((float(c.get("lag") or 0.0) for c in couplings), default=0.0)
+    tc = max((float(c.get("tau") or 0.0) for c in couplings), default=0.0)
+    if (lag > 0 or tc > 0) and not opts.get("_after_lag"):
         # A lagged channel is unknown for the first `lag` seconds (its regressor holds
         # the first value there); that flat start was fitted as an exponential
         # settling or a step (QA: 3e-9 m/s²/K at 1500 s lag gave both, bias error
         # 7e-10 -> -6e-10).  Redo the search without the first `max_lag` seconds:
         # there every lag searched is known (leaving out only the found lag biased
-        # the re-search to lags shorter than it: 1206 s + a 300 s low-pass for 1500 s)
-        lead = max_lag(opts, span)
+        # the re-search to lags shorter than it: 1206 s + a 300 s low-pass for 1500 s).
+        # A low-pass-filtered channel's filter state is unknown at the start (the
+        # regressor starts settled on the first value): the mismatch decays with the
+        # filter's time constant and was reported as an exponential drift of that T
+        # (QA: 1.04e-9 m/s², T = 298 s beside a 2e-9 coupling with a 300 s filter);
+        # it is below e^-5 after FILTER_SETTLE time constants
+        lead = max(max_lag(opts, span) if lag > 0 else 0.0, FILTER_SETTLE * tc)
         later = use & (t_all >= t0 + lead)
         # the same after every data gap: the channel was only known at the data's
         # times, so across a gap the lagged regressor was bridged (QA: steps of
-        # ±2.5e-10 m/s² right after a gap, on a noise-free coupling)
+        # ±2.5e-10 m/s² right after a gap, on a noise-free coupling) and the filter
+        # stepped over the gap as if it were one sample
         tu_ = np.unique(t_all[use])
         if tu_.size > 2:
             dtu = np.diff(tu_)
@@ -796,8 +797,9 @@ def close_loop(
                 "name": "auxiliary",
                 "channel": None,
                 "note": f"the first {lead:.0f} s (and as much after each data gap) left out "
-                f"of the analysis: a lagged coupling was found ({lag:.0f} s in the first "
-                "search), and a lagged channel is unknown before the record starts",
+                f"of the analysis: a coupling with a lag of {lag:.0f} s and a low-pass of "
+                f"{tc:.0f} s was found in the first search, and before the record starts "
+                "a lagged channel is unknown and a filter's state too",
                 "details": {"left_out": lead},
             }
             return dataclasses.replace(res, notes=(*res.notes, note))
@@ -1071,6 +1073,9 @@ _NO_SEARCH = ("quadratic_drift", "cubic_drift")  # nothing to refine
 #: by 117-27,000 (one of T = span: 44).  A margin of 100 is an e^50 likelihood ratio: the choice
 #: stands even if that extrapolation is 2x low.  Below it the polynomial terms stay.
 SWAP_MIN_GAIN = 100.0
+#: Time constants of a coupling's low-pass left out at the start (and after each gap):
+#: the unknown initial filter state has decayed below e^-5 of its size by then.
+FILTER_SETTLE = 5.0
 
 
 @dataclass(eq=False)  # compared by identity: the proposal holds arrays
