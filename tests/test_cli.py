@@ -524,3 +524,16 @@ def test_malformed_degraded_days_table_is_a_usage_error(tmp_path, text):
     out = tmp_path / "out"
     code, _, err = invoke("grace-bias", GRACE_A, "--degraded-days", table_file, "--out", out)
     assert code == 2 and "dd.toml" in err and not out.exists()
+
+
+def test_noise_free_simulation_has_no_warning_and_no_noise():
+    """`simulate grace --noise 0` printed numpy's 'invalid value in multiply' (0 × inf at
+    f = 0 of the 1/f shape); the noise is now exactly zero without it."""
+    import warnings
+
+    from accal.simulate.grace import coloured_noise
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        z = coloured_noise(1000, 1.0, 0.0, 1e-3, np.random.default_rng(1))
+    assert z.shape == (1000,) and not z.any()

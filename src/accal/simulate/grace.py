@@ -118,6 +118,9 @@ def coloured_noise(
     """
     from accal.simulate.noise import coloured_noise as shaped
 
+    if level == 0:  # noise-free (simulate --noise 0): no 0 x inf at f = 0
+        return np.zeros(n)
+
     def psd(f):
         with np.errstate(divide="ignore"):
             return 0.5 * level**2 * (1.0 + corner / np.abs(f))
