@@ -414,6 +414,9 @@ def test_filtered_coupling_start_is_not_an_exponential(sim, tc):
     e = res.effects[names.index("auxiliary")]
     assert abs(e.coefficient - 2e-9) < 3 * e.sigma + 0.01 * 2e-9
     assert any(f"first {5 * tc:.0f} s" in n["note"] for n in res.notes)
+    from accal.closure.report import to_markdown
+
+    assert f"lag 0, τ {tc:.0f} s" in to_markdown(res)  # the low-pass is in the report too
     # measured: bias error 4.0e-8 (the coupling at the channel's 20 K mean) -> 3e-11 and
     # 1.4e-10 (z 0.8 and 3.9: c's 0.1 % error times the 20 K mean is the larger part)
     err = _err(res, d)["bias"]
