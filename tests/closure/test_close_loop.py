@@ -34,6 +34,13 @@ def _err(res, d):
     return res.true_error(d["truth"])
 
 
+def _with_decay(sim, seed, amp, tau):
+    """A simulated day with ``amp·exp(−(t − t0)/tau)`` added from its first sample."""
+    d = sim(seed, **DAY)
+    d["y"] = d["y"] + amp * np.exp(-(d["t"] - d["t"][0]) / tau)
+    return d
+
+
 def test_quadratic_drift_found_and_bias_error_drops(sim):
     d = sim(1, quadratic=2e-19, **DAY)  # 1.5e-9 m/s² over the day
     res = _run(d)
@@ -61,9 +68,7 @@ def test_cubic_drift_found(sim):
 @pytest.mark.parametrize(("amp", "tau"), [(3e-9, 3600.0), (1e-9, 900.0), (-2e-9, 15000.0)])
 def test_exponential_drift_found_with_its_time_constant(sim, amp, tau):
     """A decaying bias from the start: named, not taken for a step or a polynomial."""
-    d = sim(8, **DAY)
-    el = d["t"] - d["t"][0]
-    d["y"] = d["y"] + amp * np.exp(-el / tau)
+    d = _with_decay(sim, 8, amp, tau)
     res = _run(d)
     assert _names(res) == ["exponential_drift"]
     e = res.effects[0]
@@ -82,9 +87,7 @@ def test_slow_exponential_is_not_removed_as_polynomial_terms(sim, seed, amp, tau
     amplitude: errors of 2.2e-9 / -4.5e-9 m/s² at σ ~1e-11 (z ~ 100-400).  Measured
     now: bias errors 4e-11 / 1.2e-10 at z 0.3 / 0.3, T within 0.4 % / 0.1 %.
     """
-    d = sim(seed, **DAY)
-    el = d["t"] - d["t"][0]
-    d["y"] = d["y"] + amp * np.exp(-el / tau)
+    d = _with_decay(sim, seed, amp, tau)
     res = _run(d)
     assert _names(res) == ["exponential_drift"]
     e = res.effects[0]
@@ -102,9 +105,7 @@ def test_time_constant_uncertainty_reaches_the_bias_sigma(sim):
     Without the Jacobian column a 60,000 s decay's bias σ was 4.1e-11 for an error of
     8.8e-10 (seed 9, z = 21); with it σ = 4.9e-10 (z = 1.8).
     """
-    d = sim(9, **DAY)
-    el = d["t"] - d["t"][0]
-    d["y"] = d["y"] + -5e-9 * np.exp(-el / 60000.0)
+    d = _with_decay(sim, 9, -5e-9, 60000.0)
     res = _run(d)
     e = res.effects[0]
     assert e.name == "exponential_drift" and e.details["tau_sigma"] > 0

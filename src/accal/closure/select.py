@@ -440,7 +440,11 @@ def _resolve(candidates: Sequence[str | Callable]) -> list[tuple[str, Callable]]
 
 
 def _with_tau_jacobian(
-    f: _Found, t_all: NDArray[np.float64], t0: float, use: NDArray[np.bool_], rest: Basis
+    f: _Found,
+    t_all: NDArray[np.float64],
+    t0: float,
+    use: NDArray[np.bool_],
+    rest: Callable[[], Basis],
 ) -> _Found:
     """An exponential settling with the Jacobian of its time constant as extra columns.
 
@@ -452,7 +456,8 @@ def _with_tau_jacobian(
     σ(β)·T/|A| and the base coefficients' σ include what not knowing ``T`` costs
     (a decay of T = 60,000 s over a day had a bias σ 12x too small without it).
     Other effects, and an exponential whose Jacobian is not independent of the rest of
-    the design (``rest``: the base and the other effects), are returned unchanged.
+    the design (``rest()``: the base and the other effects, formed only for an
+    exponential), are returned unchanged.
     """
     prop = f.prop
     if prop.name != "exponential_drift" or not prop.params.get("tau"):
@@ -470,7 +475,7 @@ def _with_tau_jacobian(
         prop.check_consistency,
         None if prop.axes is None else (*prop.axes, *prop.axes),
     )
-    if _independent(rest, aug, use).columns.shape[1] != aug.columns.shape[1]:
+    if _independent(rest(), aug, use).columns.shape[1] != aug.columns.shape[1]:
         return f
     return _Found(aug, f.p_adj, f.info, f.builder)
 
@@ -807,7 +812,7 @@ def close_loop(
     # its uncertainty reaches every σ (an exponential's T was fitted, not known)
     final = [
         _with_tau_jacobian(
-            f, t_all, t0, use, search.state([g for g in search.found if g is not f])[0]
+            f, t_all, t0, use, lambda f=f: search.state([g for g in search.found if g is not f])[0]
         )
         for f in search.found
     ]
