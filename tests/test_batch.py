@@ -276,6 +276,136 @@ def test_kill_minus_nine_then_rerun_gives_the_uninterrupted_outputs(tmp_path):
     assert len(manifest) == 10
 
 
+def _descendants(pid: int) -> set[int]:
+    """Live (not zombie) descendants of ``pid``, from ``/proc``."""
+    children: dict[int, list[int]] = {}
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit():
+            try:
+                stat = (d / "stat").read_text()
+            except OSError:
+                continue
+            fields = stat[stat.rindex(")") + 2 :].split()
+            if fields[0] != "Z":
+                children.setdefault(int(fields[1]), []).append(int(d.name))
+    found, todo = set(), [pid]
+    while todo:
+        for c in children.get(todo.pop(), []):
+            found.add(c)
+            todo.append(c)
+    return found
+
+
+def _alive(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().split(") ")[1][0] != "Z"
+    except (OSError, IndexError):
+        return False
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="/proc")
+@pytest.mark.parametrize("start", ["", "forkserver"])
+def test_kill_minus_nine_with_workers_leaves_no_process_and_no_lock(tmp_path, start):
+    """kill -9 of a 2-worker batch: the workers end with it (they do not wait forever
+    for inputs that never come, nor keep the output directory locked); the re-run
+    then finishes the batch.  Forked workers (the default) and a fork server's."""
+    from accal.simulate.grace import write_simulated_grace
+
+    src = tmp_path / "in"
+    for k in range(8):
+        write_simulated_grace(
+            src / f"ACC1B_2005-01-{k + 1:02d}_A_02.asc",
+            date=f"2005-01-{k + 1:02d}",
+            satellite="A",
+            seed=k,
+            duration=43200.0,
+        )
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "accal", "grace-bias", str(src), "-r", "-j", "2", "-q"]
+    proc = subprocess.Popen(
+        [*cmd, "--out", str(out)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        env={**os.environ, "ACCAL_START_METHOD": start},
+    )
+    deadline = time.monotonic() + 120
+    workers: set[int] = set()
+    while time.monotonic() < deadline and not list(out.glob("*.report.json")):
+        workers |= _descendants(proc.pid)
+        time.sleep(0.02)
+    workers |= _descendants(proc.pid)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    assert len(list(out.glob("*.report.json"))) < 8, "the batch was not killed mid-way"
+    assert len(workers) >= 2, workers
+    deadline = time.monotonic() + 20
+    while time.monotonic() < deadline and any(_alive(p) for p in workers):
+        time.sleep(0.05)
+    assert not [p for p in workers if _alive(p)], "processes of the killed batch still run"
+    res = subprocess.run([*cmd, "--out", str(out)], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    assert len(json.loads((out / "manifest.json").read_text())["entries"]) == 8
+
+
+def test_start_method_forks_only_a_single_threaded_process():
+    """Workers are forked (no fresh interpreter to import the libraries) only while no
+    other thread runs; with one, a fork server starts them."""
+    import threading
+
+    from accal.batch import start_method
+
+    code = (  # as the CLI starts: one BLAS thread (else the BLAS's own threads count)
+        "from accal._runtime import single_threaded_blas; single_threaded_blas(); "
+        "from accal.batch import start_method; print(start_method())"
+    )
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert res.stdout.strip() == ("fork" if sys.platform.startswith("linux") else "forkserver")
+    stop = threading.Event()
+    other = threading.Thread(target=stop.wait)
+    other.start()
+    try:
+        assert start_method() == "forkserver"
+    finally:
+        stop.set()
+        other.join()
+
+
+def test_start_method_can_be_forced_and_a_bad_value_is_a_clear_error(monkeypatch):
+    from accal.batch import start_method
+    from accal.errors import AccalError
+
+    monkeypatch.setenv("ACCAL_START_METHOD", "Spawn")
+    assert start_method() == "spawn"
+    monkeypatch.setenv("ACCAL_START_METHOD", "thread")
+    with pytest.raises(AccalError, match="ACCAL_START_METHOD='thread': use 'fork', 'forkserver'"):
+        start_method()
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="fork")
+def test_a_forked_child_does_not_hold_the_output_lock(tmp_path):
+    """flock belongs to the open file, which a fork shares: the child must drop it, or a
+    worker would keep the directory locked after its batch ended."""
+    lock = OutputLock(tmp_path, "parent")
+    lock.acquire()
+    started_r, started_w = os.pipe()
+    done_r, done_w = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the child: say it runs, then keep what it inherited until told to end
+        os.write(started_w, b"1")
+        os.read(done_r, 1)
+        os._exit(0)
+    try:
+        assert os.read(started_r, 1) == b"1"  # the child's fork handlers have run
+        lock.release()
+        with OutputLock(tmp_path, "next run"):  # raises LockedError if the child held it
+            pass
+    finally:
+        os.write(done_w, b"1")
+        os.waitpid(pid, 0)
+        for fd in (started_r, started_w, done_r, done_w):
+            os.close(fd)
+
+
 # ---------------------------------------------------------------- accal table
 
 

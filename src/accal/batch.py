@@ -31,6 +31,7 @@ import json
 import os
 import re
 import time as _time
+import weakref
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -265,9 +266,11 @@ class OutputLock:
         fh.write(f"pid {os.getpid()}, {self.what}, started {_time.strftime('%Y-%m-%d %H:%M:%S')}")
         fh.flush()
         self._fh = fh
+        _HELD_LOCKS.add(self)
 
     def release(self) -> None:
         """Release the lock (the file stays)."""
+        _HELD_LOCKS.discard(self)
         if self._fh is not None:
             self._fh.close()
             self._fh = None
@@ -278,6 +281,29 @@ class OutputLock:
 
     def __exit__(self, *exc: object) -> None:
         self.release()
+
+
+#: Locks this process holds; a forked child closes its copies of their files.
+_HELD_LOCKS: weakref.WeakSet[OutputLock] = weakref.WeakSet()
+
+
+def _forget_locks_in_child() -> None:
+    """In a forked child (a worker): drop the inherited descriptors of held locks.
+
+    ``flock`` belongs to the open file, which a fork shares: a worker that kept its
+    copy would hold the directory locked after the batch process ended.  Closing
+    the copy does not unlock (only the last descriptor's close does).
+    """
+    for lock in list(_HELD_LOCKS):
+        fh, lock._fh = lock._fh, None
+        if fh is not None:
+            with contextlib.suppress(OSError, ValueError):
+                fh.close()  # its buffer is empty (flushed after the holder line)
+    _HELD_LOCKS.clear()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forget_locks_in_child)
 
 
 def remove_stale_temporaries(out_dir: Path) -> int:
@@ -472,12 +498,12 @@ def execute(
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
-    # forkserver: no fork of a process that may hold threads (tqdm, BLAS); the
-    # server imports the task's module and the heavy libraries once, so each worker
-    # starts in milliseconds instead of importing them again (~0.6 s)
-    ctx = mp.get_context("forkserver")
     func = getattr(task, "func", task)  # functools.partial -> the function
-    ctx.set_forkserver_preload([*_PRELOAD, getattr(func, "__module__", "accal")])
+    preload = [*_PRELOAD, getattr(func, "__module__", "accal")]
+    method = start_method(preload)
+    ctx = mp.get_context(method)
+    if method == "forkserver":
+        ctx.set_forkserver_preload(preload)
     with ProcessPoolExecutor(
         max_workers=min(workers, len(paths)), mp_context=ctx, initializer=_worker_init
     ) as pool:
@@ -501,17 +527,91 @@ def execute(
             raise
 
 
-#: Modules the worker fork server imports before forking workers.
+#: Modules imported before the workers are forked (by this process or the fork server).
 _PRELOAD = ("numpy", "scipy.fft", "pyarrow.csv", "pyarrow.parquet")
 
 
-def _worker_init() -> None:
-    """One compute thread per worker process (the processes are the parallelism).
+#: Threads that may run while this process forks: jemalloc (pyarrow's allocator)
+#: starts one at import and handles fork itself (``pthread_atfork``: the child
+#: gets consistent allocator state and its own background thread when needed).
+FORK_SAFE_THREADS = frozenset({"jemalloc_bg_thd"})
 
-    BLAS threads are already 1 through the environment the workers inherit
-    (:func:`accal._runtime.single_threaded_blas`); the allocator is tuned here,
-    in each process (:func:`accal._runtime.tune_allocator`).
+
+def other_threads() -> list[str] | None:
+    """Names of this process's threads besides the calling one, native ones
+    included (Linux ``/proc``); None where that cannot be known."""
+    import threading
+
+    me = threading.get_native_id()
+    try:
+        tids = [int(t) for t in os.listdir("/proc/self/task")]
+    except OSError:
+        return None
+    names = []
+    for tid in tids:
+        if tid == me:
+            continue
+        try:
+            with open(f"/proc/self/task/{tid}/comm") as fh:
+                names.append(fh.read().strip())
+        except OSError:  # ended meanwhile
+            continue
+    return names
+
+
+def start_method(preload: Sequence[str] = _PRELOAD) -> str:
+    """How local workers are started: ``"fork"`` when it is safe, else ``"forkserver"``.
+
+    A forked worker starts in milliseconds with every module of this process
+    already imported; a fork server first starts a fresh interpreter that imports
+    ``preload`` (~0.4 s of every run, measured on the 2-core CI machine).  Forking
+    is only safe while no other thread runs: a fork copies the locks other threads
+    hold, not the threads.  So on Linux ``preload`` is imported here and the
+    threads are listed afterwards (a BLAS set to several threads, a ``LocalCluster``
+    in the same process or tqdm's monitor all count; only
+    :data:`FORK_SAFE_THREADS` do not): none means ``"fork"``.  Elsewhere, or with
+    any other thread, ``"forkserver"``.
+
+    The environment variable ``ACCAL_START_METHOD`` (``fork``, ``forkserver`` or
+    ``spawn``) overrides the choice.
     """
+    import importlib
+    import sys
+
+    forced = os.environ.get("ACCAL_START_METHOD", "").strip().lower()
+    if forced:
+        if forced not in ("fork", "forkserver", "spawn"):
+            raise AccalError(
+                f"ACCAL_START_METHOD={forced!r}: use 'fork', 'forkserver' or 'spawn' (or unset it)"
+            )
+        return forced
+    if not sys.platform.startswith("linux"):
+        return "forkserver"
+    for name in preload:
+        importlib.import_module(name)
+    others = other_threads()
+    if others is None or any(n not in FORK_SAFE_THREADS for n in others):
+        return "forkserver"
+    return "fork"
+
+
+def _worker_init() -> None:
+    """Set up a worker process: one compute thread, a tuned allocator, a parent watch.
+
+    One compute thread per worker (the processes are the parallelism): BLAS
+    threads are already 1 through the environment the workers inherit
+    (:func:`accal._runtime.single_threaded_blas`); pyarrow's pools are set here.
+    The allocator is tuned in each process (:func:`accal._runtime.tune_allocator`).
+
+    A worker waits for its next input on a queue that never closes when the batch
+    process is killed (``kill -9``: no clean-up runs), so without a watch it would
+    stay forever.  A daemon thread waits on the parent's sentinel (a pipe that the
+    kernel closes when the parent dies) and ends the worker then; a file it was
+    writing is left as a temporary, which the next run removes.
+    """
+    import multiprocessing as mp
+    import threading
+
     import pyarrow as pa
 
     from accal._runtime import tune_allocator
@@ -519,6 +619,21 @@ def _worker_init() -> None:
     tune_allocator()
     pa.set_cpu_count(1)
     pa.set_io_thread_count(1)
+    parent = mp.parent_process()
+    if parent is not None and getattr(parent, "sentinel", None) is not None:
+        threading.Thread(
+            target=_exit_with_parent,
+            args=(parent.sentinel,),
+            name="accal-parent-watch",
+            daemon=True,
+        ).start()
+
+
+def _exit_with_parent(sentinel: int) -> None:
+    from multiprocessing.connection import wait
+
+    wait([sentinel])
+    os._exit(1)
 
 
 def _execute_dask(
