@@ -234,6 +234,11 @@ class Proposal:
         Set (with no columns) when the effect cannot be estimated from these data
         (e.g. not identifiable): the selection records it in
         :attr:`ClosureResult.notes` instead of testing it.
+    jacobian : callable, optional
+        For an effect with fitted nonlinear parameters (a coupling's lag and
+        low-pass time constant): returns ``[(name, d columns / d parameter), ...]``
+        (each the shape of ``columns``; ``"tau"`` is differentiated in ``ln τ``)
+        for the final fit's Jacobian (:func:`accal.closure.select._with_tau_jacobian`).
     """
 
     name: str
@@ -245,6 +250,9 @@ class Proposal:
     check_consistency: bool = False
     axes: tuple[str, ...] | None = None
     note: str | None = None
+    jacobian: Callable[[], list[tuple[str, NDArray[np.float64]]]] | None = field(
+        default=None, compare=False
+    )
 
 
 Builder = Callable[[Context], list[Proposal]]
@@ -785,6 +793,7 @@ def auxiliary(ctx: Context) -> list[Proposal]:
     t_u = ctx.t
     # filter and shift on the distinct sample times (channels share them)
     tu, first = np.unique(t_all, return_index=True)
+    dt = float(np.median(np.diff(tu))) if tu.size > 1 else 1.0
     top_lag = max_lag(ctx.options, ctx.span)
     lags = np.linspace(0.0, top_lag, int(ctx.options.get("n_lags", 31)))
     taus = tuple(ctx.options.get("aux_taus", (0.0, 300.0, 1000.0, 3000.0)))
@@ -814,23 +823,55 @@ def auxiliary(ctx: Context) -> list[Proposal]:
             j = int(np.argmax(pw))
             grid_best.append((float(pw[j]), float(lags[j]), float(tc)))
         top = max(g[0] for g in grid_best)
+        lag_step = float(lags[1] - lags[0]) if lags.size > 1 else 0.0
         for p_best, lag, tc in grid_best:
-            if lags.size > 1 and p_best >= 0.8 * top:
+            if p_best < 0.8 * top:
+                continue
+            if lags.size > 1:
                 # between the grid's lags, for every competitive time constant: a 1500 s
                 # lag fell between grid lags and 1212 s + a 300 s low-pass won
-                lag, p_best = _refine_lag(
-                    ctx, tu, filtered(tc), lag, float(lags[1] - lags[0]), top_lag, p_best
+                lag, p_best = _refine_lag(ctx, tu, filtered(tc), lag, lag_step, top_lag, p_best)
+            if tc > 0:
+                # and between the grid's time constants: a 500 s low-pass came out as
+                # 300 s + a 160 s lag, its coefficient 7 % low.  Only up to the next
+                # grid values: beyond the largest, a 3000 s low-pass went to 6000 s on
+                # the slow noise (the ranking is the OLS power)
+                grid = sorted(taus)
+                k = grid.index(tc)
+                lo_tau = grid[k - 1] if k > 0 else 0.0
+                hi_tau = grid[k + 1] if k + 1 < len(grid) else tc
+                lag, tc, p_best = _refine_lag_tau(
+                    ctx, tu, xf, lag, tc, lag_step, top_lag, (lo_tau, hi_tau), p_best
                 )
+                if tc < TAU_MIN_STEPS * dt:  # a low-pass of a few samples is a lag
+                    lag, tc = min(lag + tc, top_lag), 0.0
+                    p_best = float(_channel_power(ctx, np.interp(t_u - lag, tu, xf)[None, :])[0])
             if p_best > best[0]:
                 best = (p_best, lag, tc)
         _, lag, tc = best
-        col = np.interp(t_all - lag, tu, filtered(tc))
+        h = filtered(tc) if tc in taus else _first_order(xf, tu, tc)
+        col = np.interp(t_all - lag, tu, h)
         # not de-meaned: the bias is the one at channel value 0, as the model
         # ``b + c·x`` says.  A de-meaned regressor left c × mean(x) in the bias (a
         # 3e-9 m/s²/K coupling to a 20 °C channel: 6e-8 m/s²), so the day-to-day bias
         # followed the day's mean temperature; the σ of that extrapolation is in the
         # bias σ (σ(c) × mean(x))
         cc, labs, axes = ctx.split(col[:, None], (f"aux:{name}",))
+
+        def jacobian(xf=xf, lag=lag, tc=tc, name=name) -> list[tuple[str, NDArray[np.float64]]]:
+            # c·h_τ(x)(t − lag): d/dlnτ by a central difference (the filter is smooth
+            # in τ), d/dlag = −h'(t − lag)
+            h = filtered(tc) if tc in taus else _first_order(xf, tu, tc)
+            parts = [("lag", -np.interp(t_all - lag, tu, np.gradient(h, tu)))]
+            if tc > 0:
+                eps = 1e-3
+                up, down = (
+                    _first_order(xf, tu, tc * np.exp(eps)),
+                    _first_order(xf, tu, tc / np.exp(eps)),
+                )
+                parts.insert(0, ("tau", np.interp(t_all - lag, tu, (up - down) / (2 * eps))))
+            return [(k, ctx.split(d[:, None], (f"aux:{name}",))[0]) for k, d in parts]
+
         out.append(
             Proposal(
                 "auxiliary",
@@ -841,6 +882,7 @@ def auxiliary(ctx: Context) -> list[Proposal]:
                 {"lag": lag, "tau": tc},
                 True,
                 axes,
+                jacobian=jacobian,
             )
         )
     return out
@@ -873,6 +915,59 @@ def _refine_lag(
         return lag, power
     res = minimize_scalar(neg_power, bounds=(lo, hi), method="bounded", options={"xatol": 0.5})
     return (float(res.x), float(-res.fun)) if -res.fun > power else (lag, power)
+
+
+#: A refined low-pass time constant below this many sample steps is taken as a
+#: pure lag (τ = 0, the lag grown by τ): the two cannot be told apart.
+TAU_MIN_STEPS = 5.0
+
+
+def _refine_lag_tau(
+    ctx: Context,
+    tu: NDArray[np.float64],
+    x: NDArray[np.float64],
+    lag: float,
+    tau: float,
+    lag_step: float,
+    top_lag: float,
+    tau_range: tuple[float, float],
+    power: float,
+) -> tuple[float, float, float]:
+    """(lag, τ, power) of most explained power near a grid point, both varied together.
+
+    A low-pass delays the slow part of a channel by about its time constant, so a
+    time constant between grid values is fitted by a neighbour plus a lag: lag and
+    τ are searched jointly (Nelder-Mead within ``[0, top_lag] × tau_range``, from
+    the grid point).  ``x``: the channel on the distinct sample times ``tu``.
+    Returns the start unchanged unless the power grows.
+    """
+    from scipy.optimize import minimize
+
+    t_u = ctx.t
+
+    def neg_power(v: NDArray[np.float64]) -> float:
+        lg, tc = float(v[0]), float(v[1])
+        z = np.interp(t_u - lg, tu, _first_order(x, tu, tc))
+        return -float(_channel_power(ctx, z[None, :])[0])
+
+    lo_tau, hi_tau = tau_range
+    d_lag = max(lag_step, 0.1 * tau, 10.0)
+    d_tau = 0.5 * tau if tau + 0.5 * tau <= hi_tau else -0.5 * (tau - lo_tau)
+    start = np.array([min(lag, top_lag), tau])
+    simplex = np.array([start, start + [d_lag, 0.0], start + [0.0, d_tau]])
+    simplex[:, 0] = np.clip(simplex[:, 0], 0.0, max(top_lag, 0.0))
+    if simplex[1, 0] == start[0]:  # at the upper lag bound: step down instead
+        simplex[1, 0] = max(start[0] - d_lag, 0.0)
+    res = minimize(
+        neg_power,
+        start,
+        method="Nelder-Mead",
+        bounds=[(0.0, max(top_lag, 0.0)), (lo_tau, hi_tau)],
+        options={"initial_simplex": simplex, "xatol": 0.5, "fatol": 1e-9 * power, "maxfev": 150},
+    )
+    if -res.fun > power:
+        return float(res.x[0]), float(res.x[1]), float(-res.fun)
+    return lag, tau, power
 
 
 def max_lag(options: dict[str, Any], span: float) -> float:

@@ -203,8 +203,14 @@ def to_markdown(
             )
             if e.tau is not None and e.details.get("tau_sigma") and where.startswith("τ"):
                 where += f" ± {_fmt(e.details['tau_sigma'])}"
-            elif e.name == "auxiliary" and e.tau:  # the coupling's low-pass, besides its lag
-                where += f", τ {e.tau:.4g} s"
+            elif e.name == "auxiliary":  # the coupling's lag and low-pass, with their σ
+                if e.details.get("lag_sigma"):
+                    where += f" ± {_fmt(e.details['lag_sigma'])}"
+                if e.tau:
+                    where += f", τ {e.tau:.4g}"
+                    if e.details.get("tau_sigma"):
+                        where += f" ± {_fmt(e.details['tau_sigma'])}"
+                    where += " s"
             ax = f"{e.axis or ''} | " if multi else ""
             lines.append(
                 f"| {e.name} | {e.channel or ''} | {ax}{_fmt(e.coefficient)} | {_fmt(e.sigma)} "

@@ -446,7 +446,7 @@ def _with_tau_jacobian(
     use: NDArray[np.bool_],
     rest: Callable[[], Basis],
 ) -> _Found:
-    """An exponential settling with the Jacobian of its time constant as extra columns.
+    """An effect with a fitted time constant, with its Jacobian as extra columns.
 
     The selection searches ``T`` (:func:`accal.closure.candidates.exponential_drift`)
     and fits ``A`` with ``T`` held.  Linearised at the fitted ``T``,
@@ -455,25 +455,35 @@ def _with_tau_jacobian(
     Gauss-Newton covariance of the nonlinear least-squares problem, so σ(T) =
     σ(β)·T/|A| and the base coefficients' σ include what not knowing ``T`` costs
     (a decay of T = 60,000 s over a day had a bias σ 12x too small without it).
-    Other effects, and an exponential whose Jacobian is not independent of the rest of
-    the design (``rest()``: the base and the other effects, formed only for an
-    exponential), are returned unchanged.
+    A coupling through a first-order low-pass (:func:`accal.closure.candidates.auxiliary`)
+    is treated alike: ``c·h_{τ+δ}(x) ≈ c·h_τ(x) + β·∂h_τ(x)/∂lnτ`` (the derivative by
+    a central difference, :attr:`~accal.closure.candidates.Proposal.dlntau`), so
+    σ(τ) = σ(β)·τ/|c| and the bias σ includes it (a 500 s low-pass to a 293 K channel:
+    bias z 6 without it).  Other effects, and a Jacobian that is not independent of
+    the rest of the design (``rest()``: the base and the other effects, formed only
+    when needed), are returned unchanged.
     """
     prop = f.prop
-    if prop.name != "exponential_drift" or not prop.params.get("tau"):
+    if prop.name == "exponential_drift" and not prop.params.get("tau"):
         return f
-    tau = float(prop.params["tau"])
     cols = prop.columns
-    jac = cols * ((t_all - t0) / tau)[:, None]
+    if prop.name == "exponential_drift":
+        parts = [("tau", cols * ((t_all - t0) / float(prop.params["tau"]))[:, None])]
+    elif prop.jacobian is not None:  # a coupling: lag and low-pass, numerically
+        parts = prop.jacobian()
+    else:
+        return f
+    jac = np.column_stack([d for _, d in parts])
+    names = [k for k, _ in parts]
     aug = Proposal(
         prop.name,
         prop.channel,
         np.column_stack([cols, jac]),
-        (*prop.labels, *(f"d{lb}/dlnT" for lb in prop.labels)),
+        (*prop.labels, *(f"d{lb}/d{k}" for k in names for lb in prop.labels)),
         prop.multiplicity,
-        {**prop.params, "jacobian": cols.shape[1]},
+        {**prop.params, "jacobian": cols.shape[1], "jacobian_params": names},
         prop.check_consistency,
-        None if prop.axes is None else (*prop.axes, *prop.axes),
+        None if prop.axes is None else tuple(prop.axes) * (1 + len(names)),
     )
     if _independent(rest(), aug, use).columns.shape[1] != aug.columns.shape[1]:
         return f
@@ -1703,20 +1713,27 @@ def _effects(
             kw["frequency"] = prop.params["frequency"]
         elif prop.name == "bias_step":
             kw["epoch"] = prop.params["epoch"]
-        elif prop.name == "auxiliary":
-            kw["lag"] = prop.params["lag"]
+        elif prop.name in ("auxiliary", "exponential_drift"):
+            if prop.name == "auxiliary":
+                kw["lag"] = prop.params["lag"]
+            else:
+                details["t0"] = t0
             kw["tau"] = prop.params["tau"]
-        elif prop.name == "exponential_drift":
-            kw["tau"] = prop.params["tau"]
-            details["t0"] = t0
             n_e = int(prop.params.get("jacobian", 0))
-            if n_e:  # see _with_tau_jacobian: T + δ, δ = β·T/A
-                i = 0 if axis is None else prop.axes.index(axis)
-                amp, beta = float(c[i]), float(c[n_e + i])
-                s_beta = float(np.sqrt(max(cc[n_e + i, n_e + i], 0.0)))
-                if amp != 0.0:
+            i = 0 if axis is None else prop.axes.index(axis)
+            amp = float(c[i])
+            for k, par in enumerate(prop.params.get("jacobian_params", ("tau",)) if n_e else ()):
+                # see _with_tau_jacobian: β = A·δ (δ of ln T, or of the lag [s])
+                jb = n_e * (k + 1) + i
+                beta, s_beta = float(c[jb]), float(np.sqrt(max(cc[jb, jb], 0.0)))
+                if amp == 0.0:
+                    continue
+                if par == "tau":
                     kw["tau"] = float(prop.params["tau"]) * (1.0 + beta / amp)
                     details["tau_sigma"] = float(prop.params["tau"]) * s_beta / abs(amp)
+                else:  # a lag searched from 0 up: the step stays there
+                    kw[par] = max(float(prop.params[par]) + beta / amp, 0.0)
+                    details[f"{par}_sigma"] = s_beta / abs(amp)
         elif prop.name == "intra_period_shape":
             kw["tau"] = prop.params["tau"]
             details.update(prop.params)
