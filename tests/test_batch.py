@@ -87,6 +87,52 @@ def test_discover_directories_patterns_and_files(archive, tmp_path):
     (tmp_path / "empty").mkdir()
     _, problems = discover([tmp_path / "empty"], recursive=True)
     assert problems and "no input file" in problems[0][1]
+    # a hard link under another name is the same file: processed once (QA)
+    link = tmp_path / "ACC1B_2005-03-01_A_02.asc"
+    os.link(one, link)
+    files, _ = discover([one, link, tmp_path / "sym.asc"])
+    assert files == [one, tmp_path / "sym.asc"]  # a missing file is kept: the reader says so
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX names and FIFOs")
+def test_inputs_no_reader_should_open_fail_alone_with_one_line(archive, tmp_path):
+    """QA: a file name that is not UTF-8 crashed the whole batch (traceback, nothing
+    committed, and so every later cron run); a FIFO hung it for ever with the output
+    directory locked.  Each now fails alone, with one line."""
+    good = sorted(archive.rglob("ACC1B_2005-01-0*.asc"))
+    src = tmp_path / "in"
+    src.mkdir()
+    bad_name = Path(os.fsdecode(bytes(src) + b"/ACC1B_2005-01-03_A_02\xff.asc"))
+    bad_name.write_bytes(good[0].read_bytes())
+    fifo = src / "ACC1B_2005-01-04_A_02.asc"
+    os.mkfifo(fifo)
+    for workers in ("1", "2"):
+        out = tmp_path / f"out{workers}"
+        code, _, err = invoke("grace-bias", *good, bad_name, fifo, "--out", out, "-j", workers)
+        assert code == 1
+        lines = [x for x in err.splitlines() if x.startswith("accal: ") and "warning" not in x]
+        shown = str(bad_name).encode("utf-8", "backslashreplace").decode()  # as stderr shows it
+        assert f"accal: {shown}: file name is not valid UTF-8; rename the file" in lines
+        assert f"accal: {fifo}: not a regular file (a FIFO)" in lines
+        assert "Traceback" not in err and f"{len(good)} ok" in err and "2 failed" in err
+        assert len(read_outputs(out)["table"]) == 3 * len(good)
+        assert "\\udcff" in (out / "accal.log").read_text()  # logged, escaped
+
+
+def test_an_input_replaced_during_the_batch_is_redone_next_run(tmp_path):
+    """QA: an input replaced while the batch ran was recorded with the new file's size
+    and mtime but the old content's results, so it was 'current' for ever after."""
+    from accal.batch import Manifest, file_signature
+
+    p = tmp_path / "in.asc"
+    p.write_text("old content\n")
+    before = file_signature(p)
+    p.write_text("new content, longer\n")  # replaced after it was read
+    m = Manifest(tmp_path / "manifest.json")
+    m.record(p, {}, [], p.name, before=before)
+    assert not m.is_current(p, {})
+    m.record(p, {}, [], p.name, before=file_signature(p))  # unchanged while processed
+    assert m.is_current(p, {})
 
 
 def test_groups_by_satellite_and_day(archive):
@@ -358,7 +404,10 @@ def test_start_method_forks_only_a_single_threaded_process():
         "from accal._runtime import single_threaded_blas; single_threaded_blas(); "
         "from accal.batch import start_method; print(start_method())"
     )
-    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    env = {k: v for k, v in os.environ.items() if k != "ACCAL_START_METHOD"}
+    res = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env
+    )
     assert res.stdout.strip() == ("fork" if sys.platform.startswith("linux") else "forkserver")
     stop = threading.Event()
     other = threading.Thread(target=stop.wait)
@@ -370,7 +419,7 @@ def test_start_method_forks_only_a_single_threaded_process():
         other.join()
 
 
-def test_start_method_can_be_forced_and_a_bad_value_is_a_clear_error(monkeypatch):
+def test_start_method_can_be_forced_and_a_bad_value_is_a_usage_error(monkeypatch, tmp_path):
     from accal.batch import start_method
     from accal.errors import AccalError
 
@@ -379,6 +428,24 @@ def test_start_method_can_be_forced_and_a_bad_value_is_a_clear_error(monkeypatch
     monkeypatch.setenv("ACCAL_START_METHOD", "thread")
     with pytest.raises(AccalError, match="ACCAL_START_METHOD='thread': use 'fork', 'forkserver'"):
         start_method()
+    # at once, whatever the number of workers, before any output exists
+    code, _, err = invoke("grace-bias", "x.asc", "--out", tmp_path / "o", "-j", "1")
+    assert code == 2 and err.strip().startswith("accal: ACCAL_START_METHOD='thread': use")
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="/proc")
+def test_rerun_into_an_existing_table_still_forks_and_logs_how(archive, tmp_path):
+    """Reading the existing table must not start threads (pyarrow's pools would make
+    the workers start from a fork server); the log says how the workers started."""
+    env = {k: v for k, v in os.environ.items() if k != "ACCAL_START_METHOD"}
+    out = tmp_path / "o"
+    cmd = [sys.executable, "-m", "accal", "grace-bias", "--out", str(out), "-j", "2", "-q"]
+    files = sorted(str(p) for p in archive.rglob("ACC1B_*.asc"))
+    for chunk in (files[:2], files[2:]):  # the second run reads the first one's table
+        subprocess.run([*cmd, *chunk], check=True, env=env, capture_output=True)
+    starts = [x for x in (out / "accal.log").read_text().splitlines() if "to process:" in x]
+    assert len(starts) == 2 and all(x.endswith("2 worker processes (fork)") for x in starts)
 
 
 @pytest.mark.skipif(not hasattr(os, "fork"), reason="fork")
@@ -556,3 +623,14 @@ def test_ctrl_c_stops_the_batch_at_once_and_keeps_what_finished(tmp_path):
     rerun = subprocess.run([*cmd, "--out", str(out), "-q"], capture_output=True, text=True)
     assert rerun.returncode == 0, rerun.stderr
     assert len(pd.read_parquet(out / "bias_drift.parquet")) == 6 * 3
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX file descriptors")
+def test_runs_with_stderr_closed(archive, tmp_path):
+    """QA: with stderr closed (``2>&-`` in a crontab) and no -q, accal exited 1 at once
+    and silently (``sys.stderr`` is None); the batch runs and the log has it."""
+    out = tmp_path / "o"
+    cmd = [sys.executable, "-m", "accal", "grace-bias", str(archive), "-r", "--out", str(out)]
+    res = subprocess.run(cmd, stdout=subprocess.PIPE, preexec_fn=lambda: os.close(2))  # noqa: PLW1509
+    assert res.returncode == 0
+    assert "accal grace-bias: 6 ok" in (out / "accal.log").read_text()

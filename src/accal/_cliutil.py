@@ -128,10 +128,13 @@ class Group(click.Group):
 
 def progress(quiet: bool, desc: str) -> Any:
     """A ``wrap(iterable, total=None)`` progress bar on a terminal, else None."""
-    if quiet or not sys.stderr.isatty():
+    if quiet or sys.stderr is None or not sys.stderr.isatty():  # None: stderr closed (2>&-)
         return None
     from tqdm import tqdm
 
+    # no monitor thread: the bar is updated as each input completes, and a thread in
+    # this process would keep the workers from being forked (accal.batch.start_method)
+    tqdm.monitor_interval = 0
     return lambda it, total=None: tqdm(it, total=total, desc=desc, unit="file", file=sys.stderr)
 
 

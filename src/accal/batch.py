@@ -31,6 +31,7 @@ import json
 import os
 import re
 import time as _time
+import warnings
 import weakref
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
@@ -110,6 +111,36 @@ def failure_message(path: Path | str, exc: AccalError) -> str:
     return msg
 
 
+def check_input(path: Path) -> None:
+    """Refuse, before anything opens it, an input that no reader should touch.
+
+    * a name that is not valid UTF-8 (its bytes kept as surrogates): the table,
+      manifest and reports key inputs by name, and those are UTF-8;
+    * a FIFO, device or socket: reading it could block for ever (with the output
+      directory locked) or never end (``/dev/zero``).
+
+    Raises
+    ------
+    ValidationError
+        With the reason (the caller names the file).
+    """
+    import stat
+
+    from accal.errors import ValidationError
+
+    try:
+        str(path).encode("utf-8")
+    except UnicodeEncodeError:
+        raise ValidationError("file name is not valid UTF-8; rename the file") from None
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return  # missing or unreadable: the reader says so
+    if not (stat.S_ISREG(mode) or stat.S_ISDIR(mode)):
+        kind = "a FIFO" if stat.S_ISFIFO(mode) else "a device or socket"
+        raise ValidationError(f"not a regular file ({kind})")
+
+
 def write_error_message(path: Path | str, exc: OSError) -> str:
     """One line for an output that could not be written (read-only or full disk, ...)."""
     where = f" ({exc.filename})" if exc.filename else ""
@@ -165,17 +196,23 @@ def discover(
     Returns
     -------
     files : list of Path
-        De-duplicated (by resolved path), in the order given; directory and
+        De-duplicated (by device and inode: symlinks and hard links to one file
+        count once), in the order given; directory and
         pattern expansions sorted by name.
     problems : list of (Path, str)
         Inputs that expand to nothing, with a one-line reason.
     """
     files: list[Path] = []
     problems: list[tuple[Path, str]] = []
-    seen: set[str] = set()
+    seen: set[Any] = set()
 
     def add(p: Path) -> None:
-        key = os.path.realpath(p)
+        # the same file reached by two routes (symlink, hard link, ./x and x) once
+        try:
+            st = os.stat(p)
+            key: Any = (st.st_dev, st.st_ino)
+        except OSError:  # missing: the reader reports it (once per spelling)
+            key = os.path.realpath(p)
         if key not in seen:
             seen.add(key)
             files.append(p)
@@ -397,12 +434,20 @@ class Manifest:
         source: str,
         *,
         checksum: bool = False,
+        before: dict[str, Any] | None = None,
     ) -> None:
-        """Record ``path`` as processed (call only after its table rows are merged)."""
+        """Record ``path`` as processed (call only after its table rows are merged).
+
+        ``before``: the input's size and mtime taken before it was read.  If the
+        file has changed since (replaced while the batch ran), that earlier
+        signature is recorded instead, so the next run sees the change and redoes it.
+        """
         try:
             sig = file_signature(path, checksum=checksum)
         except OSError:
             return
+        if before is not None and any(sig[k] != before.get(k) for k in ("size", "mtime_ns")):
+            sig = {k: before[k] for k in ("size", "mtime_ns")}
         self.entries[self.key(path)] = {
             **sig,
             "accal_version": __version__,
@@ -432,7 +477,12 @@ class RunLog:
 
     def __init__(self, out_dir: Path, enabled: bool = True) -> None:
         self.path = Path(out_dir) / LOG
-        self._fh = open(self.path, "a", encoding="utf-8") if enabled else None  # noqa: SIM115
+        # a file name that is not UTF-8 (bytes kept as surrogates) is logged escaped
+        self._fh = (
+            open(self.path, "a", encoding="utf-8", errors="backslashreplace")  # noqa: SIM115
+            if enabled
+            else None
+        )
 
     def __call__(self, msg: str) -> None:
         if self._fh is not None:
@@ -461,6 +511,7 @@ def execute(
     workers: int = 1,
     scheduler: str | Any | None = None,
     on_error: Callable[[Path, BaseException], Any],
+    on_start: Callable[[str], Any] | None = None,
 ) -> Iterator[tuple[int, Any]]:
     """Run ``task`` on every path; yield ``(index, outcome)`` as each completes.
 
@@ -479,16 +530,22 @@ def execute(
     on_error : callable
         ``on_error(path, exc)`` turns an exception that escaped ``task`` (a crashed
         worker, a bug) into an outcome, so the batch goes on.
+    on_start : callable, optional
+        Called once with where the tasks run (e.g. ``"2 worker processes (fork)"``),
+        for the run's log.
 
     Yields
     ------
     (int, outcome)
         Index into ``paths`` and the task's outcome, in completion order.
     """
+    say = on_start or (lambda _msg: None)
     if scheduler is not None:
+        say(f"dask scheduler {scheduler if isinstance(scheduler, str) else 'client'}")
         yield from _execute_dask(task, paths, scheduler, on_error)
         return
     if workers <= 1 or len(paths) <= 1:
+        say("in this process")
         for i, p in enumerate(paths):
             try:
                 yield i, task(p)
@@ -504,10 +561,22 @@ def execute(
     ctx = mp.get_context(method)
     if method == "forkserver":
         ctx.set_forkserver_preload(preload)
+    n_workers = min(workers, len(paths))
+    if method == "fork":
+        say(f"{n_workers} worker processes (fork)")
+    else:  # say why, for whoever reads the log
+        why = other_threads()
+        say(f"{n_workers} worker processes ({method}; other threads: {why})")
     with ProcessPoolExecutor(
-        max_workers=min(workers, len(paths)), mp_context=ctx, initializer=_worker_init
+        max_workers=n_workers, mp_context=ctx, initializer=_worker_init
     ) as pool:
-        futures = {pool.submit(task, p): i for i, p in enumerate(paths)}
+        with warnings.catch_warnings():
+            # Python >= 3.12 warns on any fork with another thread; start_method chose
+            # fork knowing the only one (FORK_SAFE_THREADS)
+            warnings.filterwarnings(
+                "ignore", "This process .* is multi-threaded", DeprecationWarning
+            )
+            futures = {pool.submit(task, p): i for i, p in enumerate(paths)}
         try:
             for fut in as_completed(futures):
                 i = futures[fut]
@@ -531,9 +600,10 @@ def execute(
 _PRELOAD = ("numpy", "scipy.fft", "pyarrow.csv", "pyarrow.parquet")
 
 
-#: Threads that may run while this process forks: jemalloc (pyarrow's allocator)
-#: starts one at import and handles fork itself (``pthread_atfork``: the child
-#: gets consistent allocator state and its own background thread when needed).
+#: Threads that may run while this process forks: the jemalloc bundled with
+#: pyarrow starts one at import and handles fork itself (its ``pthread_atfork``
+#: handlers take its locks around the fork; the child has consistent allocator
+#: state and no background thread).
 FORK_SAFE_THREADS = frozenset({"jemalloc_bg_thd"})
 
 
@@ -559,6 +629,24 @@ def other_threads() -> list[str] | None:
     return names
 
 
+def forced_start_method() -> str | None:
+    """``ACCAL_START_METHOD`` (lower case) if set, else None.
+
+    Raises
+    ------
+    AccalError
+        If it is set to anything but ``fork``, ``forkserver`` or ``spawn``.
+    """
+    forced = os.environ.get("ACCAL_START_METHOD", "").strip().lower()
+    if not forced:
+        return None
+    if forced not in ("fork", "forkserver", "spawn"):
+        raise AccalError(
+            f"ACCAL_START_METHOD={forced!r}: use 'fork', 'forkserver' or 'spawn' (or unset it)"
+        )
+    return forced
+
+
 def start_method(preload: Sequence[str] = _PRELOAD) -> str:
     """How local workers are started: ``"fork"`` when it is safe, else ``"forkserver"``.
 
@@ -578,12 +666,8 @@ def start_method(preload: Sequence[str] = _PRELOAD) -> str:
     import importlib
     import sys
 
-    forced = os.environ.get("ACCAL_START_METHOD", "").strip().lower()
+    forced = forced_start_method()
     if forced:
-        if forced not in ("fork", "forkserver", "spawn"):
-            raise AccalError(
-                f"ACCAL_START_METHOD={forced!r}: use 'fork', 'forkserver' or 'spawn' (or unset it)"
-            )
         return forced
     if not sys.platform.startswith("linux"):
         return "forkserver"
@@ -621,19 +705,34 @@ def _worker_init() -> None:
     pa.set_io_thread_count(1)
     parent = mp.parent_process()
     if parent is not None and getattr(parent, "sentinel", None) is not None:
+        # fork/spawn: the batch process is the parent; forkserver: the fork server is
+        direct = parent.pid if parent.pid == os.getppid() else None
         threading.Thread(
             target=_exit_with_parent,
-            args=(parent.sentinel,),
+            args=(parent.sentinel, direct),
             name="accal-parent-watch",
             daemon=True,
         ).start()
 
 
-def _exit_with_parent(sentinel: int) -> None:
+def _exit_with_parent(sentinel: int, parent_pid: int | None) -> None:
+    """End this worker when the batch process has gone.
+
+    The sentinel is ready when the parent dies, except that with ``fork`` the
+    workers forked later hold copies of its write end (so a worker would wait for
+    all later ones); a forked or spawned worker's parent is the batch process
+    itself, so it also watches ``getppid()``, which changes when the parent dies.
+    """
     from multiprocessing.connection import wait
 
-    wait([sentinel])
+    while not wait([sentinel], timeout=PARENT_POLL):
+        if parent_pid is not None and os.getppid() != parent_pid:
+            break
     os._exit(1)
+
+
+#: How often a worker checks that the batch process still runs [s].
+PARENT_POLL = 0.5
 
 
 def _execute_dask(

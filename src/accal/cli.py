@@ -14,7 +14,7 @@ import click
 import numpy as np
 
 from accal import __version__
-from accal._cliutil import Group, alpha_option, aux_option, config_option
+from accal._cliutil import Group, alpha_option, aux_option, config_option, usage_fail
 from accal._cliutil import err as _err
 from accal._cliutil import progress as _progress
 
@@ -43,6 +43,13 @@ def main(debug: bool) -> None:
     tune_allocator()
     if debug:
         os.environ["ACCAL_DEBUG"] = "1"  # inherited by worker processes
+    from accal.batch import forced_start_method
+    from accal.errors import AccalError
+
+    try:
+        forced_start_method()  # a bad value is a usage error now, not at the first pool
+    except AccalError as exc:
+        usage_fail(str(exc))
 
 
 @main.command("grace-bias")

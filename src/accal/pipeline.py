@@ -22,7 +22,14 @@ from typing import Any
 import numpy as np
 
 from accal import __version__
-from accal.batch import Outcome, failure_message, internal_error_message, write_error_message
+from accal.batch import (
+    Outcome,
+    check_input,
+    failure_message,
+    file_signature,
+    internal_error_message,
+    write_error_message,
+)
 from accal.errors import AccalError, ValidationError, check_option
 from accal.series import AccSeries
 
@@ -166,6 +173,9 @@ class FileOutcome(Outcome):
     peak_rss : float
         Peak resident memory of the process that ran the input, when it finished
         [MB] (0 where unknown).
+    signature : dict or None
+        Size and mtime of the input before it was read (see
+        :meth:`accal.batch.Manifest.record`).
     """
 
     rows: list[dict[str, Any]] = field(default_factory=list)
@@ -175,6 +185,7 @@ class FileOutcome(Outcome):
     closure: dict[str, Any] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
     peak_rss: float = 0.0
+    signature: dict[str, Any] | None = None
 
 
 @dataclass(frozen=True)
@@ -960,6 +971,8 @@ def _read_bias_drift_unchecked(path: Path):
                 if not line.startswith(b"#"):
                     break
                 skip += 1
+        # (pyarrow's CSV reader starts an I/O thread even single-threaded: after a CSV
+        # table is read, this process's workers start from a fork server)
         table = pacsv.read_csv(
             path,
             read_options=csv_read_options(skip_rows=skip),
@@ -970,7 +983,9 @@ def _read_bias_drift_unchecked(path: Path):
     else:
         import pyarrow.parquet as pq
 
-        table = pq.ParquetFile(path).read()
+        # no thread: the batch process must stay single-threaded for its workers to
+        # be forked (accal.batch.start_method)
+        table = pq.ParquetFile(path, pre_buffer=False).read(use_threads=False)
     cols = [
         table.column(f.name).cast(f.type)
         if f.name in table.column_names
@@ -1116,10 +1131,15 @@ def process_one(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutcom
     """
     path = Path(path)
     try:
+        check_input(path)
         if path.is_dir():
             raise ValidationError("is a directory (use --recursive to process the files in it)")
+        try:  # before the read: an input replaced while it is processed is redone next run
+            before = file_signature(path)
+        except OSError:
+            before = None
         outcome = process_file(path, Path(out_dir), opts)
-        return dataclasses.replace(outcome, peak_rss=_peak_rss_mb())
+        return dataclasses.replace(outcome, peak_rss=_peak_rss_mb(), signature=before)
     except AccalError as exc:
         return FileOutcome(path, False, failure_message(path, exc))
     except MemoryError:
@@ -1263,6 +1283,7 @@ def run(
                 workers=workers,
                 scheduler=scheduler,
                 on_error=_internal_error,
+                on_start=lambda where: rlog(f"{len(todo)} inputs to process: {where}"),
             )
             done = gen if progress is None else progress(gen, total=len(todo))
             interrupted = False
@@ -1348,7 +1369,9 @@ def _commit(
         manifest.entries.pop(k, None)
     for o in outcomes:
         if o.ok:
-            manifest.record(o.path, key, o.outputs, o.path.name, checksum=checksum)
+            manifest.record(
+                o.path, key, o.outputs, o.path.name, checksum=checksum, before=o.signature
+            )
         else:
             manifest.entries.pop(manifest.key(o.path), None)
     manifest.save()

@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 
 from accal import __version__
-from accal.batch import Outcome, failure_message, internal_error_message
+from accal.batch import Outcome, check_input, failure_message, internal_error_message
 from accal.errors import AccalError, ValidationError, check_option
 
 #: Standard integration time for σ(T) in the summary: 3 h, as in the paper (Fig. 5) [s].
@@ -1274,6 +1274,7 @@ def run_demod(
             log(f"start accal demod: {len(paths)} runs, options={opts}")
             for path, tgt in progress(pairs, total=len(pairs)) if progress else pairs:
                 try:
+                    check_input(path)
                     outcomes.append(process_run(path, tgt, opts, psd))
                 except AccalError as exc:
                     outcomes.append(RunOutcome(path, False, failure_message(path, exc)))
