@@ -444,7 +444,7 @@ def test_rerun_into_an_existing_table_still_forks_and_logs_how(archive, tmp_path
     files = sorted(str(p) for p in archive.rglob("ACC1B_*.asc"))
     for chunk in (files[:2], files[2:]):  # the second run reads the first one's table
         subprocess.run([*cmd, *chunk], check=True, env=env, capture_output=True)
-    starts = [x for x in (out / "accal.log").read_text().splitlines() if "to process:" in x]
+    starts = [x for x in (out / "accal.log").read_text().splitlines() if "inputs run in" in x]
     assert len(starts) == 2 and all(x.endswith("2 worker processes (fork)") for x in starts)
 
 
@@ -634,3 +634,44 @@ def test_runs_with_stderr_closed(archive, tmp_path):
     res = subprocess.run(cmd, stdout=subprocess.PIPE, preexec_fn=lambda: os.close(2))  # noqa: PLW1509
     assert res.returncode == 0
     assert "accal grace-bias: 6 ok" in (out / "accal.log").read_text()
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="SIGKILL, fork")
+@pytest.mark.parametrize("start", ["fork", "forkserver"])
+def test_a_worker_killed_mid_batch_fails_only_its_input(tmp_path, start):
+    """QA: one worker killed (the OOM killer) broke the pool, and every input not yet
+    finished was reported as an internal error.  Only the input that killed its
+    worker fails, saying how; the others are redone and succeed."""
+    script = tmp_path / "killer.py"
+    script.write_text(
+        "import os, signal, sys\n"
+        "from pathlib import Path\n"
+        "def task(p):\n"
+        "    if p.name.startswith('KILL'):\n"
+        "        os.kill(os.getpid(), signal.SIGKILL)\n"
+        "    return p.name\n"
+        "if __name__ == '__main__':\n"
+        "    from accal.batch import execute\n"
+        "    from accal.pipeline import _internal_error\n"
+        "    paths = [Path(f'{i:02d}.asc') for i in range(12)]\n"
+        "    paths[5] = Path('KILL.asc')\n"
+        "    notes = []\n"
+        "    got = dict(execute(task, paths, workers=2, on_error=lambda p, e: 'ERR ' + "
+        "_internal_error(p, e).message, on_note=notes.append))\n"
+        "    for i in sorted(got): print(got[i])\n"
+        "    print('NOTES', notes)\n"
+    )
+    env = {**os.environ, "ACCAL_START_METHOD": start, "PYTHONPATH": str(tmp_path)}
+    res = subprocess.run(
+        [sys.executable, str(script)], capture_output=True, text=True, env=env, timeout=120
+    )
+    assert res.returncode == 0, res.stderr
+    lines = res.stdout.splitlines()
+    assert lines[:12] == [
+        f"{i:02d}.asc"
+        if i != 5
+        else "ERR KILL.asc: the worker process running this input was "
+        "killed by SIGKILL (out of memory? the kernel's OOM killer sends SIGKILL)"
+        for i in range(12)
+    ]
+    assert "a worker process died" in lines[12]

@@ -148,7 +148,13 @@ def write_error_message(path: Path | str, exc: OSError) -> str:
 
 
 def internal_error_message(path: Path | str, exc: BaseException) -> str:
-    """One line for a bug (not bad input); with ``ACCAL_DEBUG`` set, the traceback."""
+    """One line for a bug (not bad input); with ``ACCAL_DEBUG`` set, the traceback.
+
+    A worker that died (:class:`WorkerDied`) is not a bug of accal: its line says
+    what ended it.
+    """
+    if isinstance(exc, WorkerDied):
+        return f"{path}: {exc}"
     msg = (
         f"{path}: internal error ({type(exc).__name__}: {exc}); "
         "please report it with the output of 'accal --debug ...'"
@@ -511,7 +517,7 @@ def execute(
     workers: int = 1,
     scheduler: str | Any | None = None,
     on_error: Callable[[Path, BaseException], Any],
-    on_start: Callable[[str], Any] | None = None,
+    on_note: Callable[[str], Any] | None = None,
 ) -> Iterator[tuple[int, Any]]:
     """Run ``task`` on every path; yield ``(index, outcome)`` as each completes.
 
@@ -530,22 +536,22 @@ def execute(
     on_error : callable
         ``on_error(path, exc)`` turns an exception that escaped ``task`` (a crashed
         worker, a bug) into an outcome, so the batch goes on.
-    on_start : callable, optional
-        Called once with where the tasks run (e.g. ``"2 worker processes (fork)"``),
-        for the run's log.
+    on_note : callable, optional
+        Called with a line for the run's log: where the tasks run (e.g.
+        ``"inputs run in 2 worker processes (fork)"``), and when a worker died.
 
     Yields
     ------
     (int, outcome)
         Index into ``paths`` and the task's outcome, in completion order.
     """
-    say = on_start or (lambda _msg: None)
+    say = on_note or (lambda _msg: None)
     if scheduler is not None:
-        say(f"dask scheduler {scheduler if isinstance(scheduler, str) else 'client'}")
+        say(f"inputs run on dask scheduler {scheduler if isinstance(scheduler, str) else 'client'}")
         yield from _execute_dask(task, paths, scheduler, on_error)
         return
     if workers <= 1 or len(paths) <= 1:
-        say("in this process")
+        say("inputs run in this process")
         for i, p in enumerate(paths):
             try:
                 yield i, task(p)
@@ -553,7 +559,6 @@ def execute(
                 yield i, on_error(p, exc)
         return
     import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor, as_completed
 
     func = getattr(task, "func", task)  # functools.partial -> the function
     preload = [*_PRELOAD, getattr(func, "__module__", "accal")]
@@ -563,12 +568,53 @@ def execute(
         ctx.set_forkserver_preload(preload)
     n_workers = min(workers, len(paths))
     if method == "fork":
-        say(f"{n_workers} worker processes (fork)")
+        say(f"inputs run in {n_workers} worker processes (fork)")
     else:  # say why, for whoever reads the log
         why = other_threads()
-        say(f"{n_workers} worker processes ({method}; other threads: {why})")
+        say(f"inputs run in {n_workers} worker processes ({method}; other threads: {why})")
+    # A worker that dies (the OOM killer, kill -9) breaks the whole pool: every input
+    # not finished gets BrokenProcessPool.  The inputs that were in the workers' hands
+    # are the first ones not finished (the pool hands them out in order): those are
+    # each redone alone, to tell a killer input from a bystander; the rest go on in a
+    # fresh pool.
+    todo = list(range(len(paths)))
+    while todo:
+        broken: list[int] = []
+        yield from _pool_round(task, paths, todo, ctx, n_workers, on_error, broken)
+        if not broken:
+            break
+        suspects, todo = broken[: n_workers + 1], broken[n_workers + 1 :]
+        say(
+            f"a worker process died: the {len(suspects)} input(s) it may have been running "
+            f"are redone one at a time, {len(todo)} more in a fresh pool"
+        )
+        for i in suspects:
+            alone: list[int] = []
+            yield from _pool_round(task, paths, [i], ctx, 1, on_error, alone, died=True)
+
+
+class WorkerDied(RuntimeError):
+    """The worker process running an input ended abruptly (killed, out of memory)."""
+
+
+def _pool_round(
+    task: Callable[[Path], Any],
+    paths: Sequence[Path],
+    todo: Sequence[int],
+    ctx: Any,
+    n_workers: int,
+    on_error: Callable[[Path, BaseException], Any],
+    broken: list[int],
+    *,
+    died: bool = False,
+) -> Iterator[tuple[int, Any]]:
+    """Run ``paths[todo]`` in one pool; inputs cut off by a broken pool go to ``broken``
+    (in ``todo`` order), unless ``died`` (an input alone: it is reported as failed)."""
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures.process import BrokenProcessPool
+
     with ProcessPoolExecutor(
-        max_workers=n_workers, mp_context=ctx, initializer=_worker_init
+        max_workers=min(n_workers, len(todo)), mp_context=ctx, initializer=_worker_init
     ) as pool:
         with warnings.catch_warnings():
             # Python >= 3.12 warns on any fork with another thread; start_method chose
@@ -576,13 +622,22 @@ def execute(
             warnings.filterwarnings(
                 "ignore", "This process .* is multi-threaded", DeprecationWarning
             )
-            futures = {pool.submit(task, p): i for i, p in enumerate(paths)}
+            futures = {pool.submit(task, paths[i]): i for i in todo}
+        procs = list((getattr(pool, "_processes", None) or {}).values())
         try:
             for fut in as_completed(futures):
                 i = futures[fut]
                 try:
                     yield i, fut.result()
-                except Exception as exc:  # BrokenProcessPool, pickling errors, bugs
+                except BrokenProcessPool:
+                    if died:
+                        for proc in procs:  # reaped: its exit code is known
+                            proc.join(timeout=5)
+                        codes = sorted({p.exitcode for p in procs if p.exitcode})
+                        yield i, on_error(paths[i], WorkerDied(_death(codes)))
+                    else:
+                        broken.append(i)
+                except Exception as exc:  # pickling errors, bugs
                     yield i, on_error(paths[i], exc)
         except (KeyboardInterrupt, GeneratorExit):
             # Ctrl-C (or the caller stopped): drop the queued inputs and stop the
@@ -594,6 +649,24 @@ def execute(
             for proc in procs:
                 proc.join(timeout=10)
             raise
+    broken.sort(key=list(todo).index)
+
+
+def _death(codes: Sequence[int]) -> str:
+    """What ended a worker, from its exit codes (negative: the signal)."""
+    import signal
+
+    sig = [c for c in codes if c < 0]
+    if sig:
+        try:
+            name = signal.Signals(-sig[0]).name
+        except ValueError:
+            name = f"signal {-sig[0]}"
+        hint = (
+            " (out of memory? the kernel's OOM killer sends SIGKILL)" if name == "SIGKILL" else ""
+        )
+        return f"the worker process running this input was killed by {name}{hint}"
+    return f"the worker process running this input exited abruptly (exit codes {list(codes)})"
 
 
 #: Modules imported before the workers are forked (by this process or the fork server).

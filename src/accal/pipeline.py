@@ -1283,7 +1283,7 @@ def run(
                 workers=workers,
                 scheduler=scheduler,
                 on_error=_internal_error,
-                on_start=lambda where: rlog(f"{len(todo)} inputs to process: {where}"),
+                on_note=rlog,
             )
             done = gen if progress is None else progress(gen, total=len(todo))
             interrupted = False
