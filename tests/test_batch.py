@@ -675,3 +675,14 @@ def test_a_worker_killed_mid_batch_fails_only_its_input(tmp_path, start):
         for i in range(12)
     ]
     assert "a worker process died" in lines[12]
+
+
+def test_a_pattern_that_matches_nothing_counts_as_failed(archive, tmp_path):
+    """QA: it printed an error line but the summary did not count it (4 error lines,
+    '3 failed'), and the log (what a cron job mails) did not have it."""
+    one = next(archive.rglob("ACC1B_*.asc"))
+    code, _, err = invoke("grace-bias", one, tmp_path / "nope*.asc", "--out", tmp_path / "o")
+    assert code == 1
+    assert f"accal: {tmp_path / 'nope*.asc'}: no file matches this pattern" in err
+    assert "1 ok, 0 skipped (current), 1 failed, 0 not run" in err
+    assert "FAILED " in (tmp_path / "o" / "accal.log").read_text()

@@ -165,7 +165,8 @@ def main(debug: bool) -> None:
     "--keep-going/--fail-fast",
     default=True,
     show_default=True,
-    help="Go on with the other inputs after a failure.",
+    help="Go on with the other inputs after a failure (--fail-fast: stop at the first, "
+    "running the inputs one at a time, in order).",
 )
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar or summary.")
 @config_option
@@ -234,13 +235,12 @@ def grace_bias(
     except AccalError as exc:
         raise click.UsageError(str(exc)) from None
     files, problems = discover(inputs, recursive=recursive, include=include or DEFAULT_INCLUDE)
-    for _, msg in problems:
-        _err(msg)
     try:
         summary = run(
             files,
             out,
             opts,
+            unmatched=problems,
             fail_fast=not keep_going,
             progress=_progress(quiet, "grace-bias"),
             workers=workers or default_workers(),

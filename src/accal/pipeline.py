@@ -1177,6 +1177,7 @@ def run(
     checksum: bool = False,
     commit_seconds: float = 15.0,
     log: bool = True,
+    unmatched: Sequence[tuple[Path, str]] = (),
 ) -> RunSummary:
     """Process every input into ``out_dir``; failures are recorded, not raised.
 
@@ -1207,6 +1208,9 @@ def run(
         (also at the end): a killed batch loses at most this much work.
     log : bool
         Append to ``out_dir/accal.log``.
+    unmatched : sequence of (Path, str)
+        Command-line inputs that expanded to no file, with their one-line message
+        (``problems`` of :func:`accal.batch.discover`): counted and logged as failed.
 
     Returns
     -------
@@ -1252,6 +1256,9 @@ def run(
             )
             manifest = Manifest.load(out_dir)
             results: dict[int, FileOutcome] = {}
+            for k, (p, msg) in enumerate(unmatched):  # expanded to nothing: a failure
+                results[k - len(unmatched)] = FileOutcome(Path(p), False, msg)
+                rlog(f"FAILED {msg}")
             todo: list[int] = []
             owners: dict[str, Path] = {}
             for i, p in enumerate(paths):
@@ -1314,7 +1321,7 @@ def run(
                 outcomes,
                 table_path,
                 _time.perf_counter() - start,
-                n_inputs=len(paths),
+                n_inputs=len(paths) + len(unmatched),
                 log_path=rlog.path if log else None,
                 workers=max(1, min(workers, len(todo))) if scheduler is None else workers,
             )
