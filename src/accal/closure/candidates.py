@@ -831,23 +831,30 @@ def auxiliary(ctx: Context) -> list[Proposal]:
                 # between the grid's lags, for every competitive time constant: a 1500 s
                 # lag fell between grid lags and 1212 s + a 300 s low-pass won
                 lag, p_best = _refine_lag(ctx, tu, filtered(tc), lag, lag_step, top_lag, p_best)
-            if tc > 0:
-                # and between the grid's time constants: a 500 s low-pass came out as
-                # 300 s + a 160 s lag, its coefficient 7 % low.  Only up to the next
-                # grid values: beyond the largest, a 3000 s low-pass went to 6000 s on
-                # the slow noise (the ranking is the OLS power)
-                grid = sorted(taus)
-                k = grid.index(tc)
-                lo_tau = grid[k - 1] if k > 0 else 0.0
-                hi_tau = grid[k + 1] if k + 1 < len(grid) else tc
-                lag, tc, p_best = _refine_lag_tau(
-                    ctx, tu, xf, lag, tc, lag_step, top_lag, (lo_tau, hi_tau), p_best
-                )
-                if tc < TAU_MIN_STEPS * dt:  # a low-pass of a few samples is a lag
-                    lag, tc = min(lag + tc, top_lag), 0.0
-                    p_best = float(_channel_power(ctx, np.interp(t_u - lag, tu, xf)[None, :])[0])
             if p_best > best[0]:
                 best = (p_best, lag, tc)
+        p_best, lag, tc = best
+        grid = sorted(taus)
+        if len(grid) > 1:
+            # and between the grid's time constants, lag and τ together: a 500 s
+            # low-pass came out as 300 s + a 160 s lag, its coefficient 7 % low.  Up to
+            # the neighbouring grid values only: beyond the largest, a 3000 s low-pass
+            # went to 6000 s on the slow noise (the ranking is the OLS power).  From a
+            # pure lag, the search starts half-way to the first low-pass.
+            k = grid.index(tc)
+            lo_tau = grid[k - 1] if k > 0 else 0.0
+            hi_tau = grid[k + 1] if k + 1 < len(grid) else tc
+            start_lag, start_tau = lag, tc
+            if tc == 0:
+                start_tau = 0.5 * hi_tau
+                start_lag = max(lag - start_tau, 0.0)
+            lag2, tc2, p2 = _refine_lag_tau(
+                ctx, tu, xf, start_lag, start_tau, lag_step, top_lag, (lo_tau, hi_tau), p_best
+            )
+            if p2 > p_best:
+                if tc2 < TAU_MIN_STEPS * dt:  # a low-pass of a few samples is a lag
+                    lag2, tc2 = min(lag2 + tc2, top_lag), 0.0
+                best = (p2, lag2, tc2)
         _, lag, tc = best
         h = filtered(tc) if tc in taus else _first_order(xf, tu, tc)
         col = np.interp(t_all - lag, tu, h)
@@ -963,7 +970,7 @@ def _refine_lag_tau(
         start,
         method="Nelder-Mead",
         bounds=[(0.0, max(top_lag, 0.0)), (lo_tau, hi_tau)],
-        options={"initial_simplex": simplex, "xatol": 0.5, "fatol": 1e-9 * power, "maxfev": 150},
+        options={"initial_simplex": simplex, "xatol": 2.0, "fatol": 1e-6 * power, "maxfev": 60},
     )
     if -res.fun > power:
         return float(res.x[0]), float(res.x[1]), float(-res.fun)

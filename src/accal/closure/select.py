@@ -53,7 +53,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from accal.closure.basis import Basis, BlockBase, FitResult
-from accal.closure.candidates import BUILDERS, Context, Proposal, max_lag
+from accal.closure.candidates import BUILDERS, TAU_MIN_STEPS, Context, Proposal, max_lag
 from accal.closure.residual import (
     Grid,
     ResidualStats,
@@ -794,7 +794,10 @@ def close_loop(
         # filter's time constant and was reported as an exponential drift of that T
         # (QA: 1.04e-9 m/s², T = 298 s beside a 2e-9 coupling with a 300 s filter);
         # it is below e^-5 after FILTER_SETTLE time constants
-        lead = max(max_lag(opts, span) if lag > 0 else 0.0, FILTER_SETTLE * tc)
+        # (a lag of a few samples, e.g. 1 ± 6 s beside a low-pass, is not a lagged
+        # channel: only those samples are left out for it)
+        step = float(np.median(np.diff(np.unique(t_all)))) if t_all.size > 1 else 1.0
+        lead = max(max_lag(opts, span) if lag > TAU_MIN_STEPS * step else lag, FILTER_SETTLE * tc)
         later = use & (t_all >= t0 + lead)
         # the same after every data gap: the channel was only known at the data's
         # times, so across a gap the lagged regressor was bridged (QA: steps of
