@@ -227,9 +227,16 @@ def test_rerun_skips_current_inputs_and_redoes_changed_ones(archive, tmp_path):
     assert len(table) == 5 * 3
     assert not table.duplicated(["source", "axis", "method"]).any()
 
-    # --checksum: a touched but identical file is current
-    assert invoke("grace-bias", src, "-r", "--out", out, "--checksum", "--force", "-q")[0] == 0
+    # --checksum: a touched but identical file is current; switching to --checksum on a
+    # directory recorded without checksums adds them (QA: the first touched file after
+    # the switch was redone once)
+    code, _, err = invoke("grace-bias", src, "-r", "--out", out, "--checksum")
+    assert "0 ok, 5 skipped" in err, err
     os.utime(changed, ns=(time.time_ns(), time.time_ns() + 2 * 10**9))
+    code, _, err = invoke("grace-bias", src, "-r", "--out", out, "--checksum")
+    assert "0 ok, 5 skipped" in err, err
+    assert invoke("grace-bias", src, "-r", "--out", out, "--checksum", "--force", "-q")[0] == 0
+    os.utime(changed, ns=(time.time_ns(), time.time_ns() + 3 * 10**9))
     code, _, err = invoke("grace-bias", src, "-r", "--out", out, "--checksum")
     assert "0 ok, 5 skipped" in err, err
 
@@ -249,7 +256,7 @@ def test_rerun_skips_current_inputs_and_redoes_changed_ones(archive, tmp_path):
     assert "1 ok, 4 skipped" in err, err
 
     log = (out / "accal.log").read_text()
-    assert log.count(" start accal ") == 9
+    assert log.count(" start accal ") == 11
     assert "skip " in log and "accal grace-bias: 1 ok, 4 skipped" in log
 
 

@@ -385,6 +385,8 @@ class Manifest:
 
     path: Path
     entries: dict[str, dict[str, Any]] = field(default_factory=dict)
+    #: Entries changed since the last :meth:`save` (see :meth:`is_current`).
+    changed: bool = field(default=False, compare=False)
 
     @classmethod
     def load(cls, out_dir: Path) -> Manifest:
@@ -420,7 +422,13 @@ class Manifest:
         if any(e.get(k) != sig[k] for k in keys):
             return False
         out = self.path.parent
-        return all((out / name).exists() for name in e.get("outputs", ()))
+        if not all((out / name).exists() for name in e.get("outputs", ())):
+            return False
+        if checksum and not use_hash:  # recorded without one: add it (saved with the run)
+            with contextlib.suppress(OSError):
+                e["sha256"] = file_signature(path, checksum=True)["sha256"]
+                self.changed = True
+        return True
 
     def sharing_outputs(self, path: Path, outputs: Sequence[Path]) -> dict[str, dict[str, Any]]:
         """Entries of *other* inputs that name any of ``outputs`` (which ``path`` now wrote)."""
@@ -466,6 +474,8 @@ class Manifest:
     def save(self) -> None:
         """Write the manifest atomically."""
         from accal.io.writers import atomic_path
+
+        self.changed = False
 
         with atomic_path(self.path) as tmp:
             tmp.write_text(

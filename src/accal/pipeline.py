@@ -1316,6 +1316,8 @@ def run(
                 interrupted = True  # keep what finished: commit it below
                 gen.close()  # stops the worker pool now if Ctrl-C came between results
             table_path = _commit(out_dir, opts, manifest, key, pending, checksum) or table_path
+            if manifest.changed:  # checksums added to entries recorded without one
+                manifest.save()
             outcomes = [results[i] for i in sorted(results)]
             summary = RunSummary(
                 outcomes,
