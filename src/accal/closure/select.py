@@ -809,7 +809,7 @@ def close_loop(
             for k in np.flatnonzero(dtu > 5.0 * np.median(dtu)):
                 g_end = tu_[k + 1]
                 later &= ~((t_all >= g_end) & (t_all < g_end + lead))
-        if int(later.sum()) >= MIN_SAMPLES:
+        if lead >= TAU_MIN_STEPS * step and int(later.sum()) >= MIN_SAMPLES:
             res = again(later, _after_lag=lead, _screened=True)  # outliers checked above
             note = {
                 "name": "auxiliary",
