@@ -659,7 +659,8 @@ def _pool_round(
             for proc in procs:
                 proc.join(timeout=10)
             raise
-    broken.sort(key=list(todo).index)
+    order = {i: k for k, i in enumerate(todo)}
+    broken.sort(key=order.__getitem__)
 
 
 def _death(codes: Sequence[int]) -> str:
