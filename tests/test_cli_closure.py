@@ -315,6 +315,13 @@ def test_aux_covering_part_of_the_day_is_used_where_it_is(undeclared, tmp_path):
     assert "bias_step" not in y
     assert abs(y["auxiliary"]["coefficient"] - COUPLING) < 3 * y["auxiliary"]["sigma"]
     assert abs(effects(entry, "z")["bias_step"]["epoch"] - (d["t0"] + STEP_AT)) <= 120.0
+    # where the channel is missing the coupling cannot be removed: those samples are
+    # invalid in the calibrated series and out of the refit (QA: a channel starting
+    # 3000 s late left c × 293 K there, a 6e-8 m/s² bias error)
+    assert "outside --aux: their coupling cannot be removed" in err
+    cal = pd.read_parquet(next((tmp_path / "o").glob("*.calibrated.parquet")))
+    late = cal["gps_time"] > temp["time"].iloc[-1] + 1.0
+    assert late.any() and not cal.loc[late, "valid"].any() and cal.loc[~late, "valid"].mean() > 0.9
 
 
 def test_no_step_test_on_a_record_shorter_than_two_revolutions(tmp_path):

@@ -796,8 +796,12 @@ def close_loop(
         # it is below e^-5 after FILTER_SETTLE time constants
         # (a lag of a few samples, e.g. 1 ± 6 s beside a low-pass, is not a lagged
         # channel: only those samples are left out for it)
+        # The two add up: the filter state is known FILTER_SETTLE τ after the lagged
+        # channel is (QA: lag 3000 s + 1000 s low-pass with only 5000 s left out gave a
+        # spurious exponential of T = 935 s)
         step = float(np.median(np.diff(np.unique(t_all)))) if t_all.size > 1 else 1.0
-        lead = max(max_lag(opts, span) if lag > TAU_MIN_STEPS * step else lag, FILTER_SETTLE * tc)
+        top_lag = max_lag(opts, span)
+        lead = (top_lag if lag > TAU_MIN_STEPS * step else lag) + FILTER_SETTLE * tc
         later = use & (t_all >= t0 + lead)
         # the same after every data gap: the channel was only known at the data's
         # times, so across a gap the lagged regressor was bridged (QA: steps of
@@ -810,17 +814,36 @@ def close_loop(
                 g_end = tu_[k + 1]
                 later &= ~((t_all >= g_end) & (t_all < g_end + lead))
         if lead >= TAU_MIN_STEPS * step and int(later.sum()) >= MIN_SAMPLES:
-            res = again(later, _after_lag=lead, _screened=True)  # outliers checked above
-            note = {
-                "name": "auxiliary",
-                "channel": None,
-                "note": f"the first {lead:.0f} s (and as much after each data gap) left out "
-                f"of the analysis: a coupling with a lag of {lag:.0f} s and a low-pass of "
-                f"{tc:.0f} s was found in the first search, and before the record starts "
-                "a lagged channel is unknown and a filter's state too",
-                "details": {"left_out": lead},
-            }
-            return dataclasses.replace(res, notes=(*res.notes, note))
+            # the same lags as the first search (the shorter span would lower the cap
+            # below the lag found: QA, 2000 s on a half day with gaps, capped at 1542 s)
+            res = again(later, _after_lag=lead, _screened=True, max_lag=top_lag)
+            coupled = {f.prop.channel for f in search.found if f.prop.name == "auxiliary"}
+            kept = {e.channel for e in res.effects if e.name == "auxiliary"}
+            if coupled <= kept:
+                note = {
+                    "name": "auxiliary",
+                    "channel": None,
+                    "note": f"the first {lead:.0f} s (and as much after each data gap) left "
+                    f"out of the analysis: a coupling with a lag of {lag:.0f} s and a low-pass "
+                    f"of {tc:.0f} s was found in the first search, and before the record "
+                    "starts a lagged channel is unknown and a filter's state too",
+                    "details": {"left_out": lead},
+                }
+                return dataclasses.replace(res, notes=(*res.notes, note))
+            # Without the start (and as much after each gap) the coupling was no longer
+            # found (QA: 59 % of a half day with gaps left out, or the backward stage
+            # preferring an orbit term): leaving it out of the model put c × mean(x)
+            # into the bias (z 444 and 1053 at 293 K).  The first search's result stands.
+            _note(
+                search.notes,
+                "auxiliary",
+                None,
+                f"the coupling to {', '.join(sorted(coupled - kept))} was not found again "
+                f"without the first {lead:.0f} s (and as much after each data gap, "
+                f"{int(later.sum())} of {int(use.sum())} samples left): the search on all "
+                "samples is kept, its start may hold the channel's unknown history",
+                {"left_out": lead},
+            )
     # the final fit carries the Jacobian of every searched time constant, so that
     # its uncertainty reaches every σ (an exponential's T was fitted, not known)
     final = [
@@ -1732,7 +1755,10 @@ def _effects(
                 if amp == 0.0:
                     continue
                 if par == "tau":
-                    kw["tau"] = float(prop.params["tau"]) * (1.0 + beta / amp)
+                    # the Gauss-Newton step, unless it is not a small one (T would
+                    # shrink below a tenth or turn negative: the searched value stands)
+                    if 1.0 + beta / amp > 0.1:
+                        kw["tau"] = float(prop.params["tau"]) * (1.0 + beta / amp)
                     details["tau_sigma"] = float(prop.params["tau"]) * s_beta / abs(amp)
                 else:  # a lag searched from 0 up: the step stays there
                     kw[par] = max(float(prop.params[par]) + beta / amp, 0.0)
