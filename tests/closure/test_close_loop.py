@@ -392,7 +392,7 @@ def test_lagged_coupling_start_is_not_an_exponential_or_a_step(sim, lag):
     assert any(m and 3600 <= int(m[1]) <= 4000 for m in left)
 
 
-@pytest.mark.parametrize("tc", [500.0, 1600.0, 3000.0])
+@pytest.mark.parametrize("tc", [500.0, 1600.0, 3000.0, 4500.0])
 def test_filtered_coupling_between_grid_time_constants(sim, tc):
     """QA: the coupling's low-pass was searched on a grid (0, 300, 1000, 3000 s) only: a
     500 s low-pass came out as 300 s + a 160 s lag with the coefficient 7 % low, and to a

@@ -838,12 +838,14 @@ def auxiliary(ctx: Context) -> list[Proposal]:
         if len(grid) > 1:
             # and between the grid's time constants, lag and τ together: a 500 s
             # low-pass came out as 300 s + a 160 s lag, its coefficient 7 % low.  Up to
-            # the neighbouring grid values only: beyond the largest, a 3000 s low-pass
-            # went to 6000 s on the slow noise (the ranking is the OLS power).  From a
-            # pure lag, the search starts half-way to the first low-pass.
+            # the neighbouring grid values; beyond the largest up to TAU_BEYOND times
+            # it, but a result at that bound is noise, not a time constant (a 3000 s
+            # low-pass went to 6000 s on the slow noise: the ranking is the OLS power),
+            # and the largest grid value stands.  From a pure lag, the search starts
+            # half-way to the first low-pass.
             k = grid.index(tc)
             lo_tau = grid[k - 1] if k > 0 else 0.0
-            hi_tau = grid[k + 1] if k + 1 < len(grid) else tc
+            hi_tau = grid[k + 1] if k + 1 < len(grid) else tc * TAU_BEYOND
             start_lag, start_tau = lag, tc
             if tc == 0:
                 start_tau = 0.5 * hi_tau
@@ -851,7 +853,8 @@ def auxiliary(ctx: Context) -> list[Proposal]:
             lag2, tc2, p2 = _refine_lag_tau(
                 ctx, tu, xf, start_lag, start_tau, lag_step, top_lag, (lo_tau, hi_tau), p_best
             )
-            if p2 > p_best:
+            at_bound = k + 1 == len(grid) and tc2 > 0.98 * hi_tau
+            if p2 > p_best and not at_bound:
                 if tc2 >= TAU_MIN_STEPS * dt:
                     best = (p2, lag2, tc2)
                 elif tc > 0:  # a low-pass of a few samples is a lag
@@ -933,6 +936,8 @@ def _refine_lag(
 #: A refined low-pass time constant below this many sample steps is taken as a
 #: pure lag (τ = 0, the lag grown by τ): the two cannot be told apart.
 TAU_MIN_STEPS = 5.0
+#: How far beyond the largest grid time constant (``aux_taus``) the refinement looks.
+TAU_BEYOND = 2.0
 
 
 def _refine_lag_tau(
