@@ -677,7 +677,10 @@ def _death(codes: Sequence[int]) -> str:
             " (out of memory? the kernel's OOM killer sends SIGKILL)" if name == "SIGKILL" else ""
         )
         return f"the worker process running this input was killed by {name}{hint}"
-    return f"the worker process running this input exited abruptly (exit codes {list(codes)})"
+    if codes:
+        return f"the worker process running this input exited abruptly (exit codes {list(codes)})"
+    # the pool may have reaped it first: how it ended is not known
+    return "the worker process running this input ended abruptly (killed? out of memory?)"
 
 
 #: Modules imported before the workers are forked (by this process or the fork server).
