@@ -292,12 +292,11 @@ def test_second_run_on_the_same_directory_refuses(archive, tmp_path):
     assert invoke("grace-bias", next(archive.rglob("*.asc")), "--out", tmp_path, "-q")[0] == 0
 
 
-def test_kill_minus_nine_then_rerun_gives_the_uninterrupted_outputs(tmp_path):
-    """A batch killed with SIGKILL mid-way and re-run ends exactly like a clean run."""
+def _half_days(src: Path, n: int) -> Path:
+    """``n`` simulated half days of GRACE-A in ``src`` (long enough to kill a batch mid-way)."""
     from accal.simulate.grace import write_simulated_grace
 
-    src = tmp_path / "in"
-    for k in range(10):
+    for k in range(n):
         write_simulated_grace(
             src / f"ACC1B_2005-01-{k + 1:02d}_A_02.asc",
             date=f"2005-01-{k + 1:02d}",
@@ -305,6 +304,12 @@ def test_kill_minus_nine_then_rerun_gives_the_uninterrupted_outputs(tmp_path):
             seed=k,
             duration=43200.0,
         )
+    return src
+
+
+def test_kill_minus_nine_then_rerun_gives_the_uninterrupted_outputs(tmp_path):
+    """A batch killed with SIGKILL mid-way and re-run ends exactly like a clean run."""
+    src = _half_days(tmp_path / "in", 10)
     cmd = [sys.executable, "-m", "accal", "grace-bias", str(src), "-r", "-j", "1", "-q"]
     subprocess.run([*cmd, "--out", str(tmp_path / "clean")], check=True, capture_output=True)
 
@@ -362,17 +367,7 @@ def test_kill_minus_nine_with_workers_leaves_no_process_and_no_lock(tmp_path, st
     """kill -9 of a 2-worker batch: the workers end with it (they do not wait forever
     for inputs that never come, nor keep the output directory locked); the re-run
     then finishes the batch.  Forked workers (the default) and a fork server's."""
-    from accal.simulate.grace import write_simulated_grace
-
-    src = tmp_path / "in"
-    for k in range(8):
-        write_simulated_grace(
-            src / f"ACC1B_2005-01-{k + 1:02d}_A_02.asc",
-            date=f"2005-01-{k + 1:02d}",
-            satellite="A",
-            seed=k,
-            duration=43200.0,
-        )
+    src = _half_days(tmp_path / "in", 8)
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "accal", "grace-bias", str(src), "-r", "-j", "2", "-q"]
     proc = subprocess.Popen(

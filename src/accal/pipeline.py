@@ -789,7 +789,7 @@ def close_the_loop(
         f"accal {__version__}: close_loop(alpha={opts.alpha}) removed "
         + "; ".join(f"{ax}: {out[ax]['model']}" for ax in series.axes)
     )
-    coupled = any("auxiliary" in lab for ax in series.axes for lab in out[ax]["model"].split("+"))
+    coupled = any("auxiliary(" in out[ax]["model"] for ax in series.axes)
     if coupled and n_out:
         # a removed coupling is not removed where its channel is missing: those samples
         # would bias the refit (QA: a channel starting 3000 s late left c × 293 K there,

@@ -870,13 +870,14 @@ def auxiliary(ctx: Context) -> list[Proposal]:
         # bias σ (σ(c) × mean(x))
         cc, labs, axes = ctx.split(col[:, None], (f"aux:{name}",))
 
-        def jacobian(xf=xf, lag=lag, tc=tc, name=name) -> list[tuple[str, NDArray[np.float64]]]:
+        def jacobian(
+            xf=xf, h=h, lag=lag, tc=tc, name=name
+        ) -> list[tuple[str, NDArray[np.float64]]]:
             # c·h_τ(x)(t − lag): d/dlnτ by a central difference (the filter is smooth
             # in τ), d/dlag = −h'(t − lag), smooth too behind a low-pass.  Only with a
             # low-pass: for a pure lag the channel's own derivative is the column, and
             # a channel with kicks (a platform's temperature after each rotation) made
             # it spikes: lag 1.4 ± 0.3 s for a true 0, the coefficient 2 % off
-            h = filtered(tc) if tc in taus else _first_order(xf, tu, tc)
             eps = 1e-3
             up, down = (
                 _first_order(xf, tu, tc * np.exp(eps)),

@@ -457,17 +457,15 @@ def _with_tau_jacobian(
     (a decay of T = 60,000 s over a day had a bias σ 12x too small without it).
     A coupling through a first-order low-pass (:func:`accal.closure.candidates.auxiliary`)
     is treated alike: ``c·h_{τ+δ}(x) ≈ c·h_τ(x) + β·∂h_τ(x)/∂lnτ`` (the derivative by
-    a central difference, :attr:`~accal.closure.candidates.Proposal.dlntau`), so
+    a central difference, :attr:`~accal.closure.candidates.Proposal.jacobian`, with the lag's too), so
     σ(τ) = σ(β)·τ/|c| and the bias σ includes it (a 500 s low-pass to a 293 K channel:
     bias z 6 without it).  Other effects, and a Jacobian that is not independent of
     the rest of the design (``rest()``: the base and the other effects, formed only
     when needed), are returned unchanged.
     """
     prop = f.prop
-    if prop.name == "exponential_drift" and not prop.params.get("tau"):
-        return f
     cols = prop.columns
-    if prop.name == "exponential_drift":
+    if prop.name == "exponential_drift" and prop.params.get("tau"):
         parts = [("tau", cols * ((t_all - t0) / float(prop.params["tau"]))[:, None])]
     elif prop.jacobian is not None:  # a coupling: lag and low-pass, numerically
         parts = prop.jacobian()
