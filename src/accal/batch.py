@@ -684,7 +684,7 @@ def _death(codes: Sequence[int]) -> str:
 
 
 #: Modules imported before the workers are forked (by this process or the fork server).
-_PRELOAD = ("numpy", "scipy.fft", "pyarrow.csv", "pyarrow.parquet")
+_PRELOAD = ("numpy", "pyarrow.csv", "pyarrow.parquet")
 
 
 #: Threads that may run while this process forks: the jemalloc bundled with

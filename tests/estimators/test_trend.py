@@ -374,3 +374,43 @@ def test_noise_grid_is_bounded_when_stretches_are_far_apart():
     fit = fit_trend(t, 1e-7 + 1e-12 * t)
     assert np.isfinite(fit.sigma).all()
     np.testing.assert_allclose(fit.coef, [1e-7, 1e-12], rtol=1e-9)
+
+
+@pytest.mark.parametrize("order", [1, 2])
+@pytest.mark.parametrize("layout", ["uniform", "gaps", "odd"])
+def test_binned_covariance_equals_the_per_frequency_quadratic_form(order, layout):
+    """The kernel sums Re(G_i conj(G_j)) over each PSD bin once; the covariance must
+    equal Re(G diag(w) G^H)/N with the PSD estimate w spread over every frequency
+    (the form written out in linear_estimator_covariance's docstring), to rounding."""
+    from accal.estimators.trend import _CovarianceKernel, _on_grid
+
+    rng = np.random.default_rng(11)
+    n = {"uniform": 4000, "gaps": 4000, "odd": 3001}[layout]
+    t = np.arange(n, dtype=float)
+    if layout == "gaps":
+        keep = np.ones(n, bool)
+        for a in rng.choice(np.arange(10, n - 10), 40, replace=False):
+            keep[a : a + rng.integers(1, 30)] = False
+        t = t[keep]
+    g = wavelet_weights(t, order)
+    resid = np.cumsum(rng.standard_normal((3, t.size)), axis=1)
+    kern = _CovarianceKernel(t, g, order)
+    got = kern.covariances(resid)
+
+    # reference: the explicit per-frequency weights
+    spec_r = np.fft.rfft(_on_grid(resid, kern.idx, kern.ngrid), axis=1)
+    spec_g = np.fft.rfft(_on_grid(g, kern.idx, kern.ngrid), axis=1)
+    nf = spec_g.shape[1]
+    pgram = np.abs(spec_r) ** 2 * (kern.inv_suppress / kern.n)
+    sbin = np.add.reduceat(pgram[:, 1:], kern.starts, axis=1) / kern.counts
+    w = np.empty_like(pgram)
+    w[:, 1:] = np.repeat(sbin, kern.counts, axis=1)
+    w[:, 0] = sbin[:, 0]
+    w[:, 1:] *= 2.0
+    if kern.ngrid % 2 == 0:
+        w[:, nf - 1] /= 2.0
+    want = np.einsum("if,kf,jf->kij", spec_g, w, spec_g.conj()).real / kern.ngrid
+
+    assert got.shape == (3, order + 1, order + 1)
+    scale = np.sqrt(np.einsum("kii,kjj->kij", want, want))
+    assert np.max(np.abs(got - want) / scale) < 1e-12

@@ -411,8 +411,6 @@ class _CovarianceKernel:
     """
 
     def __init__(self, t: ArrayLike, g: NDArray[np.float64], order: int, min_bin: int = 3) -> None:
-        from scipy import fft as sfft
-
         t = np.asarray(t, dtype=np.float64)
         self.n = t.size
         self.order = order
@@ -422,11 +420,10 @@ class _CovarianceKernel:
         rows = np.empty((order + 1 + g.shape[0], self.n))
         rows[: order + 1] = q.T
         rows[order + 1 :] = g
-        spec = sfft.rfft(_on_grid(rows, self.idx, self.ngrid), axis=1)
+        spec = np.fft.rfft(_on_grid(rows, self.idx, self.ngrid), axis=1)
         nf = spec.shape[1]
         suppress = 1.0 - np.sum(np.abs(spec[: order + 1]) ** 2, axis=0) / self.n
         self.inv_suppress = 1.0 / np.clip(suppress, 0.2, None)
-        self.gs = spec[order + 1 :]
         # log-spaced bins over f_k, k = 1 .. nf-1
         edges = [1]
         while edges[-1] < nf:
@@ -440,23 +437,33 @@ class _CovarianceKernel:
         two_sided[0] = 1.0
         if self.ngrid % 2 == 0:
             two_sided[-1] = 1.0
-        self.two_sided = two_sided
+        # The PSD estimate is constant over each bin, so
+        #   Re(G diag(w) G^H)_ij = w_0 P_ij(f_0) + Σ_b S_b Σ_{f in b} P_ij(f),
+        #   P_ij(f) = two_sided(f) · Re(G_i(f) conj(G_j(f))):
+        # the residual-independent sums over each bin are formed once here.
+        gs = spec[order + 1 :]
+        p = gs.shape[0]
+        self.p = p
+        self.pair0 = np.empty((p, p))
+        self.pair_bins = np.empty((p, p, self.nbins))
+        for i in range(p):
+            for j in range(i + 1):
+                prod = gs[i].real * gs[j].real + gs[i].imag * gs[j].imag
+                prod *= two_sided
+                self.pair0[i, j] = self.pair0[j, i] = prod[0]
+                summed = np.add.reduceat(prod[1:], self.starts)
+                self.pair_bins[i, j] = self.pair_bins[j, i] = summed
 
     def covariances(self, residuals: NDArray[np.float64]) -> NDArray[np.float64]:
         """``G C Gᵀ`` for each row of ``residuals`` (shape (k, n)) -> (k, p, p)."""
-        from scipy import fft as sfft
-
-        rspec = sfft.rfft(_on_grid(residuals, self.idx, self.ngrid), axis=1)
+        rspec = np.fft.rfft(_on_grid(residuals, self.idx, self.ngrid), axis=1)
         pgram = (rspec.real**2 + rspec.imag**2) * (self.inv_suppress / self.n)  # (k, nf)
         # mean over each log-spaced bin of f_1 .. f_nf-1 (bins are contiguous runs)
-        sbin = np.add.reduceat(pgram[:, 1:], self.starts, axis=1) / self.counts
-        w = np.empty_like(pgram)
-        w[:, 1:] = np.repeat(sbin, self.counts, axis=1)
-        w[:, 0] = sbin[:, 0]
-        w *= self.two_sided
-        # Re(G diag(w) G^H) = Gr diag(w) Gr^T + Gi diag(w) Gi^T, for every row of w
-        gr, gi = self.gs.real, self.gs.imag
-        cov = (gr[None] * w[:, None, :]) @ gr.T + (gi[None] * w[:, None, :]) @ gi.T
+        sbin = np.add.reduceat(pgram[:, 1:], self.starts, axis=1) / self.counts  # (k, nbins)
+        # f_0 takes the lowest bin's value (see __init__ for the bin sums)
+        p = self.p
+        cov = (sbin @ self.pair_bins.reshape(p * p, self.nbins).T).reshape(-1, p, p)
+        cov += sbin[:, 0, None, None] * self.pair0
         return cov / self.ngrid
 
 
