@@ -327,12 +327,18 @@ def calibrate(
 
     ``a_cal = scale · (a_raw − trend)`` (TN-02 convention, see :mod:`accal.calibration`).
     """
-    cols = []
-    for ax in series.axes:
-        s = 1.0 if scale is None else float(scale["xyz".index(ax)])
-        cols.append(s * (series.axis(ax) - fits[(ax, method)].evaluate(series.time)))
-    return series.replace(acc=np.column_stack(cols)).with_history(
-        f"accal {__version__}: calibrate(method={method!r}, scale={scale})"
+    acc = np.empty((len(series), len(series.axes)))
+    for k, ax in enumerate(series.axes):
+        col = acc[:, k]
+        np.subtract(series.axis(ax), fits[(ax, method)].evaluate(series.time), out=col)
+        if scale is not None:
+            col *= float(scale["xyz".index(ax)])
+    return series.replace(
+        acc=acc,
+        history=(
+            *series.history,
+            f"accal {__version__}: calibrate(method={method!r}, scale={scale})",
+        ),
     )
 
 

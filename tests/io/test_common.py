@@ -7,7 +7,7 @@ import pyarrow as pa
 import pytest
 
 from accal.errors import FormatError
-from accal.io._common import bits_from_strings
+from accal.io._common import arrow_to_numpy, bits_from_strings
 
 
 @pytest.mark.parametrize("width", [1, 3, 8, 12, 32])
@@ -51,3 +51,26 @@ def test_tidy_says_when_dropped_duplicates_had_other_values():
     assert res.warnings == [
         "3 duplicated epochs dropped (first kept); 2 of them with different values"
     ]
+
+
+def test_arrow_to_numpy_copies_chunks_once_into_a_writable_array():
+    """Chunked and sliced (offset) arrays come back whole and writable; ``out`` (a
+    strided column of a 2-D array) is filled in place; nulls fall back to pyarrow."""
+    v = np.arange(50, dtype=np.float64) * 0.5
+    chunked = pa.chunked_array([pa.array(v[:7]), pa.array(v).slice(7, 20), pa.array(v[27:])])
+    got = arrow_to_numpy(chunked)
+    assert np.array_equal(got, v) and got.dtype == np.float64 and got.flags.writeable
+    got[0] = -1.0  # writable, and not a view of the Arrow buffers
+    assert chunked.chunk(0)[0].as_py() == 0.0
+    out = np.zeros((50, 3))
+    res = arrow_to_numpy(chunked, out[:, 1])
+    assert np.shares_memory(res, out) and np.array_equal(out[:, 1], v)
+    assert not out[:, [0, 2]].any()
+    ints = arrow_to_numpy(
+        pa.chunked_array([pa.array([1, 2], pa.int32()), pa.array([], pa.int32())])
+    )
+    assert ints.dtype == np.int32 and ints.tolist() == [1, 2]
+    empty = arrow_to_numpy(pa.chunked_array([], pa.float64()))
+    assert empty.shape == (0,)
+    with_null = arrow_to_numpy(pa.array([1.0, None, 3.0]))
+    assert np.isnan(with_null[1]) and with_null[[0, 2]].tolist() == [1.0, 3.0]

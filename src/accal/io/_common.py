@@ -278,25 +278,39 @@ def check_binary(text: bytes, path: str | Path, first_line: int = 1) -> None:
         raise FormatError("binary data where text was expected (not UTF-8)", path, line) from None
 
 
-def arrow_to_numpy(col: Any) -> NDArray:
+def arrow_to_numpy(col: Any, out: NDArray | None = None) -> NDArray:
     """A numeric Arrow (chunked) array without nulls as a writable numpy array.
 
-    Reads the value buffer directly: pyarrow's own ``to_numpy`` imports pandas
-    (~0.3 s), which would dominate the start-up time of a one-file run.
-    Booleans and arrays with nulls fall back to pyarrow's conversion.
+    Reads the value buffers directly: pyarrow's own ``to_numpy`` imports pandas
+    (~0.3 s), which would dominate the start-up time of a one-file run.  The
+    chunks are copied once, into ``out`` when given (e.g. a column of a 2-D
+    array; its dtype converts) or a new array.  Booleans and arrays with nulls
+    fall back to pyarrow's conversion.
     """
     import pyarrow as pa
 
-    if isinstance(col, pa.ChunkedArray):
-        col = col.combine_chunks()
     t = col.type
+    chunks = col.chunks if isinstance(col, pa.ChunkedArray) else [col]
     if col.null_count == 0 and (pa.types.is_integer(t) or pa.types.is_floating(t)):
         dtype = np.dtype(t.to_pandas_dtype())
-        buf = col.buffers()[1]
-        return np.frombuffer(
-            buf, dtype=dtype, count=len(col), offset=col.offset * dtype.itemsize
-        ).copy()
-    return np.asarray(col.to_numpy(zero_copy_only=False))
+        if out is None:
+            out = np.empty(len(col), dtype=dtype)
+        pos = 0
+        for c in chunks:
+            m = len(c)
+            if m:
+                out[pos : pos + m] = np.frombuffer(
+                    c.buffers()[1], dtype=dtype, count=m, offset=c.offset * dtype.itemsize
+                )
+            pos += m
+        return out
+    if isinstance(col, pa.ChunkedArray):
+        col = col.combine_chunks()
+    arr = np.asarray(col.to_numpy(zero_copy_only=False))
+    if out is not None:
+        out[...] = arr
+        return out
+    return arr
 
 
 def bits_from_strings(

@@ -483,6 +483,7 @@ def _check_last_line(raw: bytes, start: int, first_line: int, path: Path) -> Non
 
 
 _NON_SPACE = re.compile(rb"\S")
+_LIN_ACCL = {"lin_accl_x": 0, "lin_accl_y": 1, "lin_accl_z": 2}
 
 
 def _parse_ascii(raw: bytes, start: int, first_line: int, path: Path) -> dict[str, Any]:
@@ -528,16 +529,20 @@ def _parse_ascii(raw: bytes, start: int, first_line: int, path: Path) -> dict[st
     if table.num_rows == 0:  # only what pyarrow skips (e.g. a byte-order mark, blank lines)
         raise FormatError("header but no data records", path, first_line)
     out: dict[str, Any] = {}
+    # the three linear accelerations go straight into the (n, 3) array of the series
+    acc = np.empty((table.num_rows, 3))
     for name in COLUMNS[:11]:
         if name == "GRACE_id":
             continue
         col = table.column(name)
         if col.null_count:
             raise _locate_bad_line(raw[start:], first_line, len(names), path)
-        arr = arrow_to_numpy(col)
+        k = _LIN_ACCL.get(name)
+        arr = arrow_to_numpy(col, None if k is None else acc[:, k])
         if not np.isfinite(arr).all():
             raise _locate_bad_line(raw[start:], first_line, len(names), path)
         out[name] = arr
+    out["acc"] = acc
     line_of = row_to_line(raw, first_line, text_line=1)
     check_gps_time(out["gps_time"], path, line_of)
     out["GRACE_id"] = table.column("GRACE_id")
@@ -575,6 +580,7 @@ def _parse_binary(data: bytes, path: Path) -> dict[str, Any]:
     out["GRACE_id"] = np.char.decode(rec["GRACE_id"], "latin-1")
     out["qualflg"] = rec["qualflg"].astype(np.uint32)
     out["line_of"] = None
+    out["acc"] = np.column_stack([out["lin_accl_x"], out["lin_accl_y"], out["lin_accl_z"]])
     return out
 
 
@@ -754,7 +760,7 @@ def read_grace_acc1b(path: str | Path, *, invalid_bits: int = DEFAULT_INVALID_BI
     warn, letter = _check_ids(cols["GRACE_id"], info["letter"], path, cols["line_of"])
     time = cols["gps_time"]
     warn += _check_header_span(time, info["meta"], path, cols["line_of"])
-    acc = np.column_stack([cols["lin_accl_x"], cols["lin_accl_y"], cols["lin_accl_z"]])
+    acc = cols["acc"]
     arrays = {"acc": acc, "quality": cols["qualflg"], **{c: cols[c] for c in AUX_COLUMNS}}
     t = tidy(time, arrays)
     quality = t.arrays["quality"].astype(np.uint32)
