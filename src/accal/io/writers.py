@@ -231,12 +231,21 @@ def write_table(
             )
             # dictionary-encoding float columns costs ~8x the write time for no gain;
             # byte-stream-split floats compress: a 1 Hz calibrated day is 1.6 MB
-            # instead of 2.4 MB, at the same write time
+            # instead of 2.4 MB, at the same write time.  Only text columns are
+            # dictionary-encoded: flags and booleans compress as well without it.
             floats = [f.name for f in table.schema if pa.types.is_floating(f.type)]
+            texts = [
+                f.name
+                for f in table.schema
+                if pa.types.is_string(f.type)
+                or pa.types.is_large_string(f.type)
+                or pa.types.is_binary(f.type)
+                or pa.types.is_large_binary(f.type)
+            ]
             pq.write_table(
                 pa.Table.from_arrays(table.columns, schema=schema),
                 tmp,
-                use_dictionary=[f.name for f in table.schema if f.name not in floats],
+                use_dictionary=texts or False,
                 use_byte_stream_split=floats or False,
             )
         else:
