@@ -686,3 +686,46 @@ def test_a_pattern_that_matches_nothing_counts_as_failed(archive, tmp_path):
     assert f"accal: {tmp_path / 'nope*.asc'}: no file matches this pattern" in err
     assert "1 ok, 0 skipped (current), 1 failed, 0 not run" in err
     assert "FAILED " in (tmp_path / "o" / "accal.log").read_text()
+
+
+def test_prefetch_reads_regular_files_ahead_and_ignores_everything_else(tmp_path, monkeypatch):
+    """The read-ahead of the next inputs is advice: a regular file gets
+    POSIX_FADV_WILLNEED over its whole length; a missing path, a directory, a FIFO
+    with no writer (it must not block) or None get nothing, and nothing raises."""
+    from accal import batch
+
+    calls = []
+    real = os.posix_fadvise
+    monkeypatch.setattr(
+        os,
+        "posix_fadvise",
+        lambda fd, off, n, adv: (calls.append((off, n, adv)), real(fd, off, n, adv)),
+    )
+    f = tmp_path / "day.asc"
+    f.write_bytes(b"x" * 100_000)
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    for p in (None, tmp_path / "missing.asc", tmp_path, fifo):
+        batch.prefetch(p)
+    assert calls == []
+    batch.prefetch(f)
+    assert calls == [(0, 0, os.POSIX_FADV_WILLNEED)]
+
+
+def test_a_batch_reads_ahead_the_inputs_the_workers_take_next(archive, tmp_path, monkeypatch):
+    """With W workers the first W inputs are read by the workers at once; every
+    later input is read ahead exactly once, in the order the pool hands them out."""
+    from accal import batch
+
+    paths = sorted(archive.rglob("ACC1B_*.asc"))[:6]
+    # forked workers find _name_of in this module (a fork server would import it anew)
+    monkeypatch.setenv("ACCAL_START_METHOD", "fork")
+    seen: list[Path] = []
+    monkeypatch.setattr(batch, "prefetch", lambda p: seen.append(p) if p is not None else None)
+    got = dict(batch.execute(_name_of, paths, workers=2, on_error=lambda p, e: repr(e)))
+    assert sorted(got.values()) == sorted(p.name for p in paths)
+    assert seen == paths[2:]
+
+
+def _name_of(p: Path) -> str:
+    return p.name

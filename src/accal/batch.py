@@ -30,6 +30,7 @@ import hashlib
 import json
 import os
 import re
+import stat
 import time as _time
 import warnings
 import weakref
@@ -124,8 +125,6 @@ def check_input(path: Path) -> None:
     ValidationError
         With the reason (the caller names the file).
     """
-    import stat
-
     from accal.errors import ValidationError
 
     try:
@@ -634,8 +633,15 @@ def _pool_round(
             )
             futures = {pool.submit(task, paths[i]): i for i in todo}
         procs = list((getattr(pool, "_processes", None) or {}).values())
+        # The pool hands inputs out in order: while the workers compute, the inputs
+        # the next free workers will take are read ahead into the page cache (one
+        # per worker, topped up as each input completes).
+        ahead = iter([paths[i] for i in todo[n_workers:]])
+        for _ in range(n_workers):
+            prefetch(next(ahead, None))
         try:
             for fut in as_completed(futures):
+                prefetch(next(ahead, None))
                 i = futures[fut]
                 try:
                     yield i, fut.result()
@@ -661,6 +667,29 @@ def _pool_round(
             raise
     order = {i: k for k, i in enumerate(todo)}
     broken.sort(key=order.__getitem__)
+
+
+def prefetch(path: Path | None) -> None:
+    """Ask the kernel to read ``path`` into the page cache in the background.
+
+    ``posix_fadvise(POSIX_FADV_WILLNEED)`` starts the reads and returns; the
+    worker that later reads the file finds it in memory instead of waiting for
+    the disk (on a cold archive, ~9 MB per day file).  A no-op where not
+    available or for anything but a readable regular file; never raises.
+    """
+    if path is None or not hasattr(os, "posix_fadvise"):
+        return
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+    except OSError:
+        return
+    try:
+        if stat.S_ISREG(os.fstat(fd).st_mode):
+            os.posix_fadvise(fd, 0, 0, os.POSIX_FADV_WILLNEED)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
 
 
 def _death(codes: Sequence[int]) -> str:
