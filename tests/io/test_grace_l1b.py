@@ -618,6 +618,65 @@ def test_record_far_outside_the_header_span_is_damage(samples, tmp_path):
     assert e.value.line == len(fo)
 
 
+def test_header_times_that_are_not_times_are_errors_and_missing_ones_fall_back(samples, tmp_path):
+    """QA: a garbled 'TIME FIRST OBS' (or GRACE-FO start_time_epoch_secs) was ignored, and
+    with it the check above: a record 30 days late went into the fit as a 30-day gap (the
+    drift came out 5 orders of magnitude off, exit 0).  A garbled time is an error at its
+    header line; a header without the times is checked against the day of the L1B file
+    name; with neither, a warning says the records are not checked."""
+    head, data = _data_lines(samples["grace_a"])
+    late = data[:]
+    late[5] = late[5].replace(late[5].split()[0], str(int(late[5].split()[0]) + 30 * 86400), 1)
+    garbled = [
+        "TIME FIRST OBS(SEC PAST EPOCH): garbage\n" if h.startswith("TIME FIRST OBS") else h
+        for h in head
+    ]
+    line = next(i for i, h in enumerate(head, 1) if h.startswith("TIME FIRST OBS"))
+    with pytest.raises(FormatError, match="'TIME FIRST OBS.*' is not a GPS time") as e:
+        read_grace_acc1b(_write(tmp_path, "".join(garbled + data).encode()))
+    assert e.value.line == line
+    no_times = [h for h in head if not h.startswith(("TIME FIRST OBS", "TIME LAST OBS"))]
+    named = tmp_path / "ACC1B_2003-09-14_A_00.asc"
+    named.write_text("".join(no_times + late))
+    with pytest.raises(FormatError, match=r"\(2003-10-14\) is outside the day of the file name"):
+        read_grace_acc1b(named)
+    named.write_text("".join(no_times + data))
+    assert len(read_grace_acc1b(named)) == 60  # the good records of that day: read
+    anon = tmp_path / "day.asc"
+    anon.write_text("".join(no_times + data))
+    s = read_grace_acc1b(anon)
+    assert any("record times are not checked" in w for w in s.report.warnings)
+    fo = samples["gracefo_c"].read_text().splitlines(keepends=True)
+    fo = [
+        "    start_time_epoch_secs: garbage\n" if "start_time_epoch_secs:" in h else h for h in fo
+    ]
+    with pytest.raises(FormatError, match="'start_time_epoch_secs' is not a GPS time") as e:
+        read_grace_acc1b(_write(tmp_path, "".join(fo).encode(), "ACT1B.txt"))
+    assert "start_time_epoch_secs" in fo[e.value.line - 1]
+
+
+def test_absurd_values_are_damage_in_every_acceleration_column(samples, tmp_path):
+    """QA: 1e300 (finite) in lin_accl_x passed, and the day's sigmas came out infinite
+    (exit 0, overflow warnings); --close-loop then failed with an internal error.  Any
+    acceleration column (linear, angular, residual) beyond 1000 is damage, named with its
+    line; the binary format says the record."""
+    head, data = _data_lines(samples["grace_a"])
+    for col, name in ((2, "lin_accl_x"), (6, "ang_accl_y"), (10, "acl_z_res")):
+        bad = data[:]
+        fields = bad[7].split(" ")
+        fields[col] = "-2.5e+301" if col != 6 else "1.5e3"
+        bad[7] = " ".join(fields)
+        with pytest.raises(FormatError, match=f"{name}: .* is not a plausible acceleration") as e:
+            read_grace_acc1b(_write(tmp_path, "".join(head + bad).encode()))
+        assert e.value.line == len(head) + 8
+    raw = bytearray(samples["grace_a_bin"].read_bytes())
+    s = read_grace_acc1b(samples["grace_a_bin"])
+    i = bytes(raw).index(np.array([s.acc[3, 0]], ">f8").tobytes())  # record 4's lin_accl_x
+    raw[i : i + 8] = np.array([1e300], ">f8").tobytes()
+    with pytest.raises(FormatError, match=r"record 4: lin_accl_x: 1e\+300 m/s² is not a plaus"):
+        read_grace_acc1b(_write(tmp_path, bytes(raw), "bad.dat"))
+
+
 def test_undecodable_satellite_id_or_flag_is_a_clean_error(samples, tmp_path):
     """Found by the deep fuzz run: bytes that are not UTF-8 in the id (or flag) field."""
     raw = samples["grace_a"].read_bytes()

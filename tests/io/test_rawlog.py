@@ -164,7 +164,10 @@ def test_stream_time_checked_across_chunks(tmp_path):
     p.write_text(CSV.replace("\n2,1e-6", "\n0.5,1e-6"))
     with pytest.raises(FormatError, match=r"back\.csv:5: time is not strictly increasing"):
         list(open_rawlog(p, rows=2))  # the bad step is the first row of the second chunk
-    p.write_text(CSV.rstrip("\n"))
+    p.write_text(CSV.rstrip("\n"))  # no final newline, last row complete: read
+    assert _concat(open_rawlog(p, rows=3))[1]["time"].tolist() == read_rawlog(p).time.tolist()
+    assert len(read_rawlog(p)) == 4
+    p.write_text(CSV.rstrip("\n").rsplit(",", 1)[0])  # cut: a field short
     with pytest.raises(FormatError, match=r":6: truncated last line"):
         list(open_rawlog(p, rows=3))
 
@@ -243,3 +246,14 @@ def test_content_that_does_not_match_the_name_is_a_warning(tmp_path, rows):
     right = tmp_path / "ok.csv"
     right.write_text(CSV)
     assert open_rawlog(right, rows=rows).warnings == []
+
+
+def test_an_absurd_acceleration_is_damage_with_its_line(tmp_path):
+    """QA: m_y = 1e300 in a run was demodulated into a mean a_Y of -1.8e296 '± 1e-12'
+    (exit 0, numpy overflow warnings); beyond 1000 m/s² a value is damage or a wrong unit."""
+    p = tmp_path / "huge.csv"
+    p.write_text(CSV.replace("\n2,1e-6", "\n2,-1e300"))
+    with pytest.raises(FormatError, match=r"huge\.csv:5: m_y: -1e\+300 m/s² is not a plausible"):
+        read_rawlog(p)
+    p.write_text(CSV.replace("\n2,1e-6", "\n2,999.0"))  # large but within the bound: read
+    assert read_rawlog(p).axis("y")[2] == 999.0

@@ -116,9 +116,13 @@ def test_bad_tables(tmp_path):
         read_table_series(w("h.csv", b"gps_time,lin_accl_x\n"))
     with pytest.raises(FormatError, match="no time column"):
         read_table_series(w("t.csv", b"a,lin_accl_x\n1,2\n"))
-    with pytest.raises(FormatError, match="truncated last line") as e:
-        read_table_series(w("tr.csv", b"gps_time,lin_accl_x\n1,2\n2,3"))
-    assert e.value.line == 3
+    # no final newline: a last row with every field is read (QA: editors and some tools
+    # omit it); one cut short of its fields is a truncated last line
+    assert len(read_table_series(w("nonl.csv", b"gps_time,lin_accl_x\n1,2e-7\n2,3e-7"))) == 2
+    for cut in (b"gps_time,lin_accl_x\n1,2\n2", b"gps_time,lin_accl_x\n1,2\n2,"):
+        with pytest.raises(FormatError, match="truncated last line") as e:
+            read_table_series(w("tr.csv", cut))
+        assert e.value.line == 3
     with pytest.raises(FormatError, match="CSV: .*columns") as e:
         read_table_series(w("c.csv", b"gps_time,lin_accl_x\n1,2\n2,3,4\n"))
     with pytest.raises(FormatError, match="'lin_accl_x' is not numeric"):
@@ -138,6 +142,15 @@ def test_nan_acc_is_invalid(tmp_path):
     s = read_table_series(p)
     assert s.valid.tolist() == [True, False, True]
     assert "1 rows with missing or non-finite acceleration (invalid)" in s.report.warnings
+
+
+def test_absurd_acc_is_damage_not_a_gap(tmp_path):
+    """QA: 1e300 in a table went into the fit (infinite sigmas, a failed closure); a
+    missing value is a gap (invalid sample), an absurd one an error with its line."""
+    p = tmp_path / "h.csv"
+    p.write_text("gps_time,lin_accl_x\n1,2e-7\n2,1e300\n3,1e-7\n")
+    with pytest.raises(FormatError, match=r"h\.csv:3: lin_accl_x: 1e\+300 m/s² is not a plausible"):
+        read_table_series(p)
 
 
 # ---------------------------------------------------------------- registry

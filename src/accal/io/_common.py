@@ -43,6 +43,26 @@ _GUNZIP_STEP = 64 << 20
 #: computation downstream.
 GPS_TIME_RANGE = (-630_763_200.0, 3_155_716_800.0)
 
+#: Largest plausible magnitude of an acceleration in an input [m/s² or rad/s²].
+#: Electrostatic accelerometers measure below ~1e-3 m/s² (GRACE ±5e-5); a value
+#: beyond 1000 (100 g) is a damaged field or a wrong unit, and one near 1e300 would
+#: overflow every sum of squares downstream (infinite sigmas, failed closures).
+MAX_ABS_ACCELERATION = 1e3
+
+
+def implausible(arr: NDArray, limit: float = MAX_ABS_ACCELERATION) -> NDArray[np.intp]:
+    """Indices of the finite values of ``arr`` whose magnitude exceeds ``limit``."""
+    a = np.asarray(arr, dtype=np.float64)
+    return np.flatnonzero(np.abs(np.where(np.isfinite(a), a, 0.0)) > limit)
+
+
+def implausible_message(name: str, value: float, unit: str = "m/s²") -> str:
+    """The reader message for a value beyond :data:`MAX_ABS_ACCELERATION`."""
+    return (
+        f"{name}: {value:.6g} {unit} is not a plausible acceleration "
+        f"(|value| > {MAX_ABS_ACCELERATION:g}): a damaged value or a wrong unit"
+    )
+
 
 def read_bytes(path: str | Path) -> bytes:
     """Return the (decompressed) content of ``path``, without a leading UTF-8 BOM.

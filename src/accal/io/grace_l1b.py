@@ -38,12 +38,15 @@ from numpy.typing import NDArray
 from accal.errors import FormatError, UnsupportedFormatError, ValidationError, check_option
 from accal.io._common import (
     GPS_TIME_RANGE,
+    MAX_ABS_ACCELERATION,
     _short,
     arrow_to_numpy,
     bits_from_strings,
     check_binary,
     check_gps_time,
     csv_read_options,
+    implausible,
+    implausible_message,
     one_line,
     peek,
     read_bytes,
@@ -93,6 +96,12 @@ COLUMN_UNITS = {
     "acl_y_res": "m/s^2",
     "acl_z_res": "m/s^2",
 }
+
+
+def _unit(name: str) -> str:
+    """A column's unit as messages write it (``m/s²``)."""
+    return COLUMN_UNITS.get(name, "").replace("^2", "²")
+
 
 #: Columns carried in ``AccSeries.aux``.
 AUX_COLUMNS = COLUMNS[5:11]
@@ -304,13 +313,49 @@ def _interpret_grace(header: bytes, path: Path) -> dict[str, Any]:
     fmt = _grace_int(meta, lines, "FILE FORMAT 0=BINARY 1=ASCII", path)
     if fmt not in (None, 0, 1):
         raise FormatError(f"header 'FILE FORMAT' is {fmt}, expected 0 or 1", path)
+    first, last = (
+        _header_time(meta.get(key), key, path, lines.get(key))
+        for key in ("TIME FIRST OBS(SEC PAST EPOCH)", "TIME LAST OBS(SEC PAST EPOCH)")
+    )
     return {
         "meta": {"grace": meta},
         "letter": letter,
         "n_header": _grace_int(meta, lines, "NUMBER OF DATA RECORDS", path),
         "binary": fmt == 0,
         "columns": COLUMNS,
+        "span": _span(first, last, path),
     }
+
+
+def _header_time(value: Any, key: str, path: Path, line: int | None) -> float | None:
+    """A header's observation time [s GPS]: None if absent, FormatError if not a time.
+
+    GRACE headers give it as ``116769600.0 (2003-09-14 00:00:00.00)``: the first word.
+    """
+    if value is None:
+        return None
+    word = str(value).split()[0] if str(value).split() else ""
+    try:
+        t = float(word)
+    except ValueError:
+        t = float("nan")
+    lo, hi = GPS_TIME_RANGE
+    if not (np.isfinite(t) and lo <= t <= hi):
+        raise FormatError(
+            f"header {key!r} is not a GPS time in seconds: {_short(str(value), 40)}", path, line
+        )
+    return t
+
+
+def _span(first: float | None, last: float | None, path: Path) -> tuple[float, float] | None:
+    """The header's (first, last) observation times, both or None; last before first is wrong."""
+    if first is None or last is None:
+        return None
+    if last < first:
+        raise FormatError(
+            f"header's last observation {last:.9g} s is before its first {first:.9g} s", path
+        )
+    return first, last
 
 
 def load_yaml_header(header: bytes, path: Path) -> dict[str, Any]:
@@ -366,13 +411,27 @@ def _interpret_gracefo(header: bytes, path: Path) -> dict[str, Any]:
             f"YAML header: platform is {_short(platform, 40)}, expected 'GRACE C' or 'GRACE D'",
             path,
         )
+    nsa = hdr.get("non-standard_attributes") or {}
+    if not isinstance(nsa, dict):
+        raise FormatError("YAML header: 'non-standard_attributes' is not a mapping", path)
+    first, last = (
+        _header_time(nsa.get(key), key, path, _yaml_line(header, key))
+        for key in ("start_time_epoch_secs", "stop_time_epoch_secs")
+    )
     return {
         "meta": {"gracefo": hdr},
         "letter": letter,
         "n_header": n_header,
         "binary": False,
         "columns": GRACEFO_COLUMNS,
+        "span": _span(first, last, path),
     }
+
+
+def _yaml_line(header: bytes, key: str) -> int | None:
+    """1-based line of the header where ``key:`` first appears (for messages)."""
+    i = header.find(key.encode() + b":")
+    return None if i < 0 else header.count(b"\n", 0, i) + 1
 
 
 # --------------------------------------------------------------------------- data
@@ -454,6 +513,8 @@ def _locate_bad_line(
                 return FormatError(f"{name}: non-finite value {_short(tok)}", path, lineno)
             if not _NUMBER_RE.fullmatch(tok):
                 return FormatError(f"{name}: not a number: {_short(tok)}", path, lineno)
+            if name != "gps_time" and abs(v) > MAX_ABS_ACCELERATION:
+                return FormatError(implausible_message(name, v, _unit(name)), path, lineno)
     why = f" ({one_line(reason, 120)})" if reason else ""
     return FormatError(f"cannot parse data records{why}", path)
 
@@ -539,7 +600,11 @@ def _parse_ascii(raw: bytes, start: int, first_line: int, path: Path) -> dict[st
             raise _locate_bad_line(raw[start:], first_line, len(names), path)
         k = _LIN_ACCL.get(name)
         arr = arrow_to_numpy(col, None if k is None else acc[:, k])
-        if not np.isfinite(arr).all():
+        if name == "gps_time":
+            ok = np.isfinite(arr).all()  # its range is checked below, with the line
+        else:  # finite and plausible; NaN makes min/max NaN, which fails too
+            ok = arr.min() >= -MAX_ABS_ACCELERATION and arr.max() <= MAX_ABS_ACCELERATION
+        if not ok:
             raise _locate_bad_line(raw[start:], first_line, len(names), path)
         out[name] = arr
     out["acc"] = acc
@@ -576,6 +641,11 @@ def _parse_binary(data: bytes, path: Path) -> dict[str, Any]:
         bad = np.flatnonzero(~np.isfinite(arr))
         if bad.size:
             raise FormatError(f"{name}: non-finite value in binary record {bad[0] + 1}", path)
+        big = implausible(arr)
+        if big.size:
+            i = int(big[0])
+            msg = implausible_message(name, float(arr[i]), _unit(name))
+            raise FormatError(f"record {i + 1}: {msg}", path)
         out[name] = arr
     out["GRACE_id"] = np.char.decode(rec["GRACE_id"], "latin-1")
     out["qualflg"] = rec["qualflg"].astype(np.uint32)
@@ -643,61 +713,71 @@ def _check_ids(
 HEADER_SPAN_TOLERANCE = 3600.0
 
 
-def _header_span(meta: dict[str, Any]) -> tuple[float, float] | None:
-    """(first, last) observation time the header announces [s GPS], or None."""
-    try:
-        if "grace" in meta:
-            hdr = meta["grace"]
-            first, last = (
-                float(str(hdr[f"TIME {k} OBS(SEC PAST EPOCH)"]).split()[0])
-                for k in ("FIRST", "LAST")
-            )
-        else:
-            nsa = meta["gracefo"].get("non-standard_attributes") or {}
-            first = float(nsa["start_time_epoch_secs"])
-            last = float(nsa["stop_time_epoch_secs"])
-    except (KeyError, IndexError, TypeError, ValueError, AttributeError):
-        return None
-    if not (np.isfinite(first) and np.isfinite(last)) or last < first:
-        return None
-    return first, last
-
-
 def _check_header_span(
     time: NDArray[np.float64],
-    meta: dict[str, Any],
+    span: tuple[float, float] | None,
     path: Path,
     line_of: Callable[[int], int] | None,
 ) -> list[str]:
-    """Raise FormatError for a record far outside the header's first/last observation.
+    """Raise FormatError for a record far outside the file's day.
 
     A day file whose header says 2003-09-14 00:00–23:59:59 cannot hold a record of
     2004: such a record is damage (a corrupted time stamp), and fitting through it
-    would put a ~year-long gap into the day.  Tolerance:
-    :data:`HEADER_SPAN_TOLERANCE`.  Headers without the times are not checked; a
-    header whose span covers no record at all is itself wrong: a warning (returned).
+    would put a ~year-long gap into the day.  The day is the header's first/last
+    observation (``span``); a header without them is checked against the day its
+    L1B file name gives (``ACC1B_2003-09-14_A_02.asc``), and only if neither is
+    known are the records not checked (a warning says so).  Tolerance:
+    :data:`HEADER_SPAN_TOLERANCE`.  A header whose span covers no record at all is
+    itself wrong: a warning (returned).
     """
-    span = _header_span(meta)
-    if span is None or time.size == 0:
+    if time.size == 0:
         return []
+    what = "the header's first/last observation"
+    if span is None:
+        day = _name_day(path)
+        if day is None:
+            return [
+                "the header gives no first/last observation time and the file name no "
+                "date: record times are not checked against the file's day"
+            ]
+        span, what = day, "the day of the file name"
     lo, hi = span[0] - HEADER_SPAN_TOLERANCE, span[1] + HEADER_SPAN_TOLERANCE
     if time.min() >= lo and time.max() <= hi:
         return []
     outside = (time < lo) | (time > hi)
-    if outside.all():  # the header, not a record, is off: nothing to single out
+    if outside.all():  # the header (or name), not a record, is off: nothing to single out
         return [
-            f"the header's first/last observation {span[0]:.9g} ... {span[1]:.9g} s does not "
+            f"{what} {span[0]:.9g} ... {span[1]:.9g} s does not "
             f"cover any record ({time.min():.9g} ... {time.max():.9g} s)"
         ]
     i = int(np.flatnonzero(outside)[0])
     where = f"record {i + 1}: " if line_of is None else ""
     raise FormatError(
-        f"{where}gps_time {time[i]:.9g} s ({gps_to_date(float(time[i]))}) is outside the "
-        f"header's first/last observation {span[0]:.9g} ... {span[1]:.9g} s "
+        f"{where}gps_time {time[i]:.9g} s ({gps_to_date(float(time[i]))}) is outside "
+        f"{what} {span[0]:.9g} ... {span[1]:.9g} s "
         f"(by more than {HEADER_SPAN_TOLERANCE:g} s)",
         path,
         None if line_of is None else line_of(i),
     )
+
+
+_NAME_DATE = re.compile(r"[A-Z]{3}1[AB]_(\d{4}-\d{2}-\d{2})_[A-Z]_\d+")
+
+
+def _name_day(path: Path) -> tuple[float, float] | None:
+    """(first, last) second of the GPS day an L1B file name gives, or None."""
+    import datetime as dt
+
+    m = _NAME_DATE.search(path.name)
+    if m is None:
+        return None
+    try:
+        day = dt.date.fromisoformat(m.group(1))
+    except ValueError:
+        return None
+    # GPS seconds since 2000-01-01 12:00:00 of that day's 00:00:00 (GPS time scale)
+    t0 = (day - dt.date(2000, 1, 1)).days * 86400.0 - 43200.0
+    return t0, t0 + 86399.0
 
 
 # --------------------------------------------------------------------------- read
@@ -759,7 +839,7 @@ def read_grace_acc1b(path: str | Path, *, invalid_bits: int = DEFAULT_INVALID_BI
     )
     warn, letter = _check_ids(cols["GRACE_id"], info["letter"], path, cols["line_of"])
     time = cols["gps_time"]
-    warn += _check_header_span(time, info["meta"], path, cols["line_of"])
+    warn += _check_header_span(time, info.get("span"), path, cols["line_of"])
     acc = cols["acc"]
     arrays = {"acc": acc, "quality": cols["qualflg"], **{c: cols[c] for c in AUX_COLUMNS}}
     t = tidy(time, arrays)

@@ -29,6 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from accal.errors import FormatError
+from accal.io._common import implausible, implausible_message
 from accal.io.tables import (
     STREAM_ROWS,
     TableStream,
@@ -219,6 +220,12 @@ class RawlogStream:
                     )
                 )
             acc += [cols["m_y"], cols["m_z"]]
+            acc_names = (["m_x"] if "x" in self.axes else []) + ["m_y", "m_z"]
+            for name, a in zip(acc_names, acc, strict=True):
+                big = implausible(a)
+                if big.size:
+                    i = int(big[0])
+                    raise self._row_error(implausible_message(name, float(a[i])), row0 + i)
             if aux_names is None:  # decided on the first chunk (CSV types are fixed there)
                 aux_names, skipped = [], []
                 for name in self.names:

@@ -41,6 +41,8 @@ from accal.io._common import (
     check_binary,
     check_gps_time,
     csv_read_options,
+    implausible,
+    implausible_message,
     one_line,
     peek,
     read_bytes,
@@ -332,6 +334,26 @@ def _csv_error(exc: BaseException, body: bytes, header_line: int) -> tuple[str, 
     return msg, None
 
 
+def last_line_complete(body: bytes, header: bytes | None = None) -> bool:
+    """Whether the last line of a CSV ``body`` (no final newline) has every field.
+
+    A file cut inside its last line leaves fewer fields than the header line
+    (``header``, default the first line of ``body``); a line with all of them is
+    read (editors and some tools omit the final newline).  A cut inside the last
+    field itself cannot be told from a complete value.
+    """
+    import csv
+
+    first = body.split(b"\n", 1)[0] if header is None else header
+    last = body[body.rfind(b"\n") + 1 :]
+    try:
+        n_header = len(next(csv.reader([first.decode("utf-8").rstrip("\r\n")])))
+        row = next(csv.reader([last.decode("utf-8").rstrip("\r")]), [])
+    except (UnicodeDecodeError, csv.Error, StopIteration):
+        return False
+    return len(row) == n_header and row[-1].strip() != ""
+
+
 def read_csv_table(raw: bytes, path: Path) -> tuple[Any, dict, dict, int]:
     """Parse a whole CSV table (comment header, then a header line and rows).
 
@@ -374,11 +396,13 @@ def read_csv_table(raw: bytes, path: Path) -> tuple[Any, dict, dict, int]:
     if body.count(b"\n") <= 1 and not body.rstrip(b"\r\n").count(b"\n"):
         raise FormatError("header but no data rows", path, n_comment + 2)
     if not body.endswith(b"\n"):
-        raise FormatError(
-            "truncated last line (no newline at end of file)",
-            path,
-            n_comment + body.count(b"\n") + 1,
-        )
+        if not last_line_complete(body):
+            raise FormatError(
+                "truncated last line (no newline at end of file)",
+                path,
+                n_comment + body.count(b"\n") + 1,
+            )
+        body += b"\n"
     try:
         table = pacsv.read_csv(
             pa.py_buffer(body),
@@ -851,6 +875,11 @@ def read_table_series(path: str | Path, *, columns: dict[str, str] | None = None
     acc = np.column_stack(
         [numeric_column(table.column(c), c, path, line_of, locate=True) for c in acc_cols]
     ).astype(np.float64)
+    for j, c in enumerate(acc_cols):  # missing values are gaps; absurd ones are damage
+        big = implausible(acc[:, j])
+        if big.size:
+            i = int(big[0])
+            raise _row_error(implausible_message(c, float(acc[i, j])), path, i, line_of)
 
     warn: list[str] = []
     n = table.num_rows
@@ -1246,11 +1275,13 @@ class TableStream:
                 if not lines:
                     break
                 if not lines[-1].endswith(b"\n"):
-                    raise FormatError(
-                        "truncated last line (no newline at end of file)",
-                        self.path,
-                        line + len(lines) - 1,
-                    )
+                    if not last_line_complete(lines[-1], header):
+                        raise FormatError(
+                            "truncated last line (no newline at end of file)",
+                            self.path,
+                            line + len(lines) - 1,
+                        )
+                    lines[-1] += b"\n"
                 body = b"".join(lines)
                 check_binary(body, self.path, line)
                 try:
