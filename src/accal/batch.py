@@ -810,12 +810,16 @@ def _worker_init() -> None:
     writing is left as a temporary, which the next run removes.
     """
     import multiprocessing as mp
+    import signal
     import threading
 
     import pyarrow as pa
 
     from accal._runtime import tune_allocator
 
+    # the batch process turns SIGTERM into an interrupt (accal.__main__); a worker
+    # keeps the default, so the pool's terminate() ends it at once
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
     tune_allocator()
     pa.set_cpu_count(1)
     pa.set_io_thread_count(1)
