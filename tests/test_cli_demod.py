@@ -423,6 +423,33 @@ def test_cumulative_periods_table(tmp_path):
     assert not list(out.glob(".*.tmp"))  # no temporary files left
 
 
+def test_one_run_per_call_keeps_every_summary(tmp_path):
+    """QA: one run per call into the same --out (a cron job) overwrote summary.json, so
+    the first run's summary was gone while its rows stayed in the periods table.  A run
+    alone into a directory with another run's summary is named after its stem."""
+    r1, r2 = tmp_path / "r1.parquet", tmp_path / "r2.parquet"
+    write_table(small_run(), r1)
+    write_table(small_run(m_y=lambda d: d["m_y"] + 1e-9), r2)
+    out = tmp_path / "out"
+    args = ("--tau", 60, "--mask", 20, "--out", out, "-q")
+
+    def summaries() -> dict[str, str]:
+        return {
+            p.name: json.loads(p.read_text())["source"].rsplit("/", 1)[-1]
+            for p in sorted(out.glob("*summary.json"))
+        }
+
+    assert invoke("demod", r1, *args)[0] == 0
+    assert summaries() == {"summary.json": "r1.parquet"}  # alone in its directory
+    assert invoke("demod", r2, *args)[0] == 0
+    assert summaries() == {"summary.json": "r1.parquet", "r2.summary.json": "r2.parquet"}
+    assert invoke("demod", r1, *args)[0] == 0  # r1 again: one summary each, none stale
+    assert summaries() == {"r1.summary.json": "r1.parquet", "r2.summary.json": "r2.parquet"}
+    assert sorted(p.name for p in out.glob("*summary.md")) == ["r1.summary.md", "r2.summary.md"]
+    df = pd.read_parquet(out / "periods.parquet")
+    assert df.groupby("source").size().to_dict() == {"r1.parquet": 20, "r2.parquet": 20}
+
+
 def test_sinusoid_constant_term(day, tmp_path):
     """Eq. 24 without a constant: the 4.6e-7 m/s² mean leaks into α, β over a day that is
     not a whole number of sinusoid periods; --sinusoid-constant absorbs it (as c)."""

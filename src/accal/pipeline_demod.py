@@ -23,7 +23,9 @@ options, solver and Rd of every source are in the table metadata
 Summaries: with one input ``DIR/summary.json`` and ``DIR/summary.md``; with
 several ``DIR/<stem>.summary.json`` and ``DIR/<stem>.summary.md`` where ``<stem>``
 is the input name without its suffixes (``run1.csv.gz`` → ``run1``); inputs whose
-stems collide are refused before anything runs.  An input's summaries and its
+stems collide are refused before anything runs.  One input into a directory that
+already holds the summary of another run (one run per call, from cron) is named
+after its stem too, so the earlier run's summary stays beside its rows.  An input's summaries and its
 rows in the table are written together (temporary files renamed at the end):
 either all of them appear or none (a failed input leaves the directory as it was).
 """
@@ -849,7 +851,7 @@ def output_paths(paths: Sequence[Path], out_dir: Path, fmt: str) -> list[tuple[P
 
     check_distinct_runs(paths)
     table = out_dir / f"periods.{fmt}"
-    if len(paths) == 1:
+    if len(paths) == 1 and not _summaries_of_other_runs(out_dir, Path(paths[0]).name):
         return [(table, out_dir / "summary.json", out_dir / "summary.md")]
     seen: dict[str, Path] = {}
     out = []
@@ -863,6 +865,19 @@ def output_paths(paths: Sequence[Path], out_dir: Path, fmt: str) -> list[tuple[P
         seen[stem] = Path(p)
         out.append((table, out_dir / f"{stem}.summary.json", out_dir / f"{stem}.summary.md"))
     return out
+
+
+def _summaries_of_other_runs(out_dir: Path, name: str) -> bool:
+    """Whether ``out_dir`` holds the summary of a run other than ``name``.
+
+    One run per call into the same directory (a cron job) must not overwrite the
+    ``summary.json`` of the run before it, whose rows stay in the periods table:
+    the new run's summaries are then named after it, as with several inputs.
+    """
+    return any(
+        (src := summary_source(sp)) is not None and src != name
+        for sp in Path(out_dir).glob("*summary.json")
+    )
 
 
 def check_output_format(out_dir: Path, fmt: str) -> None:
