@@ -677,6 +677,34 @@ def test_absurd_values_are_damage_in_every_acceleration_column(samples, tmp_path
         read_grace_acc1b(_write(tmp_path, bytes(raw), "bad.dat"))
 
 
+def test_header_and_byte_order_mistakes_are_named(samples, tmp_path):
+    """QA: a negative record count was a warning; a binary file whose header says ASCII
+    was a 'truncated last line'; little-endian records a 'non-finite acl_x_res in
+    record 18'.  Each says what is wrong."""
+    import struct
+
+    text = samples["grace_a"].read_text()
+    neg = re.sub(r"NUMBER OF DATA RECORDS(\s*): \d+", r"NUMBER OF DATA RECORDS\1: -5", text)
+    with pytest.raises(FormatError, match="'NUMBER OF DATA RECORDS' is negative: -5"):
+        read_grace_acc1b(_write(tmp_path, neg.encode()))
+    b = samples["grace_a_bin"].read_bytes()
+    as_ascii = b.replace(b"FILE FORMAT 0=BINARY 1=ASCII  : 0", b"FILE FORMAT 0=BINARY 1=ASCII  : 1")
+    assert as_ascii != b
+    with pytest.raises(FormatError, match=r"header says ASCII records .* but the data are binary"):
+        read_grace_acc1b(_write(tmp_path, as_ascii, "a.dat"))
+    i = b.index(b"\n", b.index(b"END OF HEADER")) + 1
+    head, data = b[:i], b[i:]
+    le = b"".join(
+        struct.pack("<I", struct.unpack(">I", data[k : k + 4])[0])
+        + data[k + 4 : k + 5]
+        + struct.pack("<9d", *struct.unpack(">9d", data[k + 5 : k + 77]))
+        + data[k + 77 : k + 78]
+        for k in range(0, len(data), 78)
+    )
+    with pytest.raises(FormatError, match="records are little-endian .* 116769600 s"):
+        read_grace_acc1b(_write(tmp_path, head + le, "le.dat"))
+
+
 def test_undecodable_satellite_id_or_flag_is_a_clean_error(samples, tmp_path):
     """Found by the deep fuzz run: bytes that are not UTF-8 in the id (or flag) field."""
     raw = samples["grace_a"].read_bytes()

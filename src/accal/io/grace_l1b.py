@@ -290,6 +290,15 @@ def _grace_int(meta: dict, lines: dict, key: str, path: Path) -> int | None:
         ) from None
 
 
+def _record_count(meta: dict, lines: dict, path: Path) -> int | None:
+    """The header's NUMBER OF DATA RECORDS (None if absent); negative is an error."""
+    key = "NUMBER OF DATA RECORDS"
+    n = _grace_int(meta, lines, key, path)
+    if n is not None and n < 0:
+        raise FormatError(f"header {key!r} is negative: {n}", path, lines.get(key))
+    return n
+
+
 def _interpret_grace(header: bytes, path: Path) -> dict[str, Any]:
     meta, lines = _parse_grace_header(header, path)
     file_type = next((k for k in meta if k.startswith("FILE TYPE")), None)
@@ -320,7 +329,7 @@ def _interpret_grace(header: bytes, path: Path) -> dict[str, Any]:
     return {
         "meta": {"grace": meta},
         "letter": letter,
-        "n_header": _grace_int(meta, lines, "NUMBER OF DATA RECORDS", path),
+        "n_header": _record_count(meta, lines, path),
         "binary": fmt == 0,
         "columns": COLUMNS,
         "span": _span(first, last, path),
@@ -558,6 +567,13 @@ def _parse_ascii(raw: bytes, start: int, first_line: int, path: Path) -> dict[st
 
     if _NON_SPACE.search(raw, start) is None:
         raise FormatError("header but no data records", path, first_line)
+    if _binary_records(raw[start:]):
+        raise FormatError(
+            "the header says ASCII records (FILE FORMAT 1) but the data are binary; "
+            "fix the header's FILE FORMAT line (0 = binary)",
+            path,
+            first_line,
+        )
     if not raw.endswith(b"\n"):
         _check_last_line(raw, start, first_line, path)
     nl = raw.find(b"\n", start)
@@ -634,6 +650,13 @@ def _parse_binary(data: bytes, path: Path) -> dict[str, Any]:
             path,
         )
     rec = np.frombuffer(data, dtype=BINARY_DTYPE)
+    if _little_endian(rec["gps_time"][:10]):
+        raise FormatError(
+            "the binary records are little-endian (their gps_time reads "
+            f"{float(rec['gps_time'][:1].byteswap()[0]):.0f} s, ... only byte-swapped); "
+            "GRACE binary L1B is big-endian",
+            path,
+        )
     out: dict[str, Any] = {"gps_time": rec["gps_time"].astype(np.float64)}
     check_gps_time(out["gps_time"], path)
     for name in COLUMNS[2:11]:
@@ -652,6 +675,34 @@ def _parse_binary(data: bytes, path: Path) -> dict[str, Any]:
     out["line_of"] = None
     out["acc"] = np.column_stack([out["lin_accl_x"], out["lin_accl_y"], out["lin_accl_z"]])
     return out
+
+
+def _binary_records(data: bytes) -> bool:
+    """Whether ``data`` look like binary L1B records (whole 78-byte records, the first
+    with a GPS time and a satellite letter where binary records have them)."""
+    size = BINARY_DTYPE.itemsize
+    if len(data) < size or len(data) % size or data[:size].isascii():
+        return False
+    t = int.from_bytes(data[:4], "big")
+    lo, hi = GPS_TIME_RANGE
+    return lo <= t <= hi and data[4:5] in (b"A", b"B", b"C", b"D")
+
+
+def _little_endian(t: NDArray) -> bool:
+    """Whether the first record times ``t`` (read big-endian) were written little-endian.
+
+    Byte-swapped they are GPS times, and either read as given they are not, or
+    they step by far more than swapped (a 1 s step read the wrong way is 2²⁴ s).
+    """
+    if t.size == 0:
+        return False
+    lo, hi = GPS_TIME_RANGE
+    orig, swapped = t.astype(np.float64), t.byteswap().astype(np.float64)
+    if not np.all((swapped >= lo) & (swapped <= hi)):
+        return False
+    if not np.all((orig >= lo) & (orig <= hi)):
+        return True
+    return t.size > 1 and np.median(np.abs(np.diff(swapped))) < np.median(np.abs(np.diff(orig)))
 
 
 _ID_LOOKUP = np.zeros(256, dtype=bool)
