@@ -190,7 +190,7 @@ def test_bad_option_is_a_usage_error(run_csv, tmp_path, options, message):
     out = tmp_path / "out"
     code, _, err = invoke("demod", run_csv, "--tau", TAU, "--mask", MASK, *options, "--out", out)
     assert code == 2, err
-    assert [x for x in err.splitlines() if x.startswith("Error:")] == [f"Error: {message}"]
+    assert err.splitlines() == [f"accal: {message} (see 'accal demod --help')"]
     assert not out.exists()
 
 
@@ -206,7 +206,7 @@ def test_same_run_twice_is_a_usage_error(run_csv, tmp_path, monkeypatch):
     ):
         code, _, err = invoke("demod", *runs, "--tau", TAU, "--mask", MASK, "--out", out)
         assert code == 2, err
-        assert [x for x in err.splitlines() if x.startswith("Error:")] == [f"Error: {message}"]
+        assert err.splitlines() == [f"accal: {message} (see 'accal demod --help')"]
         assert not out.exists()
 
 
@@ -417,9 +417,7 @@ def test_diagnose_on_a_directory_with_nothing_usable_names_both_kinds(run_csv, t
 def test_simulate_gap_bad_mask_names_the_option(tmp_path, options, message):
     code, _, err = invoke("simulate", "gap", *options, "--out", tmp_path / "r.parquet")
     assert code == 2, err
-    assert [x for x in err.splitlines() if x.startswith("Error:")][0].startswith(
-        f"Error: {message}"
-    )
+    assert len(err.splitlines()) == 1 and err.startswith(f"accal: {message}")
     assert not list(tmp_path.iterdir())
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import sys
 from pathlib import Path
 from typing import Any
@@ -107,10 +108,14 @@ def err(msg: str) -> None:
 class Group(click.Group):
     """The ``accal`` command group: a file-system error no command handled is one line.
 
-    An :class:`OSError` that escapes a command (an output path under a file, a
+    A usage error of a command (a bad option value, a missing argument) is one
+    line, ``accal: what is wrong (see 'accal CMD --help')``, exit status 2, instead
+    of Click's four-line block.  An :class:`OSError` that escapes a command (an output path under a file, a
     read-only or full disk, ...) is reported as ``accal: PATH: what the system
     said`` with exit status 2 instead of a traceback (``accal --debug`` keeps the
-    traceback).
+    traceback).  A :class:`MemoryError` (a problem size the option checks let
+    through but the machine cannot hold) is ``accal: out of memory (...)``, exit
+    status 1.
     """
 
     def invoke(self, ctx: click.Context) -> Any:
@@ -118,12 +123,42 @@ class Group(click.Group):
 
         try:
             return super().invoke(ctx)
+        except click.UsageError as exc:  # an option value, a missing argument: one line
+            if os.environ.get("ACCAL_DEBUG"):
+                raise
+            err(f"{_usage_message(exc)} (see '{_command_path(exc, ctx)} --help')")
+            sys.exit(exc.exit_code)
         except OSError as exc:
             if os.environ.get("ACCAL_DEBUG"):
                 raise
             where = exc.filename or "accal"
             err(f"{where}: {exc.strerror or exc}")
             sys.exit(2)
+        except MemoryError as exc:  # a size the option checks let through, on a small machine
+            if os.environ.get("ACCAL_DEBUG"):
+                raise
+            err(f"out of memory ({exc or 'MemoryError'}); use smaller option values")
+            sys.exit(1)
+
+
+def _usage_message(exc: click.UsageError) -> str:
+    """The message of a usage error; Click's "Invalid value for '--x': " prefix is
+    dropped when the message already names the option."""
+    if isinstance(exc, click.BadParameter) and exc.param is not None:
+        names = [*getattr(exc.param, "opts", []), *getattr(exc.param, "secondary_opts", [])]
+        if any(n in exc.message for n in names):
+            return exc.message
+    return exc.format_message()
+
+
+def _command_path(exc: click.UsageError, ctx: click.Context) -> str:
+    """``accal SUBCOMMAND`` of the failed command, whatever the program was called."""
+    c: click.Context | None = exc.ctx or ctx
+    parts: list[str] = []
+    while c is not None and c.parent is not None:
+        parts.insert(0, c.info_name or "")
+        c = c.parent
+    return " ".join(["accal", *parts])
 
 
 def progress(quiet: bool, desc: str) -> Any:
@@ -150,14 +185,122 @@ def usage_fail(msg: str) -> None:
     sys.exit(2)
 
 
+def _g(value: float) -> str:
+    """A number as the messages show it (``nan``, ``inf``, ``0.5``, ``1e12``, ``1e-9``)."""
+    return f"{value:g}".replace("e+0", "e").replace("e+", "e").replace("e-0", "e-")
+
+
+def _bounds(
+    low: float | None, high: float | None, low_open: bool, high_open: bool, unit: str
+) -> str:
+    """``> 0 s``, ``>= 0``, ``in (0, 1)``, ``<= 10 Hz`` or ``""`` (no bound)."""
+    if low is not None and high is not None:
+        return (
+            f"in {'(' if low_open else '['}{_g(low)}, {_g(high)}{')' if high_open else ']'}{unit}"
+        )
+    if low is not None:
+        return f"{'>' if low_open else '>='} {_g(low)}{unit}"
+    if high is not None:
+        return f"{'<' if high_open else '<='} {_g(high)}{unit}"
+    return ""
+
+
+def check_number(
+    option: str,
+    value: float | None,
+    *,
+    low: float | None = None,
+    high: float | None = None,
+    low_open: bool = False,
+    high_open: bool = False,
+    unit: str = "",
+    what: str = "",
+    why: str = "",
+) -> None:
+    """Usage error (one line, exit status 2) unless ``value`` is finite and within bounds.
+
+    Parameters
+    ----------
+    option : str
+        The option as the user typed it (``"--fs"``).
+    value : float or None
+        Its value; None (option not given) passes.
+    low, high : float, optional
+        Bounds.
+    low_open, high_open : bool
+        Exclude the bound itself.
+    unit : str
+        Unit shown after the numbers (``" s"``, ``" Hz"``).
+    what : str
+        What the option is, shown after its name (``"masking time TM"``).
+    why : str
+        Reason for a bound, shown after it (``"at most 1e6 samples of 1 s"``).
+
+    Examples
+    --------
+    ``check_number("--fs", nan, low=0, low_open=True, unit=" Hz")`` exits with
+    ``accal: --fs must be a finite number > 0 Hz, got nan``; NaN and inf never pass.
+    """
+    if value is None:
+        return
+    ok = math.isfinite(value)
+    if ok and low is not None:
+        ok = value > low if low_open else value >= low
+    if ok and high is not None:
+        ok = value < high if high_open else value <= high
+    if not ok:
+        name = f"{option} ({what})" if what else option
+        rng = _bounds(low, high, low_open, high_open, unit)
+        shown = str(value) if isinstance(value, int) else _g(value)
+        shown += unit if math.isfinite(value) else ""
+        kind = "a number" if low is not None and high is not None else "a finite number"
+        rng = f" {rng}" if rng else ""
+        rng += f" ({why})" if why else ""
+        usage_fail(f"{name} must be {kind}{rng}, got {shown}")
+
+
+def check_seed(option: str, seed: int | None) -> None:
+    """Usage error (one line, exit status 2) unless ``seed`` is None or an integer >= 0.
+
+    NumPy's generators take any non-negative integer (arbitrarily large) as a seed.
+    """
+    if seed is not None and seed < 0:
+        usage_fail(f"{option} must be a whole number >= 0, got {seed}")
+
+
+def check_size(option: str, n: float, cap: float, what: str) -> None:
+    """Usage error (one line, exit status 2) when a problem size ``n`` exceeds ``cap``.
+
+    Parameters
+    ----------
+    option : str
+        The option(s) that set the size, as typed (``"--days/--fs"``).
+    n : float
+        The size the options ask for (``what`` counts it).
+    cap : float
+        The largest size allowed.
+    what : str
+        What ``n`` counts, plural (``"samples"``, ``"tau values"``).
+    """
+    if not n <= cap:
+        usage_fail(f"{option}: {_g(float(n))} {what} asked for; at most {_g(float(cap))} allowed")
+
+
+def _check_alpha(ctx: click.Context, param: click.Parameter, value: float | None) -> Any:
+    """``--alpha`` callback: a probability in (0, 1); NaN and inf are refused too."""
+    check_number("--alpha", value, low=0, high=1, low_open=True, high_open=True)
+    return value
+
+
 def alpha_option(f: Any) -> Any:
     """``--alpha``: false-detection probability per closure selection step (shared)."""
     return click.option(
         "--alpha",
-        type=click.FloatRange(min=0, max=1, min_open=True, max_open=True),
+        type=float,
         default=0.01,
         show_default=True,
-        help="False-detection probability per --close-loop selection step.",
+        callback=_check_alpha,
+        help="False-detection probability per --close-loop selection step, in (0, 1).",
     )(f)
 
 

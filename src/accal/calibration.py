@@ -17,6 +17,8 @@ References
 
 from __future__ import annotations
 
+import math
+
 from accal.errors import ValidationError
 
 #: TN-02 v2 coefficients: (T0 [MJD], C0 [µm/s²], C1 [µm/s²/day], C2 [µm/s²/day²], scale)
@@ -83,7 +85,27 @@ def tn02_bias(satellite: str, mjd: float) -> tuple[float, float, float]:
 
 
 def parse_scale(value: str | None, satellite: str) -> tuple[float, float, float] | None:
-    """Interpret a ``--scale`` value: ``None``, ``"tn02"`` or ``"sx,sy,sz"``."""
+    """Interpret a ``--scale`` value: ``None``, ``"tn02"`` or ``"sx,sy,sz"``.
+
+    Parameters
+    ----------
+    value : str or None
+        ``None``, ``""`` or ``"none"`` (no scale), ``"tn02"`` (the TN-02 preset of
+        ``satellite``), one number (all three axes) or three ``"sx,sy,sz"``
+        [dimensionless]; each must be positive and finite (``inf``, ``nan`` and
+        values that overflow a float, such as ``1e400``, are refused).
+    satellite : str
+        Satellite of the data (for ``"tn02"``).
+
+    Returns
+    -------
+    tuple of 3 float or None
+
+    Raises
+    ------
+    ValidationError
+        For any other value.
+    """
     if value is None or value == "" or value == "none":
         return None
     if value.lower() == "tn02":
@@ -95,8 +117,8 @@ def parse_scale(value: str | None, satellite: str) -> tuple[float, float, float]
         vals = ()
     if len(vals) == 1:
         vals = vals * 3
-    if len(vals) != 3 or not all(v > 0 for v in vals):
+    if len(vals) != 3 or not all(v > 0 and math.isfinite(v) for v in vals):
         raise ValidationError(
-            f"--scale expects 'tn02', one positive number or three 'sx,sy,sz', got {value!r}"
+            f"--scale expects 'tn02', one positive finite number or three 'sx,sy,sz', got {value!r}"
         )
     return vals  # type: ignore[return-value]

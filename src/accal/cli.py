@@ -14,7 +14,15 @@ import click
 import numpy as np
 
 from accal import __version__
-from accal._cliutil import Group, alpha_option, aux_option, config_option, usage_fail
+from accal._cliutil import (
+    Group,
+    alpha_option,
+    aux_option,
+    check_number,
+    check_seed,
+    config_option,
+    usage_fail,
+)
 from accal._cliutil import err as _err
 from accal._cliutil import progress as _progress
 
@@ -340,8 +348,16 @@ def table_cmd(
             raise click.BadParameter(f"--start {start} is after --end {end}")
         keep = np.ones(len(df), dtype=bool)
         if satellites:
-            want = {s.upper().removeprefix("GRACE-FO-").removeprefix("GRACE-") for s in satellites}
+            want = {_short_satellite(s) for s in satellites}
             short = df["satellite"].astype(str).str.upper().str.split("-").str[-1]
+            held = sorted(set(df["satellite"].astype(str)))
+            known = set(short) | set(held)
+            unknown = [s for s in satellites if _short_satellite(s) not in known and s not in known]
+            if unknown:  # a typo would otherwise match nothing, silently
+                usage_fail(
+                    f"--satellite {unknown[0]!r} is not in {path} (it holds "
+                    f"{', '.join(held) or 'no rows'})"
+                )
             keep &= short.isin(want).to_numpy() | df["satellite"].isin(satellites).to_numpy()
         if start:
             keep &= (df["date"] >= start).to_numpy()
@@ -356,6 +372,11 @@ def table_cmd(
         df = df[keep]
         if columns:
             cols = [c.strip() for c in columns.split(",") if c.strip()]
+            if not cols:
+                usage_fail(
+                    f"--columns names no column, got {columns!r}; give a comma-separated "
+                    f"list of {', '.join(map(str, df.columns))}"
+                )
             unknown = [c for c in cols if c not in df.columns]
             if unknown:
                 raise click.BadParameter(f"unknown columns {unknown}; known: {list(df.columns)}")
@@ -388,6 +409,11 @@ def table_cmd(
     except AccalError as exc:
         _err(str(exc))
         sys.exit(1)
+
+
+def _short_satellite(name: str) -> str:
+    """``GRACE-A``, ``grace-a``, ``a`` → ``A``; ``GRACE-FO-C`` → ``C`` (others: upper case)."""
+    return name.upper().removeprefix("GRACE-FO-").removeprefix("GRACE-")
 
 
 def _is_date(s: str) -> bool:
@@ -551,14 +577,21 @@ def simulate_grace(
             f"expected a day YYYY-MM-DD in 1980-01-06 ... 2099-12-31, got {date!r}",
             param_hint="--date",
         )
-    for name, value, ok in (
-        ("--duration", duration, duration > 0),
-        ("--gaps", gaps, gaps >= 0),
-        ("--flagged", flagged, 0 <= flagged < 1),
-        ("--noise", noise, noise >= 0),
-    ):
-        if not (ok and np.isfinite(value)):
-            raise click.BadParameter(f"out of range: {value!r}", param_hint=name)
+    from accal.simulate.grace import MAX_SAMPLES
+
+    check_seed("--seed", seed)
+    check_number(
+        "--duration",
+        duration,
+        low=0,
+        high=MAX_SAMPLES,  # 1 s sampling
+        low_open=True,
+        unit=" s",
+        why=f"at most {MAX_SAMPLES:.0e} samples of 1 s".replace("+0", ""),
+    )
+    check_number("--gaps", gaps, low=0, high=MAX_SAMPLES)
+    check_number("--flagged", flagged, low=0, high=1, high_open=True, what="fraction")
+    check_number("--noise", noise, low=0, unit=" m/s^2/sqrt(Hz)")
 
     try:
         truth_path = write_simulated_grace(

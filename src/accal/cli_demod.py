@@ -15,13 +15,45 @@ from pathlib import Path
 
 import click
 
-from accal._cliutil import alpha_option, config_option
+from accal._cliutil import alpha_option, check_number, check_seed, config_option
 from accal._cliutil import err as _err
 from accal._cliutil import fail as _fail
 from accal._cliutil import progress as _progress
 from accal._cliutil import usage_fail as _usage_fail
 
 CONTEXT_SETTINGS = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
+
+# Size caps of the commands that build arrays from option values alone (a bad value
+# is a usage error saying the cap, not a MemoryError or a run that never ends).
+#: Samples per modulation period (τ·fs) for design, budget and simulate gap:
+#: designing a pattern costs ~(τ·fs)² (24,000 samples: ~10 s; 60,000: ~25 s).
+MAX_PERIOD_SAMPLES = 50_000
+#: Rows of a ``design`` table (periods·τ·fs): 1e7 rows take ~2 s and ~0.5 GB.
+MAX_DESIGN_SAMPLES = 10_000_000
+#: τ values of a ``budget --taus`` scan (each designs a pattern: ~5 ms at 1 Hz).
+MAX_SCAN_TAUS = 10_000
+#: LS budget: noise samples of the lag structure function, ~(T + τ)·fs
+#: (1e6: ~1.5 min, ~1 GB).
+MAX_BUDGET_SAMPLES = 1_000_000
+#: GLS budget: entries of the (P·τ·fs) x P design matrix, P = 2·T/τ + 4 periods
+#: (~32 bytes of memory each: 5e7 is ~1.6 GB).
+MAX_GLS_ENTRIES = 50_000_000
+#: Samples of a ``simulate gap`` run (1e8: about 3 years at 1 Hz, a few GB of file).
+MAX_RUN_SAMPLES = 100_000_000
+
+
+def _g(x: float) -> str:
+    """A number in a message: ``600``, ``0.5``, ``1e9``, ``nan``."""
+    return f"{x:.6g}".replace("e+0", "e").replace("e+", "e").replace("e-0", "e-")
+
+
+def _check_period_samples(tau: float, fs: float, option: str = "--tau") -> None:
+    """Usage error unless ``tau·fs <= MAX_PERIOD_SAMPLES`` (τ [s], fs [Hz] both finite)."""
+    if tau * fs > MAX_PERIOD_SAMPLES:
+        _usage_fail(
+            f"{option} {_g(tau)} s at --fs {_g(fs)} Hz is {_g(tau * fs)} samples per "
+            f"modulation period; at most {MAX_PERIOD_SAMPLES} (tau·fs) are allowed"
+        )
 
 
 PSD_HELP = "Noise PSD: 'microstar' (eq. 1 of Lenoir et al. 2013) or a CSV/Parquet table with columns f [Hz], S [m^2 s^-4 Hz^-1] (two-sided)."
@@ -166,6 +198,7 @@ def demod(
         noise = load_psd(psd)
     except AccalError as exc:
         _usage_fail(str(exc))
+    _check_tau_vs_sampling(runs, opts)
     try:
         summary = run_demod(runs, out, opts, progress=_progress(quiet, "demod"), psd=noise)
     except AccalError as exc:
@@ -206,6 +239,41 @@ def demod(
         sys.exit(1)
 
 
+def _check_tau_vs_sampling(runs: tuple[Path, ...], opts: object) -> None:
+    """Usage error when ``--tau`` is shorter than one sample of a run (τ·fs < 1).
+
+    The sampling step is found as :func:`accal.pipeline_demod.estimate` finds it
+    (first chunk of the run).  A run that cannot be read is left to
+    :func:`accal.pipeline_demod.run_demod`, which reports it as a failed run.
+
+    Parameters
+    ----------
+    runs : tuple of Path
+        The run files.
+    opts : accal.pipeline_demod.DemodOptions
+        The validated options (``tau`` [s], ``chunk_rows``, ``resample``).
+    """
+    import math
+
+    from accal.io.rawlog import open_rawlog
+    from accal.pipeline_demod import sampling_step
+
+    tau = float(opts.tau)  # type: ignore[attr-defined]
+    for path in runs:
+        try:
+            stream = open_rawlog(path, rows=int(opts.chunk_rows))  # type: ignore[attr-defined]
+            step = sampling_step(stream, opts)  # type: ignore[arg-type]
+        except Exception:  # noqa: BLE001 (a bad run fails in run_demod, with its message)
+            continue
+        if not 0 < step < math.inf:
+            continue
+        if tau / step < 1 - 1e-6:  # 0 samples per period; its "nearest" whole tau is 0
+            _usage_fail(
+                f"--tau {_g(tau)} s is shorter than one sample of {path} (fs = {_g(1 / step)} "
+                f"Hz): tau must be a whole number of samples, at least {_g(step)} s"
+            )
+
+
 @click.command("design", context_settings=CONTEXT_SETTINGS)
 @click.option("--tau", type=float, required=True, help="Modulation period τ [s].")
 @click.option("--mask", type=float, required=True, help="Total rotation time per period TM [s].")
@@ -244,10 +312,22 @@ def design(
     from accal.errors import AccalError
     from accal.pipeline_demod import write_design
 
+    check_number("--tau", tau, low=0, low_open=True, unit=" s", what="modulation period")
+    check_number("--fs", fs, low=0, low_open=True, unit=" Hz", what="sampling frequency")
+    check_number(
+        "--mask", mask, low=0, high=tau, low_open=True, high_open=True, unit=" s",
+        what="total rotation time TM", why="shorter than --tau",
+    )  # fmt: skip
+    _check_period_samples(tau, fs)
+    if periods * tau * fs > MAX_DESIGN_SAMPLES:
+        _usage_fail(
+            f"--periods {periods} of --tau {_g(tau)} s at --fs {_g(fs)} Hz is "
+            f"{_g(periods * tau * fs)} samples; at most {MAX_DESIGN_SAMPLES} are written"
+        )
     try:
         path, pat = write_design(out, tau, mask, fs, kind=kind, periods=periods)
     except AccalError as exc:
-        raise click.UsageError(str(exc)) from None
+        _usage_fail(str(exc))
     need = ("sum_c", "sum_ct") + (("sum_ct2",) if signal_model == "affine" else ())
     click.echo(
         f"pattern {pat.kind}: segments [s] "
@@ -300,16 +380,26 @@ def budget(
     from accal.errors import AccalError
     from accal.pipeline_demod import budget_report, load_psd, plot_budget
 
+    check_number("--mask", mask, low=0, low_open=True, unit=" s", what="masking time TM")
+    check_number(
+        "--tau", tau, low=mask, low_open=True, unit=" s", what="modulation period",
+        why="longer than --mask",
+    )  # fmt: skip
+    check_number("--fs", fs, low=0, low_open=True, unit=" Hz", what="sampling frequency")
+    check_number(
+        "--integration", integration, low=0, low_open=True, unit=" s", what="integration time T"
+    )
     try:  # a missing or bad --psd table is a usage error (exit 2), one line naming the file
         load_psd(psd)
     except AccalError as exc:
         _usage_fail(str(exc))
-    try:
+    _check_budget_size(mask, tau, fs, method, integration, taus)
+    try:  # every value is an option's (the --psd table is read): errors are usage errors
         rep = budget_report(
             mask, tau=tau, fs=fs, method=method, integration=integration, psd=psd, taus=taus
         )
     except AccalError as exc:
-        _fail(str(exc))
+        _usage_fail(str(exc))
     if plot is not None:
         plot_budget(rep, plot)
     if as_json:
@@ -332,6 +422,65 @@ def budget(
     )
     if plot is not None:
         click.echo(f"wrote {plot}", err=True)
+
+
+def _check_budget_size(
+    mask: float, tau: float | None, fs: float, method: str, integration: float, taus: str | None
+) -> None:
+    """Usage errors for a ``budget`` too large to compute (see the ``MAX_*`` caps).
+
+    Parameters
+    ----------
+    mask, tau, fs, method, integration, taus
+        The (finite, positive) options of ``budget``: TM [s], τ [s] or None (scan),
+        fs [Hz], ``"ls"``/``"gls"``, T [s] and the ``--taus`` spec.
+    """
+    import numpy as np
+
+    from accal.errors import AccalError
+    from accal.pipeline_demod import parse_taus
+
+    if tau is not None:
+        grid = np.array([tau])
+    else:
+        if taus:
+            try:
+                start, stop, step = (float(x) for x in taus.split(":"))
+            except ValueError:
+                start = stop = step = float("nan")
+            if not all(np.isfinite((start, stop, step))):
+                _usage_fail(f"--taus must be START:STOP:STEP in finite seconds, got {taus!r}")
+            if 0 < start <= stop and step > 0 and (stop - start) / step + 1 > MAX_SCAN_TAUS:
+                _usage_fail(
+                    f"--taus {taus} is {_g(np.floor((stop - start) / step) + 1)} tau values; "
+                    f"at most {MAX_SCAN_TAUS} are scanned (use a larger STEP)"
+                )
+        try:
+            grid = parse_taus(taus, mask, fs)
+        except AccalError as exc:
+            _usage_fail(str(exc))
+        if not grid.size:
+            return  # budget_report says that no tau is left
+    _check_period_samples(float(grid.max()), fs, "--tau" if tau is not None else "--taus up to")
+    # the budget is computed at one tau of the grid (tau_opt when scanning): the largest need
+    n = np.maximum(1, np.round(integration / grid))  # periods in T
+    q = grid * fs
+    if method == "ls":
+        need = float(np.max((n + 1) * q))
+        if need > MAX_BUDGET_SAMPLES:
+            _usage_fail(
+                f"--integration {_g(integration)} s at --fs {_g(fs)} Hz needs {_g(need)} noise "
+                f"samples for --method ls ((T/tau + 1)·tau·fs); at most {MAX_BUDGET_SAMPLES} "
+                "are allowed (use a shorter --integration)"
+            )
+    else:
+        need = float(np.max(np.maximum(16, 2 * n + 4) ** 2 * q))
+        if need > MAX_GLS_ENTRIES:
+            _usage_fail(
+                f"--integration {_g(integration)} s at --fs {_g(fs)} Hz needs a {_g(need)}-entry "
+                "matrix for --method gls ((2·T/tau + 4)²·tau·fs); at most "
+                f"{_g(MAX_GLS_ENTRIES)} are allowed (use a shorter --integration or --method ls)"
+            )
 
 
 @click.command("gap", context_settings=CONTEXT_SETTINGS)
@@ -385,6 +534,24 @@ def simulate_gap(
     from accal.errors import AccalError, ValidationError
     from accal.pipeline_demod import write_simulated_gap
 
+    check_seed("--seed", seed)
+    check_number("--days", days, low=0, low_open=True, unit=" days", what="duration")
+    check_number("--tau", tau, low=0, low_open=True, unit=" s", what="modulation period")
+    check_number("--fs", fs, low=0, low_open=True, unit=" Hz", what="sampling frequency")
+    for name, value in (
+        ("--temperature-coupling", temperature_coupling),
+        ("--quadratic", quadratic),
+        ("--signal-amplitude", signal_amplitude),
+    ):
+        check_number(name, value)
+    check_number("--signal-period", signal_period, low=0, low_open=True, unit=" s")
+    _check_period_samples(tau, fs)
+    if days * 86400.0 * fs > MAX_RUN_SAMPLES:
+        _usage_fail(
+            f"--days {_g(days)} at --fs {_g(fs)} Hz is {_g(days * 86400.0 * fs)} samples; at "
+            f"most {_g(MAX_RUN_SAMPLES)} are simulated (--days up to "
+            f"{_g(MAX_RUN_SAMPLES / (86400.0 * fs))} at this --fs)"
+        )
     try:
         run, truth = write_simulated_gap(
             out,

@@ -36,6 +36,23 @@ __all__ = ["simulate_gap", "simulate_gap_chunks", "coloured_noise"]
 #: Temperature model: kick after each rotation [K] and relaxation time [s].
 TEMPERATURE_KICK, TEMPERATURE_TAU, TEMPERATURE_BASE = 0.05, 300.0, 293.15
 
+#: Most samples in one block of :func:`simulate_gap_chunks` with a finite
+#: ``chunk_days`` (10 days at 10 Hz; ~4 GB of memory while the block is drawn).
+MAX_BLOCK_SAMPLES = 8_640_000
+
+
+def _check_parameters(days: float, seed: int | None, prm: dict[str, Any]) -> None:
+    """ValidationError for a non-finite parameter, a period <= 0 or a negative seed."""
+    if not 0 < days < np.inf:
+        raise ValidationError(f"days must be positive and finite, got {days}")
+    if seed is not None and seed < 0:
+        raise ValidationError(f"seed must be an integer >= 0, got {seed}")
+    for name, value in prm.items():
+        if not np.isfinite(value):
+            raise ValidationError(f"{name} must be finite, got {value}")
+    if not prm["signal_period"] > 0:
+        raise ValidationError(f"signal_period must be positive, got {prm['signal_period']} s")
+
 
 def _block(
     pat: CalibrationPattern,
@@ -123,6 +140,8 @@ def simulate_gap_chunks(
         As :func:`simulate_gap`.
     chunk_days : float
         Length of a block [day], rounded down to whole periods (at least one).
+        When finite, a block also holds at most :data:`MAX_BLOCK_SAMPLES` samples
+        (whole periods, at least one); ``inf``: the whole run in one block.
     bias, bias_drift, a_Y, a_Z, signal_amplitude, signal_period, temperature_coupling, quadratic, psd, noise, with_x, kind
         As :func:`simulate_gap`.
 
@@ -133,6 +152,13 @@ def simulate_gap_chunks(
     truth : dict of str to ndarray
         The columns of its ``truth`` for the block's periods.
 
+    Raises
+    ------
+    ValidationError
+        For ``days`` not positive and finite, a negative ``seed``, a non-finite
+        amplitude, coupling, bias or factor, a ``signal_period`` <= 0, or no
+        calibration pattern for ``tau``, ``mask``, ``fs``.
+
     Notes
     -----
     The noise of each block is drawn independently (one random stream for the
@@ -140,14 +166,7 @@ def simulate_gap_chunks(
     phase run on across blocks.  With one block (``chunk_days >= days``) the
     output equals :func:`simulate_gap`'s.
     """
-    pat = design_pattern(tau, mask, fs, kind=kind)
-    q = pat.q
-    n_total = int(days * 86400.0 * fs) // q
-    if n_total < 1:
-        raise ValidationError(f"days = {days} is shorter than one period of {tau} s")
-    per_block = n_total if chunk_days >= days else max(1, int(chunk_days * 86400.0 * fs) // q)
-    rng = np.random.default_rng(seed)
-    prm = {
+    values = {
         "bias": bias,
         "bias_drift": bias_drift,
         "a_Y": a_Y,
@@ -156,10 +175,18 @@ def simulate_gap_chunks(
         "signal_period": signal_period,
         "temperature_coupling": temperature_coupling,
         "quadratic": quadratic,
-        "psd": as_psd(psd),
-        "noise": noise,
-        "with_x": with_x,
     }
+    _check_parameters(days, seed, values)
+    pat = design_pattern(tau, mask, fs, kind=kind)
+    q = pat.q
+    n_total = int(days * 86400.0 * fs) // q
+    if n_total < 1:
+        raise ValidationError(f"days = {days} is shorter than one period of {tau} s")
+    per_block = n_total if chunk_days >= days else max(1, int(chunk_days * 86400.0 * fs) // q)
+    if np.isfinite(chunk_days):  # bounded memory at any fs (1 Hz: 100 days per block)
+        per_block = min(per_block, max(1, MAX_BLOCK_SAMPLES // q))
+    rng = np.random.default_rng(seed)
+    prm = {**values, "psd": as_psd(psd), "noise": noise, "with_x": with_x}
     zi = np.zeros(1)
     for p0 in range(0, n_total, per_block):
         cols, truth, zi = _block(pat, p0, min(per_block, n_total - p0), rng, zi, prm)
@@ -191,13 +218,13 @@ def simulate_gap(
     Parameters
     ----------
     days : float
-        Duration [day]; truncated to whole periods.
+        Duration [day], positive and finite; truncated to whole periods.
     tau, mask : float
         Modulation period τ and masking time TM [s].
     fs : float
         Sampling frequency [Hz].
     seed : int or None
-        Seed of the noise.
+        Seed of the noise (an integer >= 0).
     bias : float
         Bias at t = 0 on y and z (z gets -0.7 times it) [m s⁻²].
     bias_drift : float
@@ -208,7 +235,7 @@ def simulate_gap(
     signal_amplitude : float
         Amplitude of an added ``sin(2π t/signal_period)`` on a_Y and ``cos`` on a_Z [m s⁻²].
     signal_period : float
-        Its period [s].
+        Its period [s] (positive).
     temperature_coupling : float
         Bias sensitivity to the temperature [m s⁻² K⁻¹]; the temperature rises
         by 0.05 K after every rotation and relaxes with a 300 s time constant.

@@ -36,6 +36,9 @@ from accal.errors import ValidationError
 
 ORBIT_PERIOD = 5600.0  # [s]
 
+#: Most samples of a simulated record (about 1 GB of memory; 11.6 days at 1 s).
+MAX_SAMPLES = 1_000_000
+
 #: Raw-data offsets (m/s², eq. 9 sign) for GRACE-FO C and D, from the measured
 #: 100-s means on 2023-06-01 (shared/data/SOURCES.md).
 GRACEFO_OFFSETS = {"C": (-0.278e-6, -10.651e-6, -0.182e-6), "D": (0.278e-6, 10.650e-6, -0.183e-6)}
@@ -148,14 +151,15 @@ def simulate_grace_day(
     satellite : {"A", "B", "C", "D"}
         GRACE A/B or GRACE-FO C/D.
     seed : int, optional
-        Random seed, used as given.  Default :func:`default_seed` of ``date`` and
-        ``satellite`` (deterministic, different for each day and satellite).
+        Random seed (>= 0), used as given.  Default :func:`default_seed` of ``date``
+        and ``satellite`` (deterministic, different for each day and satellite).
     duration : float
-        Length [s].
+        Length [s]; at most :data:`MAX_SAMPLES` samples of ``dt``.
     dt : float
         Sampling interval [s].
     n_gaps : int
-        Number of gaps (each 60–1800 s) cut out of the record.
+        Number of gaps (each 60–1800 s) cut out of the record (at most
+        :data:`MAX_SAMPLES`).
     flagged_fraction : float
         Fraction of samples flagged invalid (in short bursts).
     noise : float
@@ -164,16 +168,32 @@ def simulate_grace_day(
     Returns
     -------
     SimulatedDay
+
+    Raises
+    ------
+    ValidationError
+        For a bad satellite, a non-positive or non-finite ``duration`` or ``dt``,
+        more than :data:`MAX_SAMPLES` samples or gaps, or a negative ``seed``.
     """
     from accal.calibration import tn02_bias, tn02_scale
     from accal.timescale import gps_day_start
 
     if satellite not in ("A", "B", "C", "D"):
         raise ValidationError(f"satellite must be A, B, C or D, got {satellite!r}")
-    if not duration > 0 or not dt > 0:
-        raise ValidationError("duration and dt must be positive")
+    if not 0 < duration < np.inf or not 0 < dt < np.inf:
+        raise ValidationError(
+            f"duration and dt must be positive and finite, got duration = {duration} s, dt = {dt} s"
+        )
+    if not duration / dt <= MAX_SAMPLES:
+        raise ValidationError(
+            f"duration / dt = {duration / dt:.4g} samples; at most {MAX_SAMPLES} are simulated"
+        )
+    if not 0 <= n_gaps <= MAX_SAMPLES:
+        raise ValidationError(f"n_gaps must be in [0, {MAX_SAMPLES}], got {n_gaps}")
     if seed is None:
         seed = default_seed(date, satellite)
+    elif seed < 0:
+        raise ValidationError(f"seed must be an integer >= 0, got {seed}")
     rng = np.random.default_rng(seed)
     t0 = gps_day_start(date)
     n = int(round(duration / dt))
