@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -82,3 +83,13 @@ def test_atomic_path_without_sync_still_replaces_atomically(tmp_path):
     with writers.atomic_path(target, sync=False) as tmp:
         tmp.write_text("new")
     assert target.read_text() == "new"
+
+
+def test_atomic_path_names_the_target_when_its_directory_refuses_files(tmp_path):
+    """QA: ``accal table DIR --export /proc/x.parquet`` said
+    ``/proc/.x.parquet.3lbbvdcz.tmp: No such file or directory``: the error names the
+    file asked for, not the temporary."""
+    target = Path("/proc/accal-test-x.parquet")
+    with pytest.raises(OSError) as e, writers.atomic_path(target):
+        pass
+    assert e.value.filename == str(target)
