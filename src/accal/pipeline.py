@@ -582,13 +582,21 @@ def _effect_label(e: Any) -> str:
     return e.name
 
 
+#: Longest hole inside an ``--aux`` channel that is bridged linearly [s].  A longer
+#: one stays uncovered: a temperature interpolated over 1000–4000 s (most of an
+#: orbit) had hidden a coupling and put false steps at the hole's edges.
+AUX_MAX_BRIDGE = 600.0
+
+
 def load_aux(path: Path, t: np.ndarray) -> tuple[dict[str, np.ndarray], list[str]]:
     """Housekeeping channels of ``path`` interpolated onto ``t``, and what was left out.
 
-    Holes inside a channel's span are bridged linearly; before its first and after
-    its last value it is NaN (not covered).  Channels covering under 90 % of ``t``,
-    or constant, are left out (named in the returned notes); none covering 90 % is
-    an error.
+    Holes inside a channel's span of up to :data:`AUX_MAX_BRIDGE` are bridged
+    linearly; longer holes, and the time before its first and after its last value,
+    are NaN (not covered: the closure leaves those samples out).  Channels covering
+    under 90 % of ``t``, or constant, are left out (named in the returned notes).
+    A file that covers none of the data (another day's housekeeping) is an error;
+    one that covers part of it but no channel 90 % gives a note and no channel.
     """
     from accal.io.housekeeping import read_housekeeping
 
@@ -599,6 +607,9 @@ def load_aux(path: Path, t: np.ndarray) -> tuple[dict[str, np.ndarray], list[str
     for k, v in hk.on(t).items():
         v = np.asarray(v, dtype=np.float64)
         ok = np.isfinite(v)
+        if ok.any():
+            _bridge_short_holes(t, v, ok)
+            ok = np.isfinite(v)
         coverage = max(coverage, float(ok.mean()))
         # a channel must cover the day and vary to be a candidate regressor
         if ok.mean() < 0.9:
@@ -607,26 +618,36 @@ def load_aux(path: Path, t: np.ndarray) -> tuple[dict[str, np.ndarray], list[str
         if np.ptp(v[ok]) == 0:
             constant.append(k)
             continue
-        inner = ~ok & (t > t[ok][0]) & (t < t[ok][-1])
-        if inner.any():  # holes inside the channel's span: bridged linearly
-            v[inner] = np.interp(t[inner], t[ok], v[ok])
-        # before/after its span the channel stays NaN: the closure leaves those samples
-        # out (no extrapolated temperature to fit a coupling on)
         out[k] = v
-    if coverage < 0.9:
+    if coverage == 0.0:
         from accal.timescale import gps_to_date
 
         raise ValidationError(
-            f"{path}: --aux covers {coverage:.0%} of the data "
+            f"{path}: --aux covers none of the data "
             f"({gps_to_date(float(t[0]))} ... {gps_to_date(float(t[-1]))}, GPS days); "
             "give the housekeeping of the same day(s)"
         )
     notes = []
+    if not out and short:
+        notes.append(
+            f"--aux covers at most {coverage:.0%} of the data (holes over "
+            f"{AUX_MAX_BRIDGE:g} s are not bridged): no coupling is tested"
+        )
+        short = []
     if constant:
         notes.append(f"--aux channel(s) constant over the data, not tested: {', '.join(constant)}")
     if short:
         notes.append(f"--aux channel(s) covering under 90 %, not tested: {', '.join(short)}")
     return out, notes
+
+
+def _bridge_short_holes(t: np.ndarray, v: np.ndarray, ok: np.ndarray) -> None:
+    """Fill, in place, the NaN runs of ``v`` inside its span that last <= AUX_MAX_BRIDGE."""
+    idx = np.flatnonzero(ok)
+    for g in np.flatnonzero(np.diff(idx) > 1):  # holes: not-ok runs between ok samples
+        a, b = idx[g], idx[g + 1]  # the ok samples around the hole
+        if t[b] - t[a] <= AUX_MAX_BRIDGE:
+            v[a + 1 : b] = np.interp(t[a + 1 : b], (t[a], t[b]), (v[a], v[b]))
 
 
 def load_truth(path: Path, series: AccSeries, reference: bool) -> dict[str, dict[str, float]]:
