@@ -424,3 +424,38 @@ def test_aux_holes_bridged_only_when_short_and_partial_cover_is_a_note(tmp_path)
     other_day = write_table({"time": ta + 86400 * 30, "temperature": temp}, tmp_path / "o.parquet")
     with pytest.raises(ValidationError, match="covers none of the data"):
         load_aux(other_day, t)
+
+
+def test_rerun_without_close_loop_drops_the_stale_closure(tmp_path):
+    """QA: re-running a source without --close-loop rewrote its table rows and
+    calibrated file as the plain fit, but closure.json/closure.md (and the plots) kept
+    its old closure ('Refitted estimates (the table's values)' that no longer were)."""
+    from accal.simulate.grace import write_simulated_grace
+
+    a = tmp_path / "in" / "ACC1B_2005-01-01_A_02.asc"
+    b = tmp_path / "in" / "ACC1B_2005-01-01_B_02.asc"
+    write_simulated_grace(
+        a, date="2005-01-01", satellite="A",
+        duration=7200.0, seed=3,
+    )  # fmt: skip
+    write_simulated_grace(
+        b, date="2005-01-01", satellite="B",
+        duration=7200.0, seed=4,
+    )  # fmt: skip
+    out = tmp_path / "out"
+    run = CliRunner().invoke
+    assert (
+        run(main, ["grace-bias", str(a), str(b), "--close-loop", "--out", str(out), "-q"]).exit_code
+        == 0
+    )
+    sources = json.loads((out / "closure.json").read_text())["sources"]
+    assert sorted(sources) == [a.name, b.name]
+    res = run(main, ["grace-bias", str(a), "--out", str(out), "-q"])  # a without closure
+    assert res.exit_code == 0, res.stderr
+    assert list(json.loads((out / "closure.json").read_text())["sources"]) == [b.name]
+    md = (out / "closure.md").read_text()
+    assert b.name in md and a.name not in md
+    assert not list(out.glob("ACC1B_2005-01-01_A_02.closure*.png"))
+    res = run(main, ["grace-bias", str(b), "--out", str(out), "-q"])  # b too: nothing left
+    assert res.exit_code == 0, res.stderr
+    assert not (out / "closure.json").exists() and not (out / "closure.md").exists()

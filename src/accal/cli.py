@@ -274,7 +274,7 @@ def grace_bias(
             _err(o.message)
         elif o.warnings and not quiet:
             _err(f"{o.path}: warning: {'; '.join(o.warnings)}")
-    if opts.close_loop:
+    if opts.close_loop or (out / "closure.json").exists():  # also drops stale entries
         write_closure_reports(out, summary.outcomes)
     if not quiet:
         click.echo(summary.line(), err=True)

@@ -735,8 +735,9 @@ def close_the_loop(
     declared ``poly<order>`` trend, adds the significant effects and reports
     unexplained structure.  The instrument effects (:data:`INSTRUMENT_EFFECTS`)
     are subtracted from the fitted series, so the estimators then fit bias and
-    drift with the extended model.  Writes ``<prefix>.closure.<axis>.png`` and
-    ``<prefix>.closure-psd.<axis>.png`` when matplotlib is installed.
+    drift with the extended model.  Writes ``<prefix>.closure.<axis>.png``,
+    ``<prefix>.closure-psd.<axis>.png`` and ``<prefix>.closure-effects.<axis>.png``
+    when matplotlib is installed.
 
     Returns
     -------
@@ -1462,7 +1463,8 @@ def write_closure_reports(
     ``model`` (the fitted model, e.g. ``poly1+bias_step@2005-01-01T10:00:00GPS``, GPS calendar) and
     ``removed_from_calibrated`` (the effects subtracted from the calibrated series).
     Sources of earlier runs in the same directory are kept; a re-run replaces its
-    own entries.
+    own entries, and a re-run without ``--close-loop`` removes them.  With no source
+    left the two files are removed.
     """
     out_dir = Path(out_dir)
     jpath = out_dir / "closure.json"
@@ -1474,7 +1476,24 @@ def write_closure_reports(
     for o in outcomes:
         if o.ok and o.closure:
             sources[o.path.name] = o.closure
+        elif (
+            o.ok
+            and not diagnose
+            and not getattr(o, "skipped", False)
+            and sources.pop(o.path.name, None) is not None
+        ):
+            # redone without --close-loop: its table rows and calibrated file are the
+            # plain fit's now, so its old closure (report and plots) no longer applies
+            stem = output_stem(o.path)
+            for kind in ("closure", "closure-psd", "closure-effects"):
+                for ax in "xyz":
+                    (out_dir / f"{stem}.{kind}.{ax}.png").unlink(missing_ok=True)
     sources = dict(sorted(sources.items()))
+    mpath = out_dir / "closure.md"
+    if not sources:
+        for f in (jpath, mpath):
+            f.unlink(missing_ok=True)
+        return jpath, mpath
     _write_json(jpath, {"accal_version": __version__, "sources": sources})
     lines = [
         "# accal closure report",
@@ -1509,7 +1528,6 @@ def write_closure_reports(
             lines += ["", f"Removed from calibrated: {', '.join(removed) or 'nothing'}.", ""]
     from accal.io.writers import atomic_path
 
-    mpath = out_dir / "closure.md"
     with atomic_path(mpath) as tmp:
         tmp.write_text("\n".join(lines) + "\n")
     return jpath, mpath
