@@ -818,6 +818,7 @@ def close_loop(
             coupled = {f.prop.channel for f in search.found if f.prop.name == "auxiliary"}
             kept = {e.channel for e in res.effects if e.name == "auxiliary"}
             if coupled <= kept:
+                res = dataclasses.replace(res, effects=_exponentials_from(res.effects, t0))
                 note = {
                     "name": "auxiliary",
                     "channel": None,
@@ -1699,6 +1700,51 @@ def _main_coefficient(prop: Proposal, c, cc, span: float) -> tuple[float, float,
             },
         )
     return float(c[0]), float(sig[0]), {"coefficients": c.tolist(), "sigmas": sig.tolist()}
+
+
+def _exponentials_from(effects: Sequence[Effect], t0: float) -> list[Effect]:
+    """``effects`` with each exponential's amplitude referred to ``t0``.
+
+    A search that left out the record's start (a lagged coupling) fits
+    ``A'·exp(−(t − t0')/T)`` from its own first sample ``t0'``; the record's
+    amplitude is ``A = A'·exp((t0' − t0)/T)`` (QA: 4.9e-10 was reported for a decay
+    of 3e-9 starting 5400 s earlier).  Its σ adds T's: ``∂A/∂T = −A·(t0' − t0)/T²``.
+    """
+    out = []
+    for e in effects:
+        t_e = e.details.get("t0")
+        if e.name != "exponential_drift" or not e.tau or t_e is None or t_e == t0:
+            out.append(e)
+            continue
+        shift = float(t_e) - t0
+        s_tau = float(e.details.get("tau_sigma") or 0.0)
+        coef, sigma = _moved_amplitude(e.coefficient, e.sigma, shift, e.tau, s_tau)
+        details = {**e.details, "t0": t0, "amplitude_moved_from": float(t_e)}
+        if "axes" in e.details:
+            details["axes"] = {
+                ax: {
+                    **d,
+                    **dict(
+                        zip(
+                            ("coefficient", "sigma"),
+                            _moved_amplitude(d["coefficient"], d["sigma"], shift, e.tau, s_tau),
+                            strict=True,
+                        )
+                    ),
+                }
+                for ax, d in e.details["axes"].items()
+            }
+        out.append(dataclasses.replace(e, coefficient=coef, sigma=sigma, details=details))
+    return out
+
+
+def _moved_amplitude(
+    amp: float, sigma: float, shift: float, tau: float, tau_sigma: float
+) -> tuple[float, float]:
+    """An exponential's amplitude ``shift`` [s] earlier, and its σ (with T's σ)."""
+    factor = float(np.exp(shift / tau))
+    a = amp * factor
+    return a, float(np.hypot(sigma * factor, a * shift / tau**2 * tau_sigma))
 
 
 def _effects(
