@@ -185,7 +185,7 @@ def usage_fail(msg: str) -> None:
     sys.exit(2)
 
 
-def _g(value: float) -> str:
+def fmt_number(value: float) -> str:
     """A number as the messages show it (``nan``, ``inf``, ``0.5``, ``1e12``, ``1e-9``)."""
     return f"{value:g}".replace("e+0", "e").replace("e+", "e").replace("e-0", "e-")
 
@@ -195,13 +195,11 @@ def _bounds(
 ) -> str:
     """``> 0 s``, ``>= 0``, ``in (0, 1)``, ``<= 10 Hz`` or ``""`` (no bound)."""
     if low is not None and high is not None:
-        return (
-            f"in {'(' if low_open else '['}{_g(low)}, {_g(high)}{')' if high_open else ']'}{unit}"
-        )
+        return f"in {'(' if low_open else '['}{fmt_number(low)}, {fmt_number(high)}{')' if high_open else ']'}{unit}"
     if low is not None:
-        return f"{'>' if low_open else '>='} {_g(low)}{unit}"
+        return f"{'>' if low_open else '>='} {fmt_number(low)}{unit}"
     if high is not None:
-        return f"{'<' if high_open else '<='} {_g(high)}{unit}"
+        return f"{'<' if high_open else '<='} {fmt_number(high)}{unit}"
     return ""
 
 
@@ -251,7 +249,7 @@ def check_number(
     if not ok:
         name = f"{option} ({what})" if what else option
         rng = _bounds(low, high, low_open, high_open, unit)
-        shown = str(value) if isinstance(value, int) else _g(value)
+        shown = str(value) if isinstance(value, int) else fmt_number(value)
         shown += unit if math.isfinite(value) else ""
         kind = "a number" if low is not None and high is not None else "a finite number"
         rng = f" {rng}" if rng else ""
@@ -283,7 +281,9 @@ def check_size(option: str, n: float, cap: float, what: str) -> None:
         What ``n`` counts, plural (``"samples"``, ``"tau values"``).
     """
     if not n <= cap:
-        usage_fail(f"{option}: {_g(float(n))} {what} asked for; at most {_g(float(cap))} allowed")
+        usage_fail(
+            f"{option}: {fmt_number(float(n))} {what} asked for; at most {fmt_number(float(cap))} allowed"
+        )
 
 
 def _check_alpha(ctx: click.Context, param: click.Parameter, value: float | None) -> Any:

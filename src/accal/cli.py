@@ -21,6 +21,7 @@ from accal._cliutil import (
     check_number,
     check_seed,
     config_option,
+    fmt_number,
     usage_fail,
 )
 from accal._cliutil import err as _err
@@ -587,7 +588,7 @@ def simulate_grace(
         high=MAX_SAMPLES,  # 1 s sampling
         low_open=True,
         unit=" s",
-        why=f"at most {MAX_SAMPLES:.0e} samples of 1 s".replace("+0", ""),
+        why=f"at most {fmt_number(MAX_SAMPLES)} samples of 1 s",
     )
     check_number("--gaps", gaps, low=0, high=MAX_SAMPLES)
     check_number("--flagged", flagged, low=0, high=1, high_open=True, what="fraction")

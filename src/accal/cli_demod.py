@@ -18,6 +18,7 @@ import click
 from accal._cliutil import alpha_option, check_number, check_seed, config_option
 from accal._cliutil import err as _err
 from accal._cliutil import fail as _fail
+from accal._cliutil import fmt_number as _g
 from accal._cliutil import progress as _progress
 from accal._cliutil import usage_fail as _usage_fail
 
@@ -40,11 +41,6 @@ MAX_BUDGET_SAMPLES = 1_000_000
 MAX_GLS_ENTRIES = 50_000_000
 #: Samples of a ``simulate gap`` run (1e8: about 3 years at 1 Hz, a few GB of file).
 MAX_RUN_SAMPLES = 100_000_000
-
-
-def _g(x: float) -> str:
-    """A number in a message: ``600``, ``0.5``, ``1e9``, ``nan``."""
-    return f"{x:.6g}".replace("e+0", "e").replace("e+", "e").replace("e-0", "e-")
 
 
 def _check_period_samples(tau: float, fs: float, option: str = "--tau") -> None:

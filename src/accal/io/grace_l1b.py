@@ -343,9 +343,9 @@ def _header_time(value: Any, key: str, path: Path, line: int | None) -> float | 
     """
     if value is None:
         return None
-    word = str(value).split()[0] if str(value).split() else ""
+    words = str(value).split()
     try:
-        t = float(word)
+        t = float(words[0]) if words else float("nan")
     except ValueError:
         t = float("nan")
     lo, hi = GPS_TIME_RANGE
@@ -685,7 +685,7 @@ def _binary_records(data: bytes) -> bool:
         return False
     t = int.from_bytes(data[:4], "big")
     lo, hi = GPS_TIME_RANGE
-    return lo <= t <= hi and data[4:5] in (b"A", b"B", b"C", b"D")
+    return lo <= t <= hi and bool(_ID_LOOKUP[data[4]])
 
 
 def _little_endian(t: NDArray) -> bool:
@@ -812,22 +812,18 @@ def _check_header_span(
     )
 
 
-_NAME_DATE = re.compile(r"[A-Z]{3}1[AB]_(\d{4}-\d{2}-\d{2})_[A-Z]_\d+")
-
-
 def _name_day(path: Path) -> tuple[float, float] | None:
     """(first, last) second of the GPS day an L1B file name gives, or None."""
-    import datetime as dt
+    from accal.batch import _L1B_NAME
+    from accal.timescale import gps_day_start
 
-    m = _NAME_DATE.search(path.name)
+    m = _L1B_NAME.search(path.name)
     if m is None:
         return None
     try:
-        day = dt.date.fromisoformat(m.group(1))
-    except ValueError:
+        t0 = gps_day_start(m["date"])
+    except ValueError:  # a name like ACC1B_2003-02-30_A_02
         return None
-    # GPS seconds since 2000-01-01 12:00:00 of that day's 00:00:00 (GPS time scale)
-    t0 = (day - dt.date(2000, 1, 1)).days * 86400.0 - 43200.0
     return t0, t0 + 86399.0
 
 
