@@ -388,8 +388,9 @@ def test_lagged_coupling_start_is_not_an_exponential_or_a_step(sim, lag):
     e = res.effects[names.index("auxiliary")]
     assert abs(e.coefficient - 3e-9) < 3 * e.sigma
     # max_lag (3600 s) left out, plus 5 τ of the small low-pass the lag may come with
-    left = [re.match(r"the first (\d+) s", n["note"]) for n in res.notes]
-    assert any(m and 3600 <= int(m[1]) <= 4000 for m in left)
+    # (the first search may split the delay into lag + τ: 1403 s + 98 s for 1500 s)
+    left = [re.search(r"the first (\d+) s.* low-pass of (\d+) s", n["note"]) for n in res.notes]
+    assert any(m and 3600 <= int(m[1]) <= 3600 + 5 * int(m[2]) + 1 for m in left)
 
 
 @pytest.mark.parametrize("tc", [500.0, 1600.0, 3000.0, 4500.0])
@@ -574,3 +575,68 @@ def test_steps_near_the_ends_and_close_together(sim, a, b):
     got = sorted((e.epoch - d["t"][0], e.coefficient, e.sigma) for e in res.effects)
     for (epoch, c, s), (e_true, c_true) in zip(got, [(a, 2e-9), (b, -1e-9)], strict=True):
         assert epoch == e_true and abs(c - c_true) < 3 * s
+
+
+@pytest.mark.parametrize("epoch", [40.0, 60.0, 150.0, 86400.0 - 60.0, 86400.0 - 300.0])
+def test_step_at_the_edge_of_the_record(sim, epoch):
+    """QA: a 3e-9 m/s² step 150 s into the record (inside the 0.5 % the epoch scan left
+    out) came out as an exponential of T = 180 s plus two steps; 60 s in it was left
+    out as 60 outliers and the bias kept it; 300 s before the end it was found, but the
+    60 samples after it were also screened as a burst (the running-median window the
+    record's end truncates).  The scan now reaches 0.1 % of the span, a constant run of
+    flagged samples at either end is tried as a step, and flagged samples a found
+    step explains are not outliers."""
+    d = sim(43, **DAY)
+    el = d["t"] - d["t"][0]
+    d["y"] = d["y"] + 3e-9 * (el >= epoch)
+    res = _run(d)
+    assert _names(res) == ["bias_step"] and res.unexplained == ()
+    e = res.effects[0]
+    assert e.epoch - d["t"][0] == epoch and abs(e.coefficient - 3e-9) < 3 * e.sigma
+    assert not any(n["name"] == "outliers" for n in res.notes)
+    err = _err(res, d)["bias"]["after"]
+    assert abs(err) < 3 * res.base_coefficient("bias").sigma_after
+
+
+def test_burst_near_a_step_stays_outliers(sim):
+    """Flagged samples near a found step are analysed with it only when that gives the
+    same effects: a burst 200 s after a step is still left out, not fitted as steps."""
+    d = sim(43, **DAY)
+    el = d["t"] - d["t"][0]
+    d["y"] = d["y"] + 3e-9 * (el >= 40000.0)
+    i = int(np.searchsorted(el, 40200.0))
+    d["y"][i : i + 50] += 5e-8
+    res = _run(d)
+    assert _names(res) == ["bias_step"] and res.effects[0].epoch - d["t"][0] == 40000.0
+    assert next(n for n in res.notes if n["name"] == "outliers")["details"]["n"] >= 50
+
+
+@pytest.mark.parametrize(
+    ("sat", "date", "seed", "gaps", "axis", "period"),
+    [("A", "2008-03-01", 31, 0, 1, 2200.0), ("B", "2010-06-01", 23, 4, 0, 2500.0)],
+)
+def test_line_between_the_orbit_harmonics_on_raw_minus_reference(
+    sat, date, seed, gaps, axis, period
+):
+    """QA: a 3e-9 m/s² line (40x the noise) at 2200 s or 2500 s on raw − reference, half
+    a day.  At 2200 s the line was fitted 0.036 DFT bins off (the 1/10-bin grid); the
+    misfit stayed in its PSD bin and the line was not significant (p 0.1).  At 2500 s
+    the orbit trial's f was pulled 2.9 % high by the line, its harmonics kept the line
+    out of the search, and only "unexplained" was reported.  Where lines were found,
+    their σ was 20-90x too large.  The frequency is now refined continuously, and only
+    an orbit effect in the model keeps lines off its harmonics."""
+    from accal.simulate.grace import simulate_grace_day
+
+    day = simulate_grace_day(
+        date=date, satellite=sat, seed=seed, duration=43200.0, n_gaps=gaps, noise=1e-10
+    )
+    tau = day.time - day.truth["t0"]
+    y = day.raw[:, axis] - day.truth["scale_s"][axis] * day.true[:, axis]
+    y = y + 3e-9 * np.sin(2 * np.pi * tau / period)
+    res = close_loop(day.time, y, valid=day.valid, orbit_period=ORBIT)
+    assert [(e.name, e.channel) for e in res.effects] == [("periodic", "line")]
+    assert res.unexplained == ()
+    e = res.effects[0]
+    assert abs(e.frequency - 1 / period) < 0.02 / 43200.0
+    # measured: 3.00e-9 ± 1.1e-12 and ± 2.2e-12 (white noise alone: ~5e-13)
+    assert abs(e.coefficient - 3e-9) < 3 * e.sigma and e.sigma < 5e-12

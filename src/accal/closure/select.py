@@ -249,6 +249,7 @@ class ClosureResult:
     channel: NDArray[np.int64] | None = None
     channel_names: tuple[str, ...] = ()
     removed: tuple[Effect, ...] = ()
+    alternatives: tuple[str, ...] = ()
 
     @property
     def found(self) -> bool:
@@ -666,6 +667,8 @@ def close_loop(
             resolution=resolution,
         )
 
+    if not opts.get("_branched"):
+        return _best_branch(again, use)
     t_u, y_u = t_all[use], y_all[use]
     chan_u = None if chan_all is None else chan_all[use]
     t0 = float(t_u[0])
@@ -685,6 +688,21 @@ def close_loop(
         if bad.any():
             later = use.copy()
             later[np.flatnonzero(use)[bad]] = False
+            edge = _edge_run(bad, fit0.resid) if chan_u is None else None
+            if edge is not None:
+                # A constant offset of the first (last) k samples is a bias step k
+                # samples from the end, closer than the epoch scan reaches by default
+                # (QA: a 3e-9 m/s² step 60 s into a half day was left out as 60
+                # outliers, and the table's bias kept it, 3e-9 m/s² off).  Kept when the
+                # analysis with the scan reaching it finds that step.
+                k, at_start = edge
+                res = again(use, _screened=True, min_segment=k - 1)
+                epoch = float(t_u[k] if at_start else t_u[t_u.size - k])
+                if any(
+                    e.name == "bias_step" and e.epoch is not None and abs(e.epoch - epoch) < 1e-6
+                    for e in res.effects
+                ):
+                    return res
             res = again(later, _screened=True)
             decay = [e for e in res.effects if e.name == "exponential_drift" and e.tau]
             if decay and float(t_u[bad].max()) <= t0 + 5.0 * float(decay[0].tau):
@@ -692,6 +710,28 @@ def close_loop(
                 # them (1e-8 m/s², T = 120 s: its first 350 s were screened and its
                 # amplitude came out 5.9e-10): analyse them with it
                 return again(use, _screened=True)
+            tb = t_u[bad]
+            if any(
+                e.name == "bias_step"
+                and e.epoch is not None
+                and _within_window(t_u, e.epoch, float(tb.min()), float(tb.max()))
+                for e in res.effects
+            ):
+                # The "outliers" may be a step's edge seen from a running-median window
+                # the record's end truncates (QA: a 3e-9 m/s² step 300 s before the end
+                # was found, and 60 samples after it screened as a burst; with 120
+                # screened the epoch was 22 s off).  Analysed with them when that gives
+                # the same effects (a real burst there would be fitted as more steps).
+                whole = again(use, _screened=True)
+                if sorted(e.name for e in whole.effects) == sorted(
+                    e.name for e in res.effects
+                ) and any(
+                    g.name == "bias_step"
+                    and g.epoch is not None
+                    and _within_window(t_u, g.epoch, float(tb.min()), float(tb.max()))
+                    for g in whole.effects
+                ):
+                    return whole
             note = {
                 "name": "outliers",
                 "channel": None,
@@ -828,7 +868,10 @@ def close_loop(
                     "starts a lagged channel is unknown and a filter's state too",
                     "details": {"left_out": lead},
                 }
-                return dataclasses.replace(res, notes=(*res.notes, note))
+                alts = (*res.alternatives, *search.alternatives)
+                return dataclasses.replace(
+                    res, notes=(*res.notes, note), alternatives=tuple(dict.fromkeys(alts))
+                )
             # Without the start (and as much after each gap) the coupling was no longer
             # found (QA: 59 % of a half day with gaps left out, or the backward stage
             # preferring an orbit term): leaving it out of the model put c × mean(x)
@@ -986,7 +1029,45 @@ def close_loop(
         channel=chan_all,
         channel_names=names,
         removed=removed_eff,
+        alternatives=tuple(search.alternatives),
     )
+
+
+def _best_branch(again: Callable[..., ClosureResult], use: NDArray[np.bool_]) -> ClosureResult:
+    """The search, and again with a coupling it passed over added first, if that explains more.
+
+    Forward selection adds the effect that explains the most power.  A channel that
+    varies with the orbit (a temperature) and the orbit term can explain nearly the
+    same power while an effect not yet in the model (an exponential settling) masks
+    the difference; once the orbit term is in, the coupling is no longer significant
+    (QA: 4e-9 m/s² exponential + 3e-9 m/s²/K coupling to a 293 K channel, 1 s
+    samples: an orbit term and "unexplained" structure were reported, and the bias at
+    channel value 0 was 8.8e-7 m/s² off).  The other branch is kept when it explains
+    the structure the first left unexplained and leaves a smaller residual on the
+    samples both analysed.
+    """
+    first = again(use, _branched=True)
+    coupled = {e.channel for e in first.effects if e.name == "auxiliary"}
+    for ch in [c for c in first.alternatives if c not in coupled]:
+        alt = again(use, _branched=True, _prefer=ch)
+        if not any(e.name == "auxiliary" and e.channel == ch for e in alt.effects):
+            continue
+        both = first.use & alt.use
+        rss_first = float(np.sum(first.residual_after[both] ** 2))
+        rss_alt = float(np.sum(alt.residual_after[both] ** 2))
+        if len(alt.unexplained) < len(first.unexplained) and rss_alt < rss_first:
+            note = {
+                "name": "auxiliary",
+                "channel": ch,
+                "note": f"the coupling to {ch} was tested before the other effects: the "
+                f"search that added {', '.join(sorted({e.name for e in first.effects}))} "
+                f"first left structure unexplained (residual RMS "
+                f"{np.sqrt(rss_first / both.sum()):.3g} m/s², with the coupling first "
+                f"{np.sqrt(rss_alt / both.sum()):.3g} m/s²)",
+                "details": {"rms_first": float(np.sqrt(rss_first / both.sum()))},
+            }
+            return dataclasses.replace(alt, notes=(*alt.notes, note))
+    return first
 
 
 def _check_channels(t_all, channel, channel_names):
@@ -1093,6 +1174,56 @@ def _outliers(
     return bad
 
 
+def _sample_step(t: NDArray[np.float64]) -> float:
+    """Median sampling step [s] of the (sorted) times ``t``."""
+    return float(np.median(np.diff(t))) if t.size > 1 else 1.0
+
+
+def _within_window(t: NDArray[np.float64], epoch: float, first: float, last: float) -> bool:
+    """Whether the samples ``first..last`` [s] lie within one outlier window of ``epoch``."""
+    reach = OUTLIER_WINDOW * _sample_step(t)
+    return epoch - reach <= first and last <= epoch + reach
+
+
+#: Fewest samples of a run at the record's start or end that :func:`_edge_run` takes
+#: for a possible bias step rather than outliers.
+EDGE_STEP_MIN = 10
+#: Largest offset [robust σ of the other samples] of such a run taken for a step.  At
+#: the record's end a step and a burst fit alike (the burst's other edge is outside
+#: the record); instrument bias steps are ~1e-9-1e-8 m/s² (tens of σ for a residual
+#: against a reference), bursts and spikes hundreds to thousands of σ.
+EDGE_STEP_MAX_SIGMAS = 200.0
+
+
+def _edge_run(bad: NDArray[np.bool_], r: NDArray[np.float64]) -> tuple[int, bool] | None:
+    """``(k, at_start)`` when the flagged samples are the first or last ``k`` (≥
+    :data:`EDGE_STEP_MIN`) and a constant offset of at most
+    :data:`EDGE_STEP_MAX_SIGMAS` explains them, else ``None``.
+
+    Explained: about their own median the run's samples are within
+    :data:`OUTLIER_SIGMAS` robust σ of the other samples' scatter, as the samples
+    before and after a bias step are; a burst of spikes is not.
+    """
+    idx = np.flatnonzero(bad)
+    k = idx.size
+    if k < EDGE_STEP_MIN or idx[-1] - idx[0] != k - 1:
+        return None
+    if idx[0] == 0:
+        at_start = True
+    elif idx[-1] == r.size - 1:
+        at_start = False
+    else:
+        return None
+    rest = r[~bad]
+    sig = 1.4826 * float(np.median(np.abs(rest - np.median(rest))))
+    run = r[bad]
+    if not sig > 0 or np.max(np.abs(run - np.median(run))) > OUTLIER_SIGMAS * sig:
+        return None
+    if abs(float(np.median(run) - np.median(rest))) > EDGE_STEP_MAX_SIGMAS * sig:
+        return None
+    return k, at_start
+
+
 #: A residual within this factor of the data's numerical resolution is rounding
 #: (of the data and of the fit: a noise-free exponential left 17x eps·max|y|).  An
 #: instrument's noise is ~1e10 times the resolution (GRACE: 1e-10 vs 7e-21 m/s²).
@@ -1152,6 +1283,7 @@ class _Search:
     unexplained: list[Effect] = field(default_factory=list)
     notes: dict[tuple, dict[str, Any]] = field(default_factory=dict)
     excluded: list[float] = field(default_factory=list)
+    alternatives: list[str] = field(default_factory=list)
     _states: dict = field(default_factory=dict, repr=False)
     _cache: dict = field(default_factory=dict, repr=False)
 
@@ -1255,6 +1387,14 @@ class _Search:
                 continue
             tested.append((self._padj(w, prop.multiplicity), float(w.gamma @ w.gamma), prop, w, bi))
         sig = sorted((e for e in tested if e[0] < self.alpha), key=lambda e: -e[1])
+        coupled = {f.prop.channel for f in self.found if f.prop.name == "auxiliary"}
+        prefer = self.options.get("_prefer")
+        if prefer is not None and prefer not in coupled:
+            # the other branch (see close_loop): this channel's coupling first
+            first = [e for e in sig if e[2].name == "auxiliary" and e[2].channel == prefer]
+            sig = first + [e for e in sig if e not in first]
+            if first:
+                return self._add_single(basis, sig)
         top_sig = sig[0][1] if sig else 0.0
         masked = sorted(
             (e for e in tested if self.alpha <= e[0] < _PAIR_GATE and e[1] > top_sig),
@@ -1271,10 +1411,25 @@ class _Search:
         pair = self._best_pair(basis, fit, lev, masked) if masked else None
         if pair is not None and pair[-1] > top_sig and self._add_pair(pair):
             return True
-        for p_adj, _, prop, w, bi in sig:
+        return self._add_single(basis, sig)
+
+    def _add_single(self, basis: Basis, sig: list) -> bool:
+        """Add the first consistent of the significant proposals ``sig`` (best first).
+
+        A significant coupling passed over for another effect is recorded in
+        :attr:`alternatives` (an orbit-periodic temperature and the orbit term can
+        explain the same power while an undeclared drift masks the difference).
+        """
+        coupled = {f.prop.channel for f in self.found if f.prop.name == "auxiliary"}
+        for j, (p_adj, _, prop, w, bi) in enumerate(sig):
             info = {"stat": w.stat, "dof": w.dof, "multiplicity": prop.multiplicity}
             if not self._consistent(basis, prop, p_adj, info):
                 continue
+            if prop.name != "auxiliary":
+                for e in sig[j + 1 :]:
+                    ch = e[2].channel
+                    if e[2].name == "auxiliary" and ch not in coupled | set(self.alternatives):
+                        self.alternatives.append(ch)
             self._add([_Found(_independent(basis, prop, self.use), p_adj, info, bi)])
             self._settle(protect_last=True)
             return True
