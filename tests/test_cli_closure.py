@@ -512,8 +512,9 @@ def test_orbit_periodic_channel_with_a_decay_is_a_coupling_not_an_orbit_term(tmp
     found = effects(closure, "y")
     assert set(found) == {"auxiliary", "exponential_drift"} and not closure["y"]["unexplained"]
     assert abs(found["auxiliary"]["coefficient"] - 3e-9) < 3 * found["auxiliary"]["sigma"]
-    assert abs(found["exponential_drift"]["coefficient"] - 4e-9) < 3 * (
-        found["exponential_drift"]["sigma"]
+    assert (
+        abs(found["exponential_drift"]["coefficient"] - 4e-9)
+        < 3 * (found["exponential_drift"]["sigma"])
     )
     bias = closure["y"]["estimates"]["wavelet"]["bias"]
     # measured: 8.8e-7 before, -2.5e-10 ± 8e-10 after

@@ -596,3 +596,51 @@ def test_demod_close_loop_sigmas_stay_honest(tmp_path):
         z = (df[f"a_{ax}"] - df[f"a_{ax}_true"]) / df[f"sigma_{ax}"]
         assert 0.85 < float(np.std(z)) < 1.2, (ax, float(np.std(z)))
         assert float((df[f"sigma_{ax}"] / df[f"sigma_{ax}_before"]).median()) >= 0.98
+
+
+def test_demod_close_loop_gls_summary_and_rerun_without_it(undeclared_run, tmp_path):
+    """QA: with ``--method gls --close-loop`` the periods held the closure's LS values
+    (a_Y bit-identical to LS) while a_Y_before was GLS; the summary's mean and
+    scatter/σ were the declared model's (23σ off, 31.7); "median |change|/σ" was
+    2e4 from periods that had not changed (a rounding-level change over a
+    rounding-level σ); and a re-run without --close-loop left the old closure."""
+    run, truth, _ = undeclared_run
+    out = tmp_path / "out"
+    rows = {}
+    for method in ("ls", "gls"):
+        code, _, err = invoke(
+            "demod", run, "--tau", 600, "--mask", 200, "--method", method, "--close-loop",
+            "--out", out / method, "-q",
+        )  # fmt: skip
+        assert code == 0, err
+        rows[method] = pd.read_parquet(out / method / "periods.parquet").merge(
+            truth, on="period", suffixes=("", "_true")
+        )
+    ls, gls = rows["ls"], rows["gls"]
+    assert not np.allclose(gls["a_Y"], ls["a_Y"], rtol=0, atol=1e-16)
+    plain = tmp_path / "plain"
+    assert invoke("demod", run, "--tau", 600, "--mask", 200, "--method", "gls",
+                  "--out", plain, "-q")[0] == 0  # fmt: skip
+    declared = pd.read_parquet(plain / "periods.parquet")
+    np.testing.assert_array_equal(gls["a_Y_before"], declared["a_Y"])
+    for ax in "YZ":
+        z = (gls[f"a_{ax}"] - gls[f"a_{ax}_true"]) / gls[f"sigma_{ax}"]
+        assert 0.8 < float(np.std(z)) < 1.25, (ax, float(np.std(z)))
+    summary = json.loads((out / "gls" / "summary.json").read_text())
+    assert summary["mean"]["model"].startswith("declared+")
+    assert summary["mean"]["a_Y"] == pytest.approx(float(gls["a_Y"].mean()), rel=1e-12)
+    assert summary["declared"]["mean"]["a_Y"] == pytest.approx(
+        float(gls["a_Y_before"].mean()), rel=1e-12
+    )
+    assert "(declared model)" in (out / "gls" / "summary.md").read_text()
+    closure = json.loads((out / "gls" / "closure.json").read_text())["sources"]["run.parquet"]
+    assert closure["method"] == "gls"
+    per = closure["periods"]
+    # measured 10.4: the coupling changed every period; no longer ~2e4 from rounding
+    assert per["median_abs_change_Y_sigmas"] < 100 and 0 < per["n_changed_Y"] <= per["n"]
+    # the same source again without --close-loop: its closure report and plots go
+    code, _, err = invoke("demod", run, "--tau", 600, "--mask", 200, "--out", out / "ls", "-q")
+    assert code == 0, err
+    assert not (out / "ls" / "closure.json").exists() and not (out / "ls" / "closure.md").exists()
+    assert not list((out / "ls").glob("run.closure*.png"))
+    assert "model" not in pd.read_parquet(out / "ls" / "periods.parquet").columns
