@@ -84,6 +84,25 @@ def test_bias_step_inside_a_period(platform):
     assert _errors(per)["Y"][1] < 0.3 * _errors(per)["Y"][0]
 
 
+@pytest.mark.parametrize("from_end", [False, True])
+def test_bias_step_seconds_from_the_run_ends(platform, from_end):
+    """QA: a step 10-60 s from either end of a run was outside the epochs scanned (0.5 %
+    of the record from its ends) and came out as steps of the wrong sign (a_Y max |z|
+    5.6 -> 14.6) or an exponential plus steps.  A block base scans each period on its
+    own, so only the record's last 10 samples are left out."""
+    d = platform(3)
+    n = d["t"].size
+    epoch = d["t"][n - 10] if from_end else d["t"][0] + 60.0
+    d["m"] = d["m"] + np.column_stack([1e-9 * (d["t"] >= epoch), np.zeros(n)])
+    res, per = _run(d)
+    assert [e.name for e in res.effects] == ["bias_step"]
+    e = res.effects[0]
+    # at a rest start when the step falls during a rotation (masked samples)
+    assert abs(e.epoch - epoch) <= 30.0 and abs(e.coefficient - 1e-9) < 3 * e.sigma
+    k = -1 if from_end else 0
+    assert abs(per.a_Y_after[k] - AY) < 3 * per.sigma_Y_after[k]
+
+
 def test_settling_transient_after_each_rotation(platform):
     """A transient with the sign of the rotation leaks into a_Y/a_Z; a common one barely."""
     d = platform(4, settle=(2e-10, -1e-10, 20.0, "direction"))

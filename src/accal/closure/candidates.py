@@ -456,12 +456,16 @@ def bias_step(ctx: Context) -> list[Proposal]:
     n = t.size
     masks = ctx.channel_masks()
     n_time = n // len(masks)
-    min_seg = int(ctx.options.get("min_segment", max(10, n_time // 1000))) * len(masks)
+    # a block base (one bias per demodulation period) scans every block on its own and
+    # its multiplicity counts them, so only the record's last samples are left out
+    # (QA: a step 10-60 s from a run's end came out as steps of the wrong sign)
+    edge = 10 if ctx.basis.n_blocks > 1 else max(10, n_time // 1000)
+    min_seg = int(ctx.options.get("min_segment", edge)) * len(masks)
     if n < 2 * min_seg + 2:
         return []
     r = _without_orbit_template(ctx, masks)
     ok = np.zeros(n, dtype=bool)
-    ok[min_seg : n - min_seg] = True
+    ok[min_seg : n - min_seg + 1] = True  # at least min_seg samples on either side
     ok &= np.r_[True, np.diff(t) > 0]  # epochs at the first sample of a time
     for lab in ctx.labels:  # no second step at an existing epoch
         if lab.startswith("step@"):

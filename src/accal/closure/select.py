@@ -696,7 +696,7 @@ def close_loop(
                 # outliers, and the table's bias kept it, 3e-9 m/s² off).  Kept when the
                 # analysis with the scan reaching it finds that step.
                 k, at_start = edge
-                res = again(use, _screened=True, min_segment=k - 1)
+                res = again(use, _screened=True, min_segment=k)
                 epoch = float(t_u[k] if at_start else t_u[t_u.size - k])
                 if any(
                     e.name == "bias_step" and e.epoch is not None and abs(e.epoch - epoch) < 1e-6
