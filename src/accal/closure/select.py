@@ -222,6 +222,9 @@ class ClosureResult:
         Their names (empty for one channel).
     removed : tuple of Effect
         Effects added and later removed by backward elimination.
+    alternatives : tuple of str
+        Channels whose significant coupling the search passed over for another
+        effect (:func:`_best_branch` tries them first).
     """
 
     effects: tuple[Effect, ...]
