@@ -691,19 +691,22 @@ def close_loop(
         if bad.any():
             later = use.copy()
             later[np.flatnonzero(use)[bad]] = False
-            edge = _edge_run(bad, fit0.resid) if chan_u is None else None
-            if edge is not None:
+            edges = _edge_runs(bad, fit0.resid) if chan_u is None else []
+            if edges:
                 # A constant offset of the first (last) k samples is a bias step k
                 # samples from the end, closer than the epoch scan reaches by default
                 # (QA: a 3e-9 m/s² step 60 s into a half day was left out as 60
-                # outliers, and the table's bias kept it, 3e-9 m/s² off).  Kept when the
-                # analysis with the scan reaching it finds that step.
-                k, at_start = edge
-                res = again(use, _screened=True, min_segment=k)
-                epoch = float(t_u[k] if at_start else t_u[t_u.size - k])
-                if any(
-                    e.name == "bias_step" and e.epoch is not None and abs(e.epoch - epoch) < 1e-6
-                    for e in res.effects
+                # outliers, and the table's bias kept it, 3e-9 m/s² off; a step near
+                # each end, both).  Kept when the analysis with the scan reaching them
+                # finds those steps.
+                res = again(use, _screened=True, min_segment=min(k for k, _ in edges))
+                epochs = [float(t_u[k] if first else t_u[t_u.size - k]) for k, first in edges]
+                if all(
+                    any(
+                        e.name == "bias_step" and e.epoch is not None and abs(e.epoch - ep) < 1e-6
+                        for e in res.effects
+                    )
+                    for ep in epochs
                 ):
                     return res
             res = again(later, _screened=True)
@@ -848,7 +851,10 @@ def close_loop(
         # times, so across a gap the lagged regressor was bridged (QA: steps of
         # ±2.5e-10 m/s² right after a gap, on a noise-free coupling) and the filter
         # stepped over the gap as if it were one sample
-        tu_ = np.unique(t_all[use])
+        # (gaps in the samples, where the channel is unknown: not rotation masks or
+        # flagged samples, at which the channel is known; QA: with every rotation mask
+        # taken for a gap a demod lag cap of 1080 s left nothing to re-search)
+        tu_ = np.unique(t_all)
         if tu_.size > 2:
             dtu = np.diff(tu_)
             for k in np.flatnonzero(dtu > 5.0 * np.median(dtu)):
@@ -1188,7 +1194,7 @@ def _within_window(t: NDArray[np.float64], epoch: float, first: float, last: flo
     return epoch - reach <= first and last <= epoch + reach
 
 
-#: Fewest samples of a run at the record's start or end that :func:`_edge_run` takes
+#: Fewest samples of a run at the record's start or end that :func:`_edge_runs` takes
 #: for a possible bias step rather than outliers.
 EDGE_STEP_MIN = 10
 #: Largest offset [robust σ of the other samples] of such a run taken for a step.  At
@@ -1198,33 +1204,46 @@ EDGE_STEP_MIN = 10
 EDGE_STEP_MAX_SIGMAS = 200.0
 
 
-def _edge_run(bad: NDArray[np.bool_], r: NDArray[np.float64]) -> tuple[int, bool] | None:
-    """``(k, at_start)`` when the flagged samples are the first or last ``k`` (≥
-    :data:`EDGE_STEP_MIN`) and a constant offset of at most
-    :data:`EDGE_STEP_MAX_SIGMAS` explains them, else ``None``.
+def _edge_runs(bad: NDArray[np.bool_], r: NDArray[np.float64]) -> list[tuple[int, bool]]:
+    """``[(k, at_start), ...]`` when the flagged samples are the first and/or last ``k``
+    (each ≥ :data:`EDGE_STEP_MIN`) and each run is a constant offset of at most
+    :data:`EDGE_STEP_MAX_SIGMAS` from the samples next to it; else ``[]``.
 
-    Explained: about their own median the run's samples are within
-    :data:`OUTLIER_SIGMAS` robust σ of the other samples' scatter, as the samples
-    before and after a bias step are; a burst of spikes is not.
+    Constant: about their own median the run's samples are within
+    :data:`OUTLIER_SIGMAS` robust σ, as the samples before and after a bias step
+    are; a burst of spikes is not.  σ is that of the first differences of the
+    other samples (1.4826 MAD / √2), which steps and slow structure elsewhere do
+    not inflate (QA: beside a 2e-9 m/s² step mid-day the residual's own MAD made a
+    5e-8 m/s² burst at the start ~100σ, and it was taken for a step, the bias
+    5e-8 m/s² off).
     """
     idx = np.flatnonzero(bad)
-    k = idx.size
-    if k < EDGE_STEP_MIN or idx[-1] - idx[0] != k - 1:
-        return None
-    if idx[0] == 0:
-        at_start = True
-    elif idx[-1] == r.size - 1:
-        at_start = False
-    else:
-        return None
+    n = r.size
+    if idx.size == 0:
+        return []
+    runs: list[tuple[int, bool]] = []
+    k0 = int(np.argmax(~bad)) if not bad.all() else n  # leading flagged samples
+    k1 = int(np.argmax(~bad[::-1])) if not bad.all() else n  # trailing ones
+    if k0 + k1 != idx.size or k0 + k1 >= n:
+        return []  # flagged samples away from the ends
     rest = r[~bad]
-    sig = 1.4826 * float(np.median(np.abs(rest - np.median(rest))))
-    run = r[bad]
-    if not sig > 0 or np.max(np.abs(run - np.median(run))) > OUTLIER_SIGMAS * sig:
-        return None
-    if abs(float(np.median(run) - np.median(rest))) > EDGE_STEP_MAX_SIGMAS * sig:
-        return None
-    return k, at_start
+    d = np.diff(rest)
+    sig = 1.4826 * float(np.median(np.abs(d - np.median(d)))) / np.sqrt(2.0)
+    if not sig > 0:
+        return []
+    for k, at_start in ((k0, True), (k1, False)):
+        if k == 0:
+            continue
+        if k < EDGE_STEP_MIN:
+            return []
+        run = r[:k] if at_start else r[n - k :]
+        near = r[k : k + OUTLIER_WINDOW] if at_start else r[max(0, n - k - OUTLIER_WINDOW) : n - k]
+        if np.max(np.abs(run - np.median(run))) > OUTLIER_SIGMAS * sig:
+            return []
+        if abs(float(np.median(run) - np.median(near))) > EDGE_STEP_MAX_SIGMAS * sig:
+            return []
+        runs.append((k, at_start))
+    return runs
 
 
 #: A residual within this factor of the data's numerical resolution is rounding
