@@ -903,6 +903,9 @@ def auxiliary(ctx: Context) -> list[Proposal]:
                 # (from a pure lag, a few samples of low-pass: the lag stays as found)
         _, lag, tc = best
         h = filtered(tc) if tc in taus else _first_order(xf, tu, tc)
+        period = float(ctx.options.get("lag_period") or 0.0)
+        if period > 0 and lag >= 0.5 * period:
+            lag = _shortest_lag(ctx, tu, h, lag, period, lag_step, top_lag)
         col = np.interp(t_all - lag, tu, h)
         # not de-meaned: the bias is the one at channel value 0, as the model
         # ``b + c·x`` says.  A de-meaned regressor left c × mean(x) in the bias (a
@@ -944,6 +947,43 @@ def auxiliary(ctx: Context) -> list[Proposal]:
             )
         )
     return out
+
+
+def _shortest_lag(
+    ctx: Context,
+    tu: NDArray[np.float64],
+    h: NDArray[np.float64],
+    lag: float,
+    period: float,
+    step: float,
+    top: float,
+) -> float:
+    """The shortest of ``lag − k·period`` (refined) explaining ≥ 98 % of ``lag``'s power.
+
+    With a per-period base (demodulation) a channel that repeats with the period
+    (a platform temperature kicked by every rotation) couples the same at lags a
+    period apart: searched up to 1080 s, a 120 s lag came out as 720 s (on the lag
+    grid, where 120 s was not), with two spurious lines beside it.  A channel that
+    does not repeat (QA: a slow temperature at 1000 s) keeps its lag.
+    """
+
+    def power(x: float) -> float:
+        return float(_channel_power(ctx, np.interp(ctx.t - x, tu, h)[None, :])[0])
+
+    here = power(lag)
+    for k in range(int(lag // period), 0, -1):  # shortest first
+        cand = lag - k * period
+        new, p = (
+            _refine_lag(ctx, tu, h, cand, step, top, power(cand))
+            if step > 0
+            else (
+                cand,
+                power(cand),
+            )
+        )
+        if p >= 0.98 * here:
+            return new
+    return lag
 
 
 def _refine_lag(

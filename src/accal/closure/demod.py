@@ -411,7 +411,14 @@ def close_loop_demod(
         max_effects=max_effects,
         orbit_period=orbit_period,
         catchall_knots=catchall_knots,
-        options={"max_lag": 0.5 * float(tau), **(options or {}), "platform": info},
+        # lags beyond τ/2 for channels that do not repeat with τ (QA: a slow channel at
+        # 1000 s was missed, a_Y std z 31); one that repeats takes its shortest lag
+        options={
+            "max_lag": max(0.5 * float(tau), min(float(t[-1] - t[0]) / 20.0, 3600.0)),
+            "lag_period": float(tau),
+            **(options or {}),
+            "platform": info,
+        },
         channel=chan,
         channel_names=("y", "z"),
         noise_psd=noise_psd,
