@@ -1005,7 +1005,6 @@ def process_run(
         step = info.step if info.resample is not None else None
         closure, extended, plots = close_run(path, opts, targets[0].parent, step=step, psd=psd)
         rows, units = apply_closure(rows, units, extended)
-        closure["periods"] = change_statistics(rows)
         summary["closure"] = {
             k: closure[k] for k in ("effects", "unexplained", "rms_before", "rms_after", "model")
         }
@@ -1207,7 +1206,9 @@ def _gls_after(
     The σ after adds to that GLS σ the variance the closure attributes to the
     effects' estimation, ``σ²_after,LS − σ²_before,LS`` (QA: with ``--method gls
     --close-loop`` the LS values were written, ``a_Y_before`` was GLS, and the
-    change was an estimator difference).
+    change was an estimator difference).  "Before" is the declared GLS
+    demodulation of the same samples, so the change and its statistics are those
+    of the GLS values (the same from ``accal diagnose``).
     """
     from dataclasses import replace
 
@@ -1216,44 +1217,53 @@ def _gls_after(
     k = res.effect_columns.shape[1]  # an effect may have a column per axis
     gamma = np.asarray(res.coef[res.coef.size - k :], dtype=np.float64)
     model = np.nan_to_num(res.effect_columns) @ gamma
-    m_y = cols["m_y"] - model[0::2]
-    m_z = cols["m_z"] - model[1::2]
-    gls = demodulate(
-        time,
-        m_y,
-        m_z,
-        theta,
-        tau=opts.tau,
-        mask=opts.mask,
-        method="gls",
-        signal_model=opts.signal_model,
-        bias_aux=bias_aux or None,
-        psd=psd if psd is not None else load_psd(opts.psd),
-        valid=valid,
-    )
-    where = {int(p): i for i, p in enumerate(gls.period_index)}
-    pick = np.array([where.get(int(p), -1) for p in periods.period_index], dtype=np.int64)
-    have = pick >= 0
-    new: dict[str, np.ndarray] = {}
-    for ax in ("Y", "Z"):
-        a = np.full(pick.size, np.nan)
-        sg = np.full(pick.size, np.nan)
-        a[have] = getattr(gls, f"a_{ax}")[pick[have]]
-        extra = np.maximum(
-            getattr(periods, f"sigma_{ax}_after") ** 2
-            - getattr(periods, f"sigma_{ax}_before") ** 2,
-            0.0,
+
+    def gls(m_y: np.ndarray, m_z: np.ndarray) -> Any:
+        return demodulate(
+            time,
+            m_y,
+            m_z,
+            theta,
+            tau=opts.tau,
+            mask=opts.mask,
+            method="gls",
+            signal_model=opts.signal_model,
+            bias_aux=bias_aux or None,
+            psd=psd if psd is not None else load_psd(opts.psd),
+            valid=valid,
         )
-        sg[have] = np.sqrt(getattr(gls, f"sigma_{ax}")[pick[have]] ** 2 + extra[have])
-        new[f"a_{ax}_after"] = a
-        new[f"sigma_{ax}_after"] = sg
-        if opts.signal_model == "affine":
-            sl = np.full(pick.size, np.nan)
-            ss = np.full(pick.size, np.nan)
-            sl[have] = getattr(gls, f"slope_{ax}")[pick[have]]
-            ss[have] = getattr(gls, f"sigma_slope_{ax}")[pick[have]]
-            new[f"slope_{ax}_after"] = sl
-            new[f"sigma_slope_{ax}_after"] = ss
+
+    # declared (as the periods rows have it) and with the effects subtracted
+    before = gls(cols["m_y"], cols["m_z"])
+    after = gls(cols["m_y"] - model[0::2], cols["m_z"] - model[1::2])
+    new: dict[str, np.ndarray] = {}
+    for kind, r in (("before", before), ("after", after)):
+        where = {int(p): i for i, p in enumerate(r.period_index)}
+        pick = np.array([where.get(int(p), -1) for p in periods.period_index], dtype=np.int64)
+        have = pick >= 0
+
+        def take(x: np.ndarray, pick: np.ndarray = pick, have: np.ndarray = have) -> np.ndarray:
+            out = np.full(pick.size, np.nan)
+            out[have] = np.asarray(x)[pick[have]]
+            return out
+
+        for ax in ("Y", "Z"):
+            new[f"a_{ax}_{kind}"] = take(getattr(r, f"a_{ax}"))
+            sg = take(getattr(r, f"sigma_{ax}"))
+            if kind == "after":
+                extra = np.maximum(
+                    getattr(periods, f"sigma_{ax}_after") ** 2
+                    - getattr(periods, f"sigma_{ax}_before") ** 2,
+                    0.0,
+                )
+                sg = np.sqrt(sg**2 + extra)
+            new[f"sigma_{ax}_{kind}"] = sg
+            if opts.signal_model == "affine":
+                new[f"slope_{ax}_{kind}"] = take(getattr(r, f"slope_{ax}"))
+                if kind == "after":
+                    new[f"sigma_slope_{ax}_after"] = take(getattr(r, f"sigma_slope_{ax}"))
+    for ax in ("Y", "Z"):
+        new[f"change_{ax}"] = new[f"a_{ax}_after"] - new[f"a_{ax}_before"]
     return replace(periods, **new)
 
 
