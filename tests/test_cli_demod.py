@@ -644,3 +644,19 @@ def test_demod_close_loop_gls_summary_and_rerun_without_it(undeclared_run, tmp_p
     assert not (out / "ls" / "closure.json").exists() and not (out / "ls" / "closure.md").exists()
     assert not list((out / "ls").glob("run.closure*.png"))
     assert "model" not in pd.read_parquet(out / "ls" / "periods.parquet").columns
+
+
+def test_tail_shorter_than_a_period_is_a_warning(tmp_path):
+    """QA: a 900 s run with --tau 600 said "1/1 periods" and left its last 300 s out
+    without a word."""
+    from accal.pipeline_demod import write_simulated_gap
+
+    full = tmp_path / "full.parquet"
+    write_simulated_gap(full, days=0.25, tau=600.0, mask=200.0, seed=2)
+    run = tmp_path / "run.parquet"
+    pd.read_parquet(full).iloc[:900].to_parquet(run)
+    code, _, err = invoke("demod", run, "--tau", 600, "--mask", 200, "--out", tmp_path / "o")
+    assert code == 0, err
+    assert "warning: the last 300 s (300 samples) are less than one period" in err
+    code, _, err = invoke("demod", full, "--tau", 600, "--mask", 200, "--out", tmp_path / "p")
+    assert code == 0 and "less than one period" not in err

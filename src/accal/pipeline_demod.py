@@ -714,6 +714,11 @@ SHIFT_WARN = 0.5
 SHIFT_NEAR = 1 / 8
 
 
+def tau_of(summary: dict[str, Any]) -> float:
+    """The modulation period ``--tau`` a summary was made with [s]."""
+    return float(summary["options"]["tau"])
+
+
 def summary_warnings(summary: dict[str, Any]) -> tuple[str, ...]:
     """Findings of a summary worth a line on stderr."""
     w = list(summary["input"].get("warnings") or [])
@@ -725,13 +730,23 @@ def summary_warnings(summary: dict[str, Any]) -> tuple[str, ...]:
         )
     if summary["dropped"]:
         w.append(f"{summary['dropped']} of {summary['n_periods']} periods dropped")
+    # samples after the last whole period are not used (QA: a 900 s run said "1/1
+    # periods" with its last 300 s silently left out)
+    fs = summary["input"]["fs"]
+    tail = int(summary["input"]["n_samples"]) - int(
+        round(summary["n_periods"] * tau_of(summary) * fs)
+    )
+    if tail > 0:
+        w.append(
+            f"the last {tail / fs:g} s ({tail} samples) are less than one period "
+            f"(--tau {tau_of(summary):g} s) and are not used"
+        )
     # eq. 16 leakage alone is no fault: the joint fit of eq. 17 (chosen whenever it is not
     # ~0) removes the bias whatever the pattern (four angles, an affine signal model, jitter
     # give some).  What is wrong is a --tau that is not the pattern's period: then the
     # rotations move from one period to the next.
     pat = summary.get("pattern") or {}
-    shift, tau = pat.get("rotation_shift"), summary["options"]["tau"]
-    fs = summary["input"]["fs"]
+    shift, tau = pat.get("rotation_shift"), tau_of(summary)
     if shift is not None and np.isfinite(shift) and abs(shift) * fs > SHIFT_WARN:
         leak = summary.get("leakage_max")
         leak_text = (
