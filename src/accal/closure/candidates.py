@@ -973,14 +973,9 @@ def _shortest_lag(
     here = power(lag)
     for k in range(int(lag // period), 0, -1):  # shortest first
         cand = lag - k * period
-        new, p = (
-            _refine_lag(ctx, tu, h, cand, step, top, power(cand))
-            if step > 0
-            else (
-                cand,
-                power(cand),
-            )
-        )
+        new, p = cand, power(cand)
+        if step > 0:
+            new, p = _refine_lag(ctx, tu, h, cand, step, top, p)
         if p >= 0.98 * here:
             return new
     return lag

@@ -253,9 +253,10 @@ def close_loop_demod(
     alpha, max_effects, orbit_period, catchall_knots, options, noise_psd
         As in :func:`accal.closure.close_loop` (``options["settle_taus"]``: time
         constants searched by ``intra_period_shape`` [s]; ``options["max_lag"]``:
-        longest auxiliary lag searched, default ``τ/2``: the per-period bias absorbs
-        a channel's slow part, and what is left repeats with the pattern, so a lag
-        is only determined modulo τ).
+        longest auxiliary lag searched, default the larger of ``τ/2`` and
+        min(span/20, 1 h); ``options["lag_period"]``, default ``τ``: a channel that
+        repeats with the pattern couples the same at lags a period apart, and the
+        shortest such lag that explains as much is taken).
 
     Returns
     -------
