@@ -845,7 +845,15 @@ def close_loop(
         # spurious exponential of T = 935 s)
         step = float(np.median(np.diff(np.unique(t_all)))) if t_all.size > 1 else 1.0
         top_lag = max_lag(opts, span)
-        lead = (top_lag if lag > TAU_MIN_STEPS * step else lag) + FILTER_SETTLE * tc
+        lead_lag = top_lag
+        period = float(opts.get("lag_period") or 0.0)
+        if period > 0:
+            # a block base (demodulation periods): every period left out loses its
+            # values, so the lags a period-repeating channel is searched at (τ/2), or
+            # the longer lag found (QA: with the cap at 1 h the first 6 periods of a
+            # day had no extended values for a 120 s lag)
+            lead_lag = min(top_lag, max(lag, 0.5 * period))
+        lead = (lead_lag if lag > TAU_MIN_STEPS * step else lag) + FILTER_SETTLE * tc
         later = use & (t_all >= t0 + lead)
         # the same after every data gap: the channel was only known at the data's
         # times, so across a gap the lagged regressor was bridged (QA: steps of
