@@ -660,3 +660,35 @@ def test_tail_shorter_than_a_period_is_a_warning(tmp_path):
     assert "warning: the last 300 s (300 samples) are less than one period" in err
     code, _, err = invoke("demod", full, "--tau", 600, "--mask", 200, "--out", tmp_path / "p")
     assert code == 0 and "less than one period" not in err
+
+
+def test_lagged_coupling_to_a_declared_channel_is_searched(tmp_path):
+    """QA: with the channel declared in --bias-model (per-period coefficient, lag 0) a
+    lagged coupling to it was not searched: "no effect", a_Y max |z| 76.  The declared
+    channels are offered to the coupling search too (at lag 0 they are in the base)."""
+    from accal.pipeline_demod import write_simulated_gap
+
+    run = tmp_path / "run.parquet"
+    _, truth = write_simulated_gap(run, days=0.5, tau=600.0, mask=200.0, seed=6)
+    df = pd.read_parquet(run)
+    t = df["time"].to_numpy()
+    walk = np.cumsum(np.random.default_rng(6).standard_normal(t.size))
+    slow = 0.3 * np.sin(2 * np.pi * t / 5400.0) + 0.002 * walk
+    df["temp2"] = slow
+    df["m_y"] += 2e-8 * np.interp(t - 120.0, t, slow)
+    df.to_parquet(run)
+    out = tmp_path / "out"
+    code, _, err = invoke(
+        "demod", run, "--tau", 600, "--mask", 200, "--bias-model", "affine+temp2",
+        "--close-loop", "--out", out, "-q",
+    )  # fmt: skip
+    assert code == 0, err
+    closure = json.loads((out / "closure.json").read_text())["sources"]["run.parquet"]
+    found = [e for e in closure["effects"] if e["name"] == "auxiliary"]
+    assert len(found) == 1 and found[0]["channel"] == "temp2"
+    assert abs(found[0]["lag"] - 120.0) < 5.0
+    rows = pd.read_parquet(out / "periods.parquet").merge(
+        pd.read_parquet(truth), on="period", suffixes=("", "_true")
+    )
+    z = (rows["a_Y"] - rows["a_Y_true"]) / rows["sigma_Y"]
+    assert float(np.std(z)) < 1.5

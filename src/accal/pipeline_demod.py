@@ -1091,8 +1091,8 @@ def close_run(
     longer than ``opts.gap_factor`` steps kept as invalid samples, the grid point
     just after the last sample held); the declared
     model is the per-period signal (``--signal-model``) and affine bias (plus the
-    ``--bias-model`` channels, eq. 18); every other auxiliary channel is offered
-    to the ``auxiliary`` candidate, with the platform candidates (angle offset,
+    ``--bias-model`` channels, eq. 18); every auxiliary channel (the declared ones
+    for lagged couplings) is offered to the ``auxiliary`` candidate, with the platform candidates (angle offset,
     intra-period bias shape) and the generic ones (steps, periodic terms,
     polynomial drift).  Plots go to ``out_dir/<stem>.closure*.png``.
 
@@ -1144,11 +1144,10 @@ def close_run(
     missing = [c for c in opts.aux_channels if c not in chans]
     if missing:
         raise ValidationError(f"bias-model channel(s) {missing} not in the run")
-    aux = {
-        k: v
-        for k, v in chans.items()
-        if k not in bias_aux and np.isfinite(v).any() and np.ptp(v[np.isfinite(v)]) > 0
-    }
+    # every varying channel, the declared ones too: at lag 0 they are in the base, but a
+    # lagged coupling to one is not (QA: with temp2 declared, a 120 s coupling to it
+    # went unreported and a_Y was off by up to 76σ)
+    aux = {k: v for k, v in chans.items() if np.isfinite(v).any() and np.ptp(v[np.isfinite(v)]) > 0}
     dc = close_loop_demod(
         time,
         (cols["m_y"], cols["m_z"]),
