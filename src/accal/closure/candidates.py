@@ -949,6 +949,11 @@ def auxiliary(ctx: Context) -> list[Proposal]:
     return out
 
 
+def _lag_power(ctx: Context, tu: NDArray[np.float64], h: NDArray[np.float64], lag: float) -> float:
+    """:func:`_channel_power` of the response ``h`` (on times ``tu``) delayed by ``lag``."""
+    return float(_channel_power(ctx, np.interp(ctx.t - lag, tu, h)[None, :])[0])
+
+
 def _shortest_lag(
     ctx: Context,
     tu: NDArray[np.float64],
@@ -966,14 +971,10 @@ def _shortest_lag(
     grid, where 120 s was not), with two spurious lines beside it.  A channel that
     does not repeat (QA: a slow temperature at 1000 s) keeps its lag.
     """
-
-    def power(x: float) -> float:
-        return float(_channel_power(ctx, np.interp(ctx.t - x, tu, h)[None, :])[0])
-
-    here = power(lag)
+    here = _lag_power(ctx, tu, h, lag)
     for k in range(int(lag // period), 0, -1):  # shortest first
         cand = lag - k * period
-        new, p = cand, power(cand)
+        new, p = cand, _lag_power(ctx, tu, h, cand)
         if step > 0:
             new, p = _refine_lag(ctx, tu, h, cand, step, top, p)
         if p >= 0.98 * here:
@@ -998,10 +999,8 @@ def _refine_lag(
     """
     from scipy.optimize import minimize_scalar
 
-    t_u = ctx.t
-
     def neg_power(lg: float) -> float:
-        return -float(_channel_power(ctx, np.interp(t_u - lg, tu, h)[None, :])[0])
+        return -_lag_power(ctx, tu, h, lg)
 
     lo, hi = max(0.0, lag - step), min(top, lag + step)
     if hi <= lo:

@@ -701,13 +701,8 @@ def close_loop(
                 # finds those steps.
                 res = again(use, _screened=True, min_segment=min(k for k, _ in edges))
                 epochs = [float(t_u[k] if first else t_u[t_u.size - k]) for k, first in edges]
-                if all(
-                    any(
-                        e.name == "bias_step" and e.epoch is not None and abs(e.epoch - ep) < 1e-6
-                        for e in res.effects
-                    )
-                    for ep in epochs
-                ):
+                found = _step_epochs(res.effects)
+                if all(any(abs(f - ep) < 1e-6 for f in found) for ep in epochs):
                     return res
             res = again(later, _screened=True)
             decay = [e for e in res.effects if e.name == "exponential_drift" and e.tau]
@@ -717,26 +712,22 @@ def close_loop(
                 # amplitude came out 5.9e-10): analyse them with it
                 return again(use, _screened=True)
             tb = t_u[bad]
-            if any(
-                e.name == "bias_step"
-                and e.epoch is not None
-                and _within_window(t_u, e.epoch, float(tb.min()), float(tb.max()))
-                for e in res.effects
-            ):
+            reach = OUTLIER_WINDOW * float(np.median(np.diff(t_u)))
+
+            def near_step(effects: Sequence[Effect]) -> bool:  # within one screen window
+                return any(
+                    ep - reach <= tb[0] and tb[-1] <= ep + reach for ep in _step_epochs(effects)
+                )
+
+            if near_step(res.effects):
                 # The "outliers" may be a step's edge seen from a running-median window
                 # the record's end truncates (QA: a 3e-9 m/s² step 300 s before the end
                 # was found, and 60 samples after it screened as a burst; with 120
                 # screened the epoch was 22 s off).  Analysed with them when that gives
                 # the same effects (a real burst there would be fitted as more steps).
                 whole = again(use, _screened=True)
-                if sorted(e.name for e in whole.effects) == sorted(
-                    e.name for e in res.effects
-                ) and any(
-                    g.name == "bias_step"
-                    and g.epoch is not None
-                    and _within_window(t_u, g.epoch, float(tb.min()), float(tb.max()))
-                    for g in whole.effects
-                ):
+                same = sorted(e.name for e in whole.effects) == sorted(e.name for e in res.effects)
+                if same and near_step(whole.effects):
                     return whole
             note = {
                 "name": "outliers",
@@ -1191,15 +1182,9 @@ def _outliers(
     return bad
 
 
-def _sample_step(t: NDArray[np.float64]) -> float:
-    """Median sampling step [s] of the (sorted) times ``t``."""
-    return float(np.median(np.diff(t))) if t.size > 1 else 1.0
-
-
-def _within_window(t: NDArray[np.float64], epoch: float, first: float, last: float) -> bool:
-    """Whether the samples ``first..last`` [s] lie within one outlier window of ``epoch``."""
-    reach = OUTLIER_WINDOW * _sample_step(t)
-    return epoch - reach <= first and last <= epoch + reach
+def _step_epochs(effects: Sequence[Effect]) -> list[float]:
+    """Epochs [s] of the bias steps among ``effects``."""
+    return [e.epoch for e in effects if e.name == "bias_step" and e.epoch is not None]
 
 
 #: Fewest samples of a run at the record's start or end that :func:`_edge_runs` takes
@@ -1422,7 +1407,7 @@ class _Search:
         if prefer is not None and prefer not in coupled:
             # the other branch (see close_loop): this channel's coupling first
             first = [e for e in sig if e[2].name == "auxiliary" and e[2].channel == prefer]
-            sig = first + [e for e in sig if e not in first]
+            sig = first + [e for e in sig if e[2].name != "auxiliary" or e[2].channel != prefer]
             if first:
                 return self._add_single(basis, sig)
         top_sig = sig[0][1] if sig else 0.0
