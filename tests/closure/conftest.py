@@ -94,6 +94,7 @@ def make_platform(
     temp_lag: float = 0.0,
     step: tuple[float, float] | None = None,
     settle: tuple[float, float, float, str] | None = None,
+    line: tuple[float, float] | None = None,
 ) -> dict:
     """Rotating-platform data at 1 Hz, τ = 600 s, with optional undeclared effects.
 
@@ -102,7 +103,8 @@ def make_platform(
     walk.  ``"four"``: rests at 0, π/2, π, 3π/2, same signal, bias and noise model;
     ``angle_error = (rest angle, δ)``: the platform really rests at angle + δ there.
     ``temp_coupling`` [m/s²/K] on m_y (half on m_z) with ``temp_lag`` [s];
-    ``step = (epoch, size)`` on m_y; ``settle = (amp_y, amp_z, τ_s, "common"|"direction")``.
+    ``step = (epoch, size)`` on m_y; ``settle = (amp_y, amp_z, τ_s, "common"|"direction")``;
+    ``line = (amplitude, period)``: a sinusoidal bias term on m_y.
     """
     from accal.closure.demod import _rest_runs
     from accal.estimators.design import rest_mask
@@ -136,6 +138,8 @@ def make_platform(
         mz += 0.5 * temp_coupling * tl
     if step is not None:
         my += step[1] * (t >= step[0])
+    if line is not None:
+        my += line[0] * np.sin(2 * np.pi * t / line[1] + 0.7)
     if settle is not None:
         since, direction, _ = _rest_runs(th, rest_mask(th), 1.0)
         sh = np.where(np.isfinite(since), np.exp(-np.nan_to_num(since) / settle[2]), 0.0)
