@@ -162,6 +162,51 @@ def test_reference_removes_the_signal(simulated_day, tmp_path):
         assert df.loc[ax, "rms"] < 1e-9
 
 
+def test_reference_holes_are_left_out_not_bridged(simulated_day, tmp_path):
+    """A reference with a 600-sample hole: the data there leave the fit, with a warning.
+
+    One missing reference sample is still bridged (spacing 2 s <= 2.5 nominal steps).
+    QA: 96 missing samples were bridged by a straight line, silently (bias 2.5σ off).
+    """
+    from accal.io.writers import write_table
+    from accal.simulate.grace import simulate_grace_day
+
+    day, truth = simulated_day
+    sim = simulate_grace_day(
+        date="2005-01-01", satellite="A", seed=3, n_gaps=2, flagged_fraction=0.02
+    )
+    s = np.array(truth["scale_s"])
+    ref = pd.DataFrame(
+        {
+            "gps_time": sim.time,
+            **{f"lin_accl_{ax}": s[i] * sim.true[:, i] for i, ax in enumerate("xyz")},
+        }
+    )
+    full = write_table(ref, tmp_path / "ref.parquet")
+    keep = np.ones(len(ref), bool)
+    keep[30_000:30_600] = False  # a hole: the data at 30,000-30,599 (+ its edges' partners)
+    keep[50_000] = False  # one missing sample: bridged
+    holed = write_table(ref[keep].reset_index(drop=True), tmp_path / "holed.parquet")
+    for name, r in (("full", full), ("holed", holed)):
+        code, _, err = invoke(
+            "grace-bias", day, "--method", "lsq", "--reference", r, "--out", tmp_path / name
+        )
+        assert code == 0, err
+    a, b = (table(tmp_path / n).set_index("axis") for n in ("full", "holed"))
+    t = ref["gps_time"].to_numpy()
+    in_hole = (t > t[29_999]) & (t < t[30_600])
+    valid_there = int(np.count_nonzero(in_hole & sim.valid))
+    assert valid_there > 500
+    assert (a["n"] - b["n"]).tolist() == [valid_there] * 3
+    rep = json.loads(next((tmp_path / "holed").glob("*.report.json")).read_text())
+    msg = [w for w in rep["read_report"]["warnings"] if "holes" in w]
+    assert len(msg) == 1 and f"{valid_there} sample(s)" in msg[0] and "holed.parquet" in msg[0]
+    rep = json.loads(next((tmp_path / "full").glob("*.report.json")).read_text())
+    assert not any("holes" in w for w in rep["read_report"]["warnings"])
+    for ax in "xyz":
+        assert abs(a.loc[ax, "bias"] - b.loc[ax, "bias"]) < 2 * b.loc[ax, "bias_sigma"]
+
+
 def test_scale_tn02_applied_to_calibrated_series(tmp_path):
     code, _, err = invoke("grace-bias", GRACE_A, "--scale", "tn02", "--out", tmp_path)
     assert code == 0, err

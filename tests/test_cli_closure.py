@@ -269,6 +269,18 @@ def test_aux_and_truth_must_describe_the_same_data(tmp_path):
          "--out", str(tmp_path / "b"), "-q"],
     )  # fmt: skip
     assert ok.exit_code == 0, ok.stderr
+    assert "housekeeping of" not in ok.stderr
+    # QA: GRACE-A housekeeping was applied to GRACE-B data without a word
+    other = CliRunner().invoke(
+        main,
+        ["grace-bias", str(samples / "ACC1B_2003-09-14_B_00.asc"), "--close-loop", "--aux",
+         str(samples / "AHK1B_2003-09-14_A_00.asc"), "--out", str(tmp_path / "c")],
+    )  # fmt: skip
+    assert other.exit_code == 0, other.stderr
+    assert (
+        "--aux AHK1B_2003-09-14_A_00.asc is housekeeping of GRACE-A, the data are GRACE-B"
+        in other.stderr
+    )
     sim = tmp_path / "ACC1B_2005-01-01_B_02.asc"
     assert CliRunner().invoke(
         main, ["simulate", "grace", "--date", "2005-01-01", "--satellite", "B", "--duration",
@@ -519,3 +531,37 @@ def test_orbit_periodic_channel_with_a_decay_is_a_coupling_not_an_orbit_term(tmp
     bias = closure["y"]["estimates"]["wavelet"]["bias"]
     # measured: 8.8e-7 before, -2.5e-10 ± 8e-10 after
     assert abs(bias["true_error_after"]) < 3 * bias["sigma_after"]
+
+
+def test_no_effect_is_kept_above_the_level_once_its_pair_partner_is_gone(tmp_path):
+    """Every effect kept has a corrected p below alpha, also a survivor of a pair.
+
+    QA (real GRACE-FO C − D): a 1e-8 m/s² step on x just after a 15 s gap was accepted
+    as a pair with a quadratic (p 3.9e-4); the quadratic was then eliminated and the
+    step stayed, alone, at corrected p 0.19, and was removed from the calibrated
+    series.  Elimination now re-tests a lone survivor.
+    """
+    samples = Path(__file__).resolve().parents[1] / "data" / "samples"
+    lines = (samples / "ACT1B_2023-06-01_C_04.txt").read_text().splitlines()
+    end = lines.index("# End of YAML header")
+    out = lines[: end + 1]
+    for k, line in enumerate(lines[end + 1 :]):
+        if 30 <= k < 45:
+            continue  # a 15 s gap
+        f = line.split(" ")
+        if k >= 45:
+            f[2] = repr(float(f[2]) + 1e-8)
+        out.append(" ".join(f))
+    src = tmp_path / "ACT1B_2023-06-01_C_04.txt"
+    src.write_text("\n".join(out) + "\n")
+    res = CliRunner().invoke(
+        main,
+        ["grace-bias", str(src), "--close-loop", "--reference",
+         str(samples / "ACT1B_2023-06-01_D_04.txt"), "--out", str(tmp_path / "o"), "-q"],
+    )  # fmt: skip
+    assert res.exit_code == 0, res.stderr
+    rep = json.loads((tmp_path / "o" / "closure.json").read_text())
+    axes = rep["sources"][src.name]
+    assert set(axes) >= {"x", "y", "z"}
+    kept = [(ax, e["name"], e["significance"]) for ax, r in axes.items() for e in r["effects"]]
+    assert all(p < 0.01 for _, _, p in kept), kept

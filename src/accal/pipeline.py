@@ -278,8 +278,19 @@ def read_input(path: Path, opts: GraceBiasOptions) -> AccSeries:
     return read(path, format=fmt, **kwargs)
 
 
+#: Longest spacing of two reference samples that :func:`subtract_reference` interpolates
+#: across, in nominal reference steps: one missing sample is bridged, a longer hole is not.
+REFERENCE_MAX_BRIDGE = 2.5
+
+
 def subtract_reference(series: AccSeries, reference: AccSeries, ref_path: Path) -> AccSeries:
     """Return ``series`` minus ``reference`` interpolated onto its epochs.
+
+    Samples that fall in a hole of the reference (two reference samples more than
+    :data:`REFERENCE_MAX_BRIDGE` nominal steps apart) are not bridged: they are
+    marked invalid (left out of the fit) and a warning in the returned series'
+    report says how many.  QA: 96 missing samples of a 1 Hz reference were bridged
+    by a straight line and moved the bias by 8.7e-10 m/s² (2.5σ), silently.
 
     Raises
     ------
@@ -299,9 +310,23 @@ def subtract_reference(series: AccSeries, reference: AccSeries, ref_path: Path) 
             raise ValidationError(f"{ref_path}: reference has no axis {ax!r}")
         cols.append(series.axis(ax) - np.interp(t, tr, reference.axis(ax)))
     valid = series.valid & (np.interp(t, tr, reference.valid.astype(float)) > 0.999)
-    return series.replace(acc=np.column_stack(cols), valid=valid).with_history(
+    step = float(np.median(np.diff(tr)))
+    j = np.clip(np.searchsorted(tr, t, side="right"), 1, tr.size - 1)
+    lo, hi = tr[j - 1], tr[j]
+    hole = (hi - lo > REFERENCE_MAX_BRIDGE * step) & (t != lo) & (t != hi)
+    warnings = []
+    n_hole = int(np.count_nonzero(hole & valid))
+    if n_hole:
+        valid &= ~hole
+        warnings.append(
+            f"--reference {ref_path.name} has holes longer than "
+            f"{REFERENCE_MAX_BRIDGE * step:g} s: {n_hole} sample(s) of the data "
+            f"({n_hole / t.size:.1%}) fall in them and are left out of the fit"
+        )
+    out = series.replace(acc=np.column_stack(cols), valid=valid).with_history(
         f"accal {__version__}: subtract_reference({ref_path.name})"
     )
+    return _with_warnings(out, *warnings)
 
 
 def estimate(series: AccSeries, opts: GraceBiasOptions) -> dict[tuple[str, str], Any]:
@@ -424,6 +449,7 @@ def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutco
     if opts.reference is not None:
         ref = read_input(opts.reference, GraceBiasOptions(columns=opts.columns))
         fit_series = subtract_reference(series, ref, opts.reference)
+        series = series.replace(report=fit_series.report)  # with the reference's warnings
     scale = parse_scale(opts.scale, series.satellite)
     use = np.ones(len(series), bool) if opts.keep_flagged else fit_series.valid
     stem = output_stem(path)
@@ -588,7 +614,9 @@ def _effect_label(e: Any) -> str:
 AUX_MAX_BRIDGE = 600.0
 
 
-def load_aux(path: Path, t: np.ndarray) -> tuple[dict[str, np.ndarray], list[str]]:
+def load_aux(
+    path: Path, t: np.ndarray, satellite: str = ""
+) -> tuple[dict[str, np.ndarray], list[str]]:
     """Housekeeping channels of ``path`` interpolated onto ``t``, and what was left out.
 
     Holes inside a channel's span of up to :data:`AUX_MAX_BRIDGE` are bridged
@@ -597,10 +625,18 @@ def load_aux(path: Path, t: np.ndarray) -> tuple[dict[str, np.ndarray], list[str
     under 90 % of ``t``, or constant, are left out (named in the returned notes).
     A file that covers none of the data (another day's housekeeping) is an error;
     one that covers part of it but no channel 90 % gives a note and no channel.
+    Housekeeping of another satellite than ``satellite`` (the data's) is used, with
+    a note (QA: GRACE-A temperatures were applied to GRACE-B data without a word).
     """
     from accal.io.housekeeping import read_housekeeping
 
     hk = read_housekeeping(path)
+    notes = []
+    if hk.satellite and satellite and hk.satellite != satellite:
+        notes.append(
+            f"--aux {path.name} is housekeeping of {hk.satellite}, the data are {satellite}: "
+            "its channels are tested all the same"
+        )
     out = {}
     coverage = 0.0
     constant, short = [], []
@@ -627,7 +663,6 @@ def load_aux(path: Path, t: np.ndarray) -> tuple[dict[str, np.ndarray], list[str
             f"({gps_to_date(float(t[0]))} ... {gps_to_date(float(t[-1]))}, GPS days); "
             "give the housekeeping of the same day(s)"
         )
-    notes = []
     if not out and short:
         notes.append(
             f"--aux covers at most {coverage:.0%} of the data (holes over "
@@ -762,7 +797,7 @@ def close_the_loop(
     }
     warnings: list[str] = []
     if opts.aux is not None:
-        channels, warnings = load_aux(opts.aux, series.time)
+        channels, warnings = load_aux(opts.aux, series.time, series.satellite)
         aux.update(channels)
     # a coupling is only known where its channel is: the closure uses those samples
     covered = np.ones(len(series), bool)
@@ -1604,7 +1639,8 @@ def _diagnosis_input(
         s = np.asarray(scale, dtype=np.float64)[: len(series.axes)]
         raw = series.replace(acc=series.acc / s[None, :])
     ref_series = read_input(ref_path, GraceBiasOptions(columns=run.get("columns") or {}))
-    return subtract_reference(raw, ref_series, ref_path), ref_path, []
+    out = subtract_reference(raw, ref_series, ref_path)
+    return out, ref_path, list(out.report.warnings[len(raw.report.warnings) :])
 
 
 def diagnose_dir(
