@@ -1252,6 +1252,13 @@ def angle_offset(ctx: Context) -> list[Proposal]:
       is absorbed into the signal and bias: not identifiable (note).  It becomes
       identifiable when the pattern rests at three or more angles (e.g. 0, π/2, π,
       3π/2) and ``a`` is non-zero.
+    * ``channel="scale"``: a scale error of the angle, ``θ_true = (1 + s) θ`` (an
+      encoder gain), i.e. an offset ``s θ_g`` at every rest angle ``θ_g`` as logged:
+      regressor ``θ ∂m/∂θ`` at rest samples, coefficient ``s`` [rad/rad].  One
+      parameter where the per-rest offsets need one per angle (QA: on a four-rest
+      pattern a scale error of 1e-3 came out as the π/2 rest's offset alone, plus
+      settling shapes and lines, and a_Y got 4.5x worse).  Proposed with three or
+      more rest angles (with two it is the other rest's offset).
 
     Identifiability is decided numerically: the regressor must keep more than
     ``1e-6`` of its norm after projecting out the current design.  Each
@@ -1261,17 +1268,22 @@ def angle_offset(ctx: Context) -> list[Proposal]:
     g = info.dm_dtheta()
     out: list[Proposal] = []
     notes: list[Proposal] = []
+    at_rest = np.isfinite(info.rest_angle)
     variants = [("common", np.isfinite(g), None)]
-    angles = np.unique(info.rest_angle[ctx.use & np.isfinite(info.rest_angle)])
+    angles = np.unique(info.rest_angle[ctx.use & at_rest])
     if angles.size > 1:
         ref = angles[int(np.argmin(np.abs(np.angle(np.exp(1j * angles)))))]
         for a in angles:
             if a != ref:
                 variants.append((f"rest@{a:.4g}", info.rest_angle == a, float(a)))
+    if angles.size > 2:  # with two rest angles a scale is the other rest's offset
+        variants.append(("scale", at_rest, None))
     for channel, sel, ang in variants:
         if ctx.has_label(f"angle:{channel}"):
             continue
         col = np.where(sel, g, 0.0)
+        if channel == "scale":
+            col = np.where(sel, np.nan_to_num(info.theta) * g, 0.0)
         rel = _identifiable(ctx, col)
         if rel <= _IDENT_TOL:
             why = (
@@ -1298,7 +1310,11 @@ def angle_offset(ctx: Context) -> list[Proposal]:
                 col[:, None],
                 (f"angle:{channel}",),
                 1.0,
-                {"rest_angle": ang, "relative_norm_outside_base": rel, "units": "rad"},
+                {
+                    "rest_angle": ang,
+                    "relative_norm_outside_base": rel,
+                    "units": "rad/rad" if channel == "scale" else "rad",
+                },
             )
         )
     out = [Proposal(p.name, p.channel, p.columns, p.labels, float(len(out)), p.params) for p in out]
@@ -1346,7 +1362,16 @@ def intra_period_shape(ctx: Context) -> list[Proposal]:
     pw = ctx.joint_power(zu)
     j = int(np.argmax(np.where(ok, pw, -1.0)))
     kind, ts = keys[j]
-    cols, labs, axes = ctx.split(z[:, j : j + 1], (f"shape:{kind}",))
+    sign = info.direction if kind == "direction" else np.ones_like(phi)
+    ts = _refine_settle(ctx, phi, rest, sign, ts, sorted(taus))
+    e = np.where(rest, np.exp(-np.where(rest, phi, 0.0) / ts), 0.0) * sign
+    cols, labs, axes = ctx.split(e[:, None], (f"shape:{kind}",))
+
+    def jacobian() -> list[tuple[str, NDArray[np.float64]]]:
+        # ∂ exp(−φ/τ_s) / ∂ ln τ_s = (φ/τ_s) exp(−φ/τ_s)
+        d = np.where(rest, np.where(rest, phi, 0.0) / ts, 0.0) * e
+        return [("tau", ctx.split(d[:, None], (f"shape:{kind}",))[0])]
+
     return [
         Proposal(
             "intra_period_shape",
@@ -1356,8 +1381,44 @@ def intra_period_shape(ctx: Context) -> list[Proposal]:
             float(ok.sum()),
             {"tau": ts},
             axes=axes,
+            jacobian=jacobian,
         )
     ]
+
+
+def _refine_settle(
+    ctx: Context,
+    phi: NDArray[np.float64],
+    rest: NDArray[np.bool_],
+    sign: NDArray[np.float64],
+    ts: float,
+    grid: list[float],
+) -> float:
+    """The settling time constant of most explained power between the grid's neighbours.
+
+    Bounded search on ln τ_s (to 1e-4), between the neighbouring grid values (a
+    third / three times the end values).  On the grid alone a 60 s transient of
+    2e-9 m/s² came out at 50 s with two lines, a step and a second shape, and
+    a_Y's error stayed at 1.4e-10 m/s² (noise 4e-12).
+    """
+    from scipy.optimize import minimize_scalar
+
+    k = grid.index(ts)
+    lo = grid[k - 1] if k > 0 else ts / 3.0
+    hi = grid[k + 1] if k + 1 < len(grid) else 3.0 * ts
+    ph = np.where(rest, phi, 0.0)[ctx.use]
+    sg = np.where(rest, sign, 0.0)[ctx.use]
+
+    def neg_power(log_ts: float) -> float:
+        col = np.exp(-ph / np.exp(log_ts)) * sg
+        return -float(ctx.joint_power(col[:, None])[0])
+
+    res = minimize_scalar(
+        neg_power, bounds=(np.log(lo), np.log(hi)), method="bounded", options={"xatol": 1e-4}
+    )
+    if not res.success or -res.fun < -neg_power(np.log(ts)):
+        return ts
+    return float(np.exp(res.x))
 
 
 #: Names accepted in ``close_loop(candidates=...)``.

@@ -853,12 +853,20 @@ def close_loop(
         # (gaps in the samples, where the channel is unknown: not rotation masks or
         # flagged samples, at which the channel is known; QA: with every rotation mask
         # taken for a gap a demod lag cap of 1080 s left nothing to re-search)
-        tu_ = np.unique(t_all)
+        tu_, first_ = np.unique(t_all, return_index=True)
+        ends = []
         if tu_.size > 2:
             dtu = np.diff(tu_)
-            for k in np.flatnonzero(dtu > 5.0 * np.median(dtu)):
-                g_end = tu_[k + 1]
-                later &= ~((t_all >= g_end) & (t_all < g_end + lead))
+            ends += list(tu_[1:][dtu > 5.0 * np.median(dtu)])
+            # and after every hole of a coupled channel (NaN: e.g. the grid points of a
+            # resampled run's gap), which the search bridged (QA: lag 500 s after a
+            # 1000 s gap of a resampled demod run: 4 false steps, a_Y z +152)
+            for ch in {f.prop.channel for f in search.found if f.prop.name == "auxiliary"}:
+                known = np.isfinite(aux_all[ch][first_]) if ch in aux_all else None
+                if known is not None and known.any() and not known.all():
+                    ends += list(tu_[1:][known[1:] & ~known[:-1]])
+        for g_end in ends:
+            later &= ~((t_all >= g_end) & (t_all < g_end + lead))
         if lead >= TAU_MIN_STEPS * step and int(later.sum()) >= MIN_SAMPLES:
             # the same lags as the first search (the shorter span would lower the cap
             # below the lag found: QA, 2000 s on a half day with gaps, capped at 1542 s)
@@ -1958,11 +1966,13 @@ def _effects(
             kw["frequency"] = prop.params["frequency"]
         elif prop.name == "bias_step":
             kw["epoch"] = prop.params["epoch"]
-        elif prop.name in ("auxiliary", "exponential_drift"):
+        elif prop.name in ("auxiliary", "exponential_drift", "intra_period_shape"):
             if prop.name == "auxiliary":
                 kw["lag"] = prop.params["lag"]
-            else:
+            elif prop.name == "exponential_drift":
                 details["t0"] = t0
+            else:
+                details["tau_searched"] = prop.params["tau"]
             kw["tau"] = prop.params["tau"]
             n_e = int(prop.params.get("jacobian", 0))
             i = 0 if axis is None else prop.axes.index(axis)
@@ -1982,9 +1992,6 @@ def _effects(
                 else:  # a lag searched from 0 up: the step stays there
                     kw[par] = max(float(prop.params[par]) + beta / amp, 0.0)
                     details[f"{par}_sigma"] = s_beta / abs(amp)
-        elif prop.name == "intra_period_shape":
-            kw["tau"] = prop.params["tau"]
-            details.update(prop.params)
         else:  # angle_offset and caller-supplied builders
             details.update(prop.params)
         out.append(
