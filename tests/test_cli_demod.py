@@ -646,6 +646,30 @@ def test_demod_close_loop_gls_summary_and_rerun_without_it(undeclared_run, tmp_p
     assert "model" not in pd.read_parquet(out / "ls" / "periods.parquet").columns
 
 
+def test_demod_gls_close_loop_with_nothing_found_keeps_the_gls_values(tmp_path):
+    """QA: with ``--method gls --close-loop`` and no effect found, the closure's LS
+    values were written as ``a_Y`` (0.6σ from the GLS ``a_Y_before``), with a change
+    whose σ was 0."""
+    from accal.pipeline_demod import write_simulated_gap
+
+    run = tmp_path / "clean.parquet"
+    write_simulated_gap(run, days=0.25, tau=600.0, mask=200.0, seed=3)
+    out = tmp_path / "o"
+    args = ("demod", run, "--tau", 600, "--mask", 200, "--method", "gls", "--out")
+    code, _, err = invoke(*args, out, "--close-loop", "-q")
+    assert code == 0, err
+    closure = json.loads((out / "closure.json").read_text())["sources"]["clean.parquet"]
+    assert closure["effects"] == [] and closure["method"] == "gls"
+    per = pd.read_parquet(out / "periods.parquet")
+    assert invoke(*args, tmp_path / "plain", "-q")[0] == 0
+    plain = pd.read_parquet(tmp_path / "plain" / "periods.parquet")
+    for ax in "YZ":
+        np.testing.assert_array_equal(per[f"a_{ax}"], plain[f"a_{ax}"])
+        np.testing.assert_array_equal(per[f"a_{ax}"], per[f"a_{ax}_before"])
+        np.testing.assert_array_equal(per[f"sigma_{ax}"], plain[f"sigma_{ax}"])
+        assert (per[f"change_{ax}"] == 0).all()
+
+
 def test_tail_shorter_than_a_period_is_a_warning(tmp_path):
     """QA: a 900 s run with --tau 600 said "1/1 periods" and left its last 300 s out
     without a word."""

@@ -1163,7 +1163,7 @@ def close_run(
         noise_psd=psd if psd is not None else load_psd(opts.psd),
     )
     res, periods = dc
-    if opts.method == "gls" and res.effects:
+    if opts.method == "gls":  # also with no effect: "before" and "after" are GLS values
         periods = _gls_after(res, periods, time, cols, theta, valid, bias_aux, opts, psd)
     entry = res.to_dict()
     entry["method"] = opts.method
@@ -1249,7 +1249,9 @@ def _gls_after(
 
     # declared (as the periods rows have it) and with the effects subtracted
     before = gls(cols["m_y"], cols["m_z"])
-    after = gls(cols["m_y"] - model[0::2], cols["m_z"] - model[1::2])
+    # nothing found: the declared GLS values (QA: the closure's LS values were written
+    # as "after", 0.6σ from "before", with a change of σ 0)
+    after = gls(cols["m_y"] - model[0::2], cols["m_z"] - model[1::2]) if k else before
     new: dict[str, np.ndarray] = {}
     for kind, r in (("before", before), ("after", after)):
         where = {int(p): i for i, p in enumerate(r.period_index)}
