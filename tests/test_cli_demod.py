@@ -670,6 +670,32 @@ def test_demod_gls_close_loop_with_nothing_found_keeps_the_gls_values(tmp_path):
         assert (per[f"change_{ax}"] == 0).all()
 
 
+def test_demod_change_sigma_of_periods_in_a_lagged_couplings_start(tmp_path):
+    """QA: with a 500 s lagged coupling the closure analyses period 0 without its first
+    500 s, but its change was written against the declared value of all its samples
+    with the closure's σ of another difference: change_Z -2.6e-11 ± 1.3e-12 (20σ) on
+    an axis where nothing was injected."""
+    from accal.pipeline_demod import write_simulated_gap
+
+    run = tmp_path / "lag.parquet"
+    write_simulated_gap(run, days=0.25, tau=600.0, mask=200.0, seed=5)
+    df = pd.read_parquet(run)
+    t, temp = df["time"].to_numpy(), df["temperature"].to_numpy()
+    df["m_y"] += 2e-8 * (np.interp(t - 500.0, t, temp) - temp.mean())
+    df.to_parquet(run)
+    out = tmp_path / "o"
+    code, _, err = invoke("demod", run, "--tau", 600, "--mask", 200, "--close-loop", "--out", out)
+    assert code == 0, err
+    closure = json.loads((out / "closure.json").read_text())["sources"]["lag.parquet"]
+    lags = [e["lag"] for e in closure["effects"] if e["name"] == "auxiliary"]
+    assert len(lags) == 1 and abs(lags[0] - 500.0) < 5.0
+    per = pd.read_parquet(out / "periods.parquet")
+    ratio = (per["change_Z"] / per["sigma_change_Z"]).abs()
+    # measured: max 1.3 over the periods (period 0: 20 before)
+    assert float(ratio.max()) < 4.5, per.loc[ratio.idxmax(), ["period", "change_Z"]].tolist()
+    np.testing.assert_allclose(per["change_Z"], per["a_Z"] - per["a_Z_before"], rtol=0, atol=0)
+
+
 def test_tail_shorter_than_a_period_is_a_warning(tmp_path):
     """QA: a 900 s run with --tau 600 said "1/1 periods" and left its last 300 s out
     without a word."""
