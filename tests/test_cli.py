@@ -205,6 +205,23 @@ def test_reference_holes_are_left_out_not_bridged(simulated_day, tmp_path):
     assert not any("holes" in w for w in rep["read_report"]["warnings"])
     for ax in "xyz":
         assert abs(a.loc[ax, "bias"] - b.loc[ax, "bias"]) < 2 * b.loc[ax, "bias_sigma"]
+    # a reference sampled every 10 s is interpolated (no hole), with a word
+    t10 = np.arange(t[0], t[-1] + 10.0, 10.0)  # a regular 10 s grid over the data's span
+    sparse = write_table(
+        {"gps_time": t10, **{c: np.interp(t10, t, ref[c]) for c in ref.columns[1:]}},
+        tmp_path / "sparse.parquet",
+    )
+    code, _, err = invoke(
+        "grace-bias", day, "--method", "lsq", "--reference", sparse, "--out", tmp_path / "s"
+    )
+    assert code == 0, err
+    assert (table(tmp_path / "s").set_index("axis")["n"] == a["n"]).all()
+    rep = json.loads(next((tmp_path / "s").glob("*.report.json")).read_text())
+    warns = rep["read_report"]["warnings"]
+    assert not any("holes" in w for w in warns)
+    assert any(
+        "sparse.parquet is sampled every 10 s (median), the data every 1 s" in w for w in warns
+    )
 
 
 def test_scale_tn02_applied_to_calibrated_series(tmp_path):
