@@ -133,12 +133,10 @@ def test_simulated_day_recovers_truth_within_sigma(simulated_day, tmp_path):
         assert row["n_gaps"] >= 1
 
 
-def test_reference_removes_the_signal(simulated_day, tmp_path):
-    """--reference with the true (scaled) signal: the fit sees only bias + drift + noise."""
-    from accal.io.writers import write_table
+def _true_reference(truth: dict) -> tuple[pd.DataFrame, object]:
+    """The simulated day's true (scaled) signal as a reference table, and the simulation."""
     from accal.simulate.grace import simulate_grace_day
 
-    day, truth = simulated_day
     sim = simulate_grace_day(
         date="2005-01-01", satellite="A", seed=3, n_gaps=2, flagged_fraction=0.02
     )
@@ -149,6 +147,15 @@ def test_reference_removes_the_signal(simulated_day, tmp_path):
             **{f"lin_accl_{ax}": s[i] * sim.true[:, i] for i, ax in enumerate("xyz")},
         }
     )
+    return ref, sim
+
+
+def test_reference_removes_the_signal(simulated_day, tmp_path):
+    """--reference with the true (scaled) signal: the fit sees only bias + drift + noise."""
+    from accal.io.writers import write_table
+
+    day, truth = simulated_day
+    ref, sim = _true_reference(truth)
     ref_path = write_table(ref, tmp_path / "ref.parquet")
     code, _, err = invoke(
         "grace-bias", day, "--method", "lsq", "--reference", ref_path, "--out", tmp_path / "o"
@@ -169,19 +176,9 @@ def test_reference_holes_are_left_out_not_bridged(simulated_day, tmp_path):
     QA: 96 missing samples were bridged by a straight line, silently (bias 2.5σ off).
     """
     from accal.io.writers import write_table
-    from accal.simulate.grace import simulate_grace_day
 
     day, truth = simulated_day
-    sim = simulate_grace_day(
-        date="2005-01-01", satellite="A", seed=3, n_gaps=2, flagged_fraction=0.02
-    )
-    s = np.array(truth["scale_s"])
-    ref = pd.DataFrame(
-        {
-            "gps_time": sim.time,
-            **{f"lin_accl_{ax}": s[i] * sim.true[:, i] for i, ax in enumerate("xyz")},
-        }
-    )
+    ref, sim = _true_reference(truth)
     full = write_table(ref, tmp_path / "ref.parquet")
     keep = np.ones(len(ref), bool)
     keep[30_000:30_600] = False  # a hole: the data at 30,000-30,599 (+ its edges' partners)

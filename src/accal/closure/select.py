@@ -918,11 +918,7 @@ def close_loop(
     # reported at p 1e-16 to 1e-123 from the fit with τ held; a_Z error 9.0e-12 instead
     # of 5.8e-12)
     while len(final) > 1 and any(a is not b for a, b in zip(final, search.found, strict=True)):
-        ps = []
-        for i, f in enumerate(final):
-            b_o, f_o, l_o = search.state([g for j, g in enumerate(final) if j != i])
-            w = search.test(b_o, f_o, l_o, f.prop.columns)
-            ps.append(1.0 if w is None else search._padj(w, f.prop.multiplicity))
+        ps = search.final_p(final)
         worst = int(np.argmax(ps))
         if ps[worst] < alpha:
             break
@@ -1745,11 +1741,15 @@ class _Search:
         self.removed[n_removed:] = [f for f in self.removed[n_removed:] if id(f) in ids]
         return True
 
-    def final_p(self) -> list[float]:
-        """Corrected p-value of every effect given all the others (the reported one)."""
+    def final_p(self, found: Sequence[_Found] | None = None) -> list[float]:
+        """Corrected p-value of every effect given all the others (the reported one).
+
+        ``found``: those effects instead of :attr:`found` (e.g. with their Jacobians).
+        """
+        found = self.found if found is None else found
         out = []
-        for i, f in enumerate(self.found):
-            others = [g for j, g in enumerate(self.found) if j != i]
+        for i, f in enumerate(found):
+            others = [g for j, g in enumerate(found) if j != i]
             basis, fit, lev = self.state(others)
             w = self.test(basis, fit, lev, f.prop.columns)
             out.append(1.0 if w is None else self._padj(w, f.prop.multiplicity))
