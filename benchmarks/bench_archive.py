@@ -7,7 +7,8 @@ most of them), then measures, in this run:
 * the baseline: pyarrow's raw CSV parse of the same bytes (one process, files in
   sequence, pyarrow's own threads on) — MB/s;
 * rounds (``--repeats``, default 3) of baseline, 1 worker, 2 workers, baseline,
-  interleaved; the best time of each is reported (and every round's); every timed
+  interleaved; the best time of each is reported (and every round's), and the
+  2-worker ratio of each round (its faster baseline against its run); every timed
   run starts with the archive in the page cache (read once, untimed, just before),
   so both sides parse the same bytes from memory;
 * ``accal grace-bias DIR -r -j W`` end to end (a fresh process: import, read,
@@ -180,6 +181,14 @@ def main() -> None:
                 f"| {w} | {wall:.1f} ({', '.join(f'{x:.1f}' for x in walls[w])}) | {rate:.1f} "
                 f"| {len(files) / wall:.2f} | {rate / base_rate:.2f} | {rss[w]:.0f} | {proj:.1f} min |"
             )
+        # Paired per round: the round's faster baseline against the round's 2-worker
+        # run, measured seconds apart (the headline above pits the best of 2R baseline
+        # rounds against the best of R accal runs, which favours the baseline).
+        paired = [min(base[2 * r], base[2 * r + 1]) / walls[2][r] for r in range(args.repeats)]
+        print(
+            "\n2 workers, ratio per round (the round's faster baseline / its run): "
+            f"{', '.join(f'{x:.2f}' for x in paired)}; median {sorted(paired)[len(paired) // 2]:.2f}"
+        )
         # re-run: all current
         t1 = time.perf_counter()
         subprocess.run(
