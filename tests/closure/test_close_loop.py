@@ -155,6 +155,70 @@ def test_orbit_periodic_found_with_estimated_frequency(sim):
     assert res.rms_after < res.rms_before
 
 
+@pytest.mark.parametrize("period", [ORBIT, 3000.0])
+def test_periodic_term_with_growing_amplitude_is_one_modulated_effect(sim, period):
+    """``A(t)·sin(2πt/P)`` with ``A`` growing 0 -> 4e-9 m/s² over the day.
+
+    QA: at the orbit period it came out as two sinusoids 0.0007 DFT bins apart, 9e-7
+    m/s² each in opposite phase (227x the true peak); at 3000 s as "no effect found"
+    (its power, spread over the neighbouring frequencies, counted as noise).  Now it
+    is one periodic effect with a linearly changing amplitude: 2e-9 m/s² at mid-record
+    and 4e-9/span m/s² per s.
+    """
+    d = sim(21, **DAY)
+    tau = d["t"] - d["t"][0]
+    span = float(d["t"][d["valid"]][-1] - d["t"][d["valid"]][0])
+    d["y"] = d["y"] + 4e-9 * tau / tau[-1] * np.sin(2 * np.pi * tau / period + 0.7)
+    res = _run(d)
+    per = [e for e in res.effects if e.name == "periodic"]
+    assert len(per) == 1, [(e.channel, e.frequency, e.coefficient) for e in per]
+    e = per[0]
+    assert e.frequency == pytest.approx(1 / period, rel=2e-3)
+    mid = 4e-9 * (0.5 * span + float(d["t"][d["valid"]][0] - d["t"][0])) / tau[-1]
+    assert abs(e.coefficient - mid) < 3 * e.sigma + 0.01 * mid
+    rate = 4e-9 / tau[-1]
+    assert (
+        abs(e.details["amplitude_rate"] - rate)
+        < 3 * e.details["amplitude_rate_sigma"] + 0.02 * rate
+    )
+    assert res.rms_after < 0.2 * res.rms_before
+
+
+def test_constant_amplitude_line_is_not_modulated(sim):
+    """A line of constant amplitude stays a plain sinusoid (no amplitude rate)."""
+    d = sim(22, **DAY)
+    tau = d["t"] - d["t"][0]
+    d["y"] = d["y"] + 3e-9 * np.sin(2 * np.pi * tau / 3000.0 + 0.2)
+    res = _run(d)
+    per = [e for e in res.effects if e.name == "periodic"]
+    assert len(per) == 1 and "amplitude_rate" not in per[0].details
+    assert abs(per[0].coefficient - 3e-9) < 3 * per[0].sigma + 0.01 * 3e-9
+
+
+def test_quadratic_temperature_coupling_found_after_the_linear_one(sim):
+    """``c1·T + c2·(T − 20 K)²``: the channel's square (about its mean) is offered
+    once the linear coupling is in the model; both are found.
+
+    With ``c2`` = 2e-9 m/s²/K² (the square's part 3x the linear part's swing) the
+    linear coupling alone is not significant and nothing is found (smooth structure
+    is reported unexplained): see docs/closure.md.
+    """
+    d = sim(23, **DAY)
+    temp = d["temp"]
+    d["y"] = d["y"] + 3e-9 * temp + 1e-9 * (temp - 20.0) ** 2
+    res = _run(d)
+    chans = {e.channel: e for e in res.effects if e.name == "auxiliary"}
+    assert set(chans) == {"temp", "temp^2"}, [(e.name, e.channel) for e in res.effects]
+    assert len(res.effects) == 2
+    assert abs(chans["temp^2"].coefficient - 1e-9) < 3 * chans["temp^2"].sigma + 0.01 * 1e-9
+    # the linear coefficient is the slope at the channel's mean: c1 + 2·c2·(mean − 20 K)
+    slope = 3e-9 + 2e-9 * (float(np.mean(temp)) - 20.0)  # the mean of all samples
+    assert abs(chans["temp"].coefficient - slope) < 3 * chans["temp"].sigma + 0.02 * 3e-9
+    err = _err(res, d)
+    # measured: drift error 1.6e-14 -> 5e-17
+    assert abs(err["drift"]["after"]) < 0.05 * abs(err["drift"]["before"])
+
+
 def test_temperature_coupling_with_lag(sim):
     d = sim(5, temp_coupling=3e-9, temp_lag=600.0, **DAY)
     res = _run(d)

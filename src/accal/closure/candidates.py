@@ -828,11 +828,17 @@ def periodic(ctx: Context) -> list[Proposal]:
         # shorter than a revolution, once/twice-per-revolution terms are a smooth curve
         # the polynomial base already has: a 100 s record "found" a 1e-3 m/s² orbit term
         long_enough = ctx.span >= ctx.orbit_period
+        harm: list[int] = []
         if long_enough and not _excluded(f0, ctx, 0.05 * f0) and 2 * f0 < freqs[-1]:
             trial = f0 * (1 + np.linspace(-0.03, 0.03, 41))
             pw = _line_power(tau, r, trial, masks) + _line_power(tau, r, 2 * trial, masks)
             f = float(trial[int(np.argmax(pw))])
             harm = orbit_harmonics(f, n_max)
+            # harmonics next to a line of the model stay out (nearly collinear columns)
+            harm = [
+                n for n in harm if not any(abs(n * f - g) <= 1.5 * df for g in ctx.excluded_freqs)
+            ]
+        if harm:
             # no lines are kept off this trial's harmonics: a line competes with it
             # (QA: a 3e-9 m/s² line at 2500 s pulled this f 2.9 % high, 1.4 bins
             # from the line's 2f, the line was kept off, the orbit term had p = 1,
@@ -870,6 +876,15 @@ def periodic(ctx: Context) -> list[Proposal]:
         period = _block_period(ctx)
         if period is not None:
             f = _unalias(ctx, tau, f, period, df, fmax)
+        taken = list(ctx.excluded_freqs)
+        if ctx.orbit_frequency is not None:
+            taken += [n * ctx.orbit_frequency for n in range(1, n_max + 1)]
+        if any(abs(f - g) <= 1.5 * df for g in taken):
+            # refined back next to a sinusoid of the model: the two columns would be
+            # nearly collinear, and their fit two huge cancelling amplitudes (QA: a line
+            # 0.0007 bins from the orbit term, 9e-7 m/s² each, for a 4e-9 m/s² term
+            # whose amplitude grew over the day)
+            return out
         cols, labs, axes = ctx.split(_harmonic_cols(tau_all, [f]), (f"cos@{f!r}", f"sin@{f!r}"))
         out.insert(
             0,
@@ -899,8 +914,16 @@ def _first_order(x: NDArray[np.float64], t: NDArray[np.float64], tau: float) -> 
     return y
 
 
+SQUARED = "^2"
+"""Suffix of a channel's square (about its mean) in the ``auxiliary`` proposals."""
+
+
 def auxiliary(ctx: Context) -> list[Proposal]:
     """Linear coupling to each auxiliary channel, with a lag search and a first-order response.
+
+    A channel already coupled is offered again as its square about its mean,
+    ``(x − mean x)²`` (channel ``NAME^2``, coefficient in m/s² per unit²), searched
+    alike: with the linear term, a quadratic dependence on the channel.
 
     For channel ``x`` the regressor is ``h_τ * x`` evaluated at ``t − lag`` (``h_τ``:
     first-order low-pass with time constant ``τ``; ``τ = 0``: no filter), searched
@@ -919,9 +942,21 @@ def auxiliary(ctx: Context) -> list[Proposal]:
     lags = np.linspace(0.0, top_lag, int(ctx.options.get("n_lags", 31)))
     taus = tuple(ctx.options.get("aux_taus", (0.0, 300.0, 1000.0, 3000.0)))
     z = np.empty((lags.size, t_u.size))  # lagged regressors on the used samples, row by row
+    channels = []
     for name, x in ctx.aux.items():
-        if ctx.has_label(f"aux:{name}"):
-            continue
+        if not ctx.has_label(f"aux:{name}"):
+            channels.append((name, x))
+        elif not ctx.has_label(f"aux:{name}{SQUARED}"):
+            # once coupled linearly, the square of the channel (about its mean): a
+            # coupling c1·x + c2·x² (QA: demod with c2 = 2e-6 m/s²/K² on a platform
+            # temperature, fitted as c1 plus three steps, a line and a shape; the a_Y
+            # error grew from std z 12 to 37).  Offered from the start, the square
+            # doubled the closure's time and, about the middle of the channel's range
+            # (linear part small), did not help: a settling shape still took the
+            # linear part
+            x = np.asarray(x, dtype=np.float64)
+            channels.append((f"{name}{SQUARED}", (x - np.nanmean(x)) ** 2))
+    for name, x in channels:
         x = np.asarray(x, dtype=np.float64)[first]
         good = np.isfinite(x)
         if good.sum() < 10 or np.ptp(x[good]) == 0:

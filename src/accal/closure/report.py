@@ -203,6 +203,13 @@ def to_markdown(
             )
             if e.tau is not None and e.details.get("tau_sigma") and where.startswith("τ"):
                 where += f" ± {_fmt(e.details['tau_sigma'])}"
+            elif e.name == "periodic" and e.details.get("amplitude_rate") is not None:
+                # amplitude at mid-record, changing linearly (see _Search._modulated)
+                where += (
+                    f" (period {1.0 / e.frequency:.6g} s), amplitude changing by "
+                    f"{_fmt(e.details['amplitude_rate'])} ± "
+                    f"{_fmt(e.details['amplitude_rate_sigma'])} m/s² per s"
+                )
             elif e.name == "auxiliary":  # the coupling's lag and low-pass, with their σ
                 if e.details.get("lag_sigma"):
                     where += f" ± {_fmt(e.details['lag_sigma'])}"

@@ -1422,7 +1422,17 @@ class _Search:
                     "not identifiable: in the span of the model",
                 )
                 continue
-            tested.append((self._padj(w, prop.multiplicity), float(w.gamma @ w.gamma), prop, w, bi))
+            p_adj = self._padj(w, prop.multiplicity)
+            mod = self._modulated(prop) if p_adj >= self.alpha else None
+            wm = None if mod is None else self.test(basis, fit, lev, mod.columns)
+            if wm is not None and self._padj(wm, mod.multiplicity) < self.alpha:
+                # a periodic term whose amplitude changes over the record spreads its
+                # power over the neighbouring frequencies, which the noise estimate
+                # counts as noise: as it stands it is not significant (QA: a once-per-
+                # revolution term growing 0 -> 4e-9 m/s²; a 3000 s line growing alike
+                # was "no effect found")
+                prop, w, p_adj = mod, wm, self._padj(wm, mod.multiplicity)
+            tested.append((p_adj, float(w.gamma @ w.gamma), prop, w, bi))
         sig = sorted((e for e in tested if e[0] < self.alpha), key=lambda e: -e[1])
         coupled = {f.prop.channel for f in self.found if f.prop.name == "auxiliary"}
         prefer = self.options.get("_prefer")
@@ -1460,7 +1470,34 @@ class _Search:
         coupled = {f.prop.channel for f in self.found if f.prop.name == "auxiliary"}
         for j, (p_adj, _, prop, w, bi) in enumerate(sig):
             info = {"stat": w.stat, "dof": w.dof, "multiplicity": prop.multiplicity}
-            if not self._consistent(basis, prop, p_adj, info):
+            mod = self._modulated(prop)
+            checked = False
+            if mod is not None and prop.check_consistency:
+                # a periodic term whose amplitude changes over the record fails the
+                # thirds test as it stands; with a linear amplitude change it may pass
+                # (QA: a once-per-revolution term growing 0 -> 4e-9 m/s² over a day
+                # was fitted as two anti-phased sinusoids 0.0007 bins apart, 9e-7 each)
+                ok, cinfo = self._thirds(basis, prop)
+                if ok:
+                    info.update(cinfo)
+                    checked = True
+                else:
+                    _, fit, lev = self.state(self.found)
+                    wm = self.test(basis, fit, lev, mod.columns)
+                    pm = 1.0 if wm is None else self._padj(wm, mod.multiplicity)
+                    if pm < self.alpha:
+                        ok_m, minfo = self._thirds(basis, mod)
+                        if ok_m:
+                            p_adj, prop, checked = pm, mod, True
+                            info = {
+                                "stat": wm.stat,
+                                "dof": wm.dof,
+                                "multiplicity": mod.multiplicity,
+                            }
+                            info.update(
+                                {**minfo, "plain_segment_deviation": cinfo.get("segment_deviation")}
+                            )
+            if not checked and not self._consistent(basis, prop, p_adj, info):
                 continue
             if prop.name != "auxiliary":
                 for e in sig[j + 1 :]:
@@ -1472,10 +1509,40 @@ class _Search:
             return True
         return False
 
-    def _consistent(self, basis: Basis, prop: Proposal, p_adj: float, info) -> bool:
-        if not prop.check_consistency:
-            return True
-        ok, cinfo = _consistency(
+    def _modulated(self, prop: Proposal) -> Proposal | None:
+        """A periodic proposal with a linearly changing amplitude of its fundamental.
+
+        ``A(t)·cos(2πft − φ)`` with ``A`` linear in ``t`` is, in the columns,
+        ``cos, sin`` of the fundamental plus ``u·cos, u·sin`` with
+        ``u = (t − t_mid)/span`` (``t_mid``: the middle of the used samples): the
+        reported amplitude is the one at ``t_mid`` and the rate of change is
+        ``hypot`` of the last two coefficients over the span [m/s² per s].  Only
+        for one data channel, and not for a proposal that already has them.
+        """
+        if (
+            prop.name != "periodic"
+            or prop.axes is not None
+            or prop.params.get("modulated")
+            or prop.columns.shape[1] < 2
+            or self.span <= 0
+        ):
+            return None
+        f = float(prop.params["frequency"])
+        u = (self.t_all - (self.t0 + 0.5 * self.span)) / self.span
+        cols = np.column_stack([prop.columns, prop.columns[:, :2] * u[:, None]])
+        return Proposal(
+            prop.name,
+            prop.channel,
+            cols,
+            (*prop.labels, f"ucos@{f!r}", f"usin@{f!r}"),
+            2.0 * prop.multiplicity,  # a second model of the same family member
+            {**prop.params, "modulated": True},
+            prop.check_consistency,
+            None,
+        )
+
+    def _thirds(self, basis: Basis, prop: Proposal) -> tuple[bool, dict[str, Any]]:
+        return _consistency(
             self.grid,
             basis,
             prop.columns[self.use],
@@ -1483,6 +1550,11 @@ class _Search:
             self.t_all[self.use],
             self.leverage,
         )
+
+    def _consistent(self, basis: Basis, prop: Proposal, p_adj: float, info) -> bool:
+        if not prop.check_consistency:
+            return True
+        ok, cinfo = self._thirds(basis, prop)
         info.update(cinfo)
         if ok:
             return True
@@ -1704,9 +1776,17 @@ class _Search:
         basis, fit, lev = self.state(before)
         ctx = self.context(before, basis, fit, lev)
         trial = list(before)
+        df = 1.0 / (self.grid.size * self.grid.step)
         for prop, bi in self.propose(ctx):
             b, *_ = self.state(trial)
             if b.complement(prop.columns[self.use]).shape[1] == 0:
+                continue
+            if any(
+                abs(f - g) <= 1.5 * df for f in _freqs(prop) for x in trial for g in _freqs(x.prop)
+            ):
+                # two sinusoids this close are nearly collinear: jointly they fit a
+                # changing amplitude with two huge cancelling terms (QA: 9e-7 m/s² each
+                # for a once-per-revolution term growing to 4e-9 m/s²)
                 continue
             trial.append(_Found(_independent(b, prop, self.use), 1.0, {"stage": "backward"}, bi))
         if len(trial) == len(before):
@@ -1821,6 +1901,14 @@ def _same_member(a: Proposal, b: Proposal, use: NDArray[np.bool_], tol: float = 
     return bool(np.all(left <= tol * np.maximum(np.linalg.norm(za, axis=0), 1e-300)))
 
 
+def _freqs(prop: Proposal) -> list[float]:
+    """The frequencies of a periodic proposal's sinusoids [Hz] (none for others)."""
+    if prop.name != "periodic" or prop.params.get("frequency") is None:
+        return []
+    f = float(prop.params["frequency"])
+    return [n * f for n in prop.params.get("harmonics", (1,))]
+
+
 def _key(prop: Proposal) -> tuple:
     """What identifies a family member (lag, epoch, frequency, ...)."""
     return tuple(sorted((k, repr(v)) for k, v in prop.params.items()))
@@ -1881,6 +1969,18 @@ def _main_coefficient(prop: Proposal, c, cc, span: float) -> tuple[float, float,
         )
     if prop.name == "periodic":
         amps, phases, amp_sig = [], [], []
+        mod: dict[str, Any] = {}
+        if prop.params.get("modulated") and prop.labels[-1].startswith("usin@"):
+            # the last two columns: u·cos, u·sin with u = (t − t_mid)/span
+            a, b = c[-2], c[-1]
+            rate = float(np.hypot(a, b))
+            g = np.array([a, b]) / rate if rate > 0 else np.zeros(2)
+            sub = cc[-2:, -2:]
+            mod = {
+                "amplitude_rate": rate / span,
+                "amplitude_rate_sigma": float(np.sqrt(max(g @ sub @ g, 0.0))) / span,
+            }
+            q -= 2
         for h in range(q // 2):
             a, b = c[2 * h], c[2 * h + 1]
             amp = float(np.hypot(a, b))
@@ -1898,6 +1998,7 @@ def _main_coefficient(prop: Proposal, c, cc, span: float) -> tuple[float, float,
                 "amplitudes": amps,
                 "amplitude_sigmas": amp_sig,
                 "phases": phases,
+                **mod,
             },
         )
     return float(c[0]), float(sig[0]), {"coefficients": c.tolist(), "sigmas": sig.tolist()}
