@@ -738,6 +738,15 @@ def _line_background(pgram: NDArray[np.float64]) -> NDArray[np.float64]:
     return out / np.log(2.0)
 
 
+def _model_freqs(ctx: Context) -> list[float]:
+    """Frequencies of the sinusoids in the model [Hz] (from their ``cos@f`` labels)."""
+    out = []
+    for lab in ctx.labels:
+        if lab.startswith("cos@"):
+            out.append(float(lab[4:].split(":")[0]))
+    return out
+
+
 def _excluded(f: float, ctx: Context, width: float) -> bool:
     return any(abs(f - g) < width for g in ctx.excluded_freqs)
 
@@ -835,9 +844,8 @@ def periodic(ctx: Context) -> list[Proposal]:
             f = float(trial[int(np.argmax(pw))])
             harm = orbit_harmonics(f, n_max)
             # harmonics next to a line of the model stay out (nearly collinear columns)
-            harm = [
-                n for n in harm if not any(abs(n * f - g) <= 1.5 * df for g in ctx.excluded_freqs)
-            ]
+            in_model = _model_freqs(ctx)
+            harm = [n for n in harm if not any(abs(n * f - g) <= 1.5 * df for g in in_model)]
         if harm:
             # no lines are kept off this trial's harmonics: a line competes with it
             # (QA: a 3e-9 m/s² line at 2500 s pulled this f 2.9 % high, 1.4 bins
@@ -876,7 +884,7 @@ def periodic(ctx: Context) -> list[Proposal]:
         period = _block_period(ctx)
         if period is not None:
             f = _unalias(ctx, tau, f, period, df, fmax)
-        taken = list(ctx.excluded_freqs)
+        taken = _model_freqs(ctx)
         if ctx.orbit_frequency is not None:
             taken += [n * ctx.orbit_frequency for n in range(1, n_max + 1)]
         if any(abs(f - g) <= 1.5 * df for g in taken):
@@ -916,6 +924,22 @@ def _first_order(x: NDArray[np.float64], t: NDArray[np.float64], tau: float) -> 
 
 SQUARED = "^2"
 """Suffix of a channel's square (about its mean) in the ``auxiliary`` proposals."""
+
+
+def squared_column(
+    t_all: NDArray[np.float64], x: NDArray[np.float64], lag: float, tau: float
+) -> NDArray[np.float64]:
+    """``(x − mean x)²`` through the coupling's low-pass ``tau`` and lag ``lag`` (on ``t_all``).
+
+    The regressor of channel ``NAME^2`` as :func:`auxiliary` forms it (holes
+    interpolated, filtered and shifted on the distinct sample times).
+    """
+    tu, first = np.unique(t_all, return_index=True)
+    x = np.asarray(x, dtype=np.float64)
+    sq = ((x - np.nanmean(x)) ** 2)[first]
+    good = np.isfinite(sq)
+    h = _first_order(np.interp(tu, tu[good], sq[good]), tu, tau)
+    return np.interp(t_all - lag, tu, h)
 
 
 def auxiliary(ctx: Context) -> list[Proposal]:

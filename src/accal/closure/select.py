@@ -1423,15 +1423,34 @@ class _Search:
                 )
                 continue
             p_adj = self._padj(w, prop.multiplicity)
-            mod = self._modulated(prop) if p_adj >= self.alpha else None
+            # the richer variant where the plain term is not significant; for a coupling
+            # only where it is not even suggestive (a suggestive one is a pair anchor:
+            # a low-pass's start transient had been taken up by a square)
+            mod = (
+                self._extended(prop)
+                if p_adj >= (_PAIR_GATE if prop.name == "auxiliary" else self.alpha)
+                else None
+            )
             wm = None if mod is None else self.test(basis, fit, lev, mod.columns)
             if wm is not None and self._padj(wm, mod.multiplicity) < self.alpha:
                 # a periodic term whose amplitude changes over the record spreads its
                 # power over the neighbouring frequencies, which the noise estimate
                 # counts as noise: as it stands it is not significant (QA: a once-per-
                 # revolution term growing 0 -> 4e-9 m/s²; a 3000 s line growing alike
-                # was "no effect found")
+                # was "no effect found"); a coupling mostly quadratic in its channel
+                # likewise (QA: c2 = 2e-9 m/s²/K² on a 20 ± 1.5 K channel)
                 prop, w, p_adj = mod, wm, self._padj(wm, mod.multiplicity)
+            elif p_adj < self.alpha and prop.name == "auxiliary":
+                # a significant coupling: with its square, when the square is
+                # significant given it, the pair competes on its own (QA: about the
+                # middle of the channel's range the linear part is small, and a settling
+                # shape explained more than the linear coupling alone)
+                both = self._with_square(prop)
+                if both is not None and self._square_adds(basis, prop, both):
+                    wb = self.test(basis, fit, lev, both.columns)
+                    if wb is not None and self._padj(wb, both.multiplicity) < self.alpha:
+                        pb = self._padj(wb, both.multiplicity)
+                        tested.append((pb, float(wb.gamma @ wb.gamma), both, wb, bi))
             tested.append((p_adj, float(w.gamma @ w.gamma), prop, w, bi))
         sig = sorted((e for e in tested if e[0] < self.alpha), key=lambda e: -e[1])
         coupled = {f.prop.channel for f in self.found if f.prop.name == "auxiliary"}
@@ -1470,7 +1489,7 @@ class _Search:
         coupled = {f.prop.channel for f in self.found if f.prop.name == "auxiliary"}
         for j, (p_adj, _, prop, w, bi) in enumerate(sig):
             info = {"stat": w.stat, "dof": w.dof, "multiplicity": prop.multiplicity}
-            mod = self._modulated(prop)
+            mod = self._extended(prop)
             checked = False
             if mod is not None and prop.check_consistency:
                 # a periodic term whose amplitude changes over the record fails the
@@ -1504,10 +1523,66 @@ class _Search:
                     ch = e[2].channel
                     if e[2].name == "auxiliary" and ch not in coupled | set(self.alternatives):
                         self.alternatives.append(ch)
+            if prop.params.get("with_square"):
+                # a coupling and its square: two effects, added as a pair (each must be
+                # consistent given the other)
+                lin, sq = _split_square(prop)
+                fa = _Found(_independent(basis, lin, self.use), 1.0, {}, bi)
+                if self._add_pair((p_adj, fa, sq, bi, w, 0.0)):
+                    return True
+                continue
             self._add([_Found(_independent(basis, prop, self.use), p_adj, info, bi)])
             self._settle(protect_last=True)
             return True
         return False
+
+    def _extended(self, prop: Proposal) -> Proposal | None:
+        """The richer variant of a proposal, tried when it fails as it stands."""
+        return self._modulated(prop) or self._with_square(prop)
+
+    def _square_adds(self, basis: Basis, prop: Proposal, both: Proposal) -> bool:
+        """Whether the square in ``both`` is significant given ``prop`` (the coupling)."""
+        k = prop.columns.shape[1]
+        fa = _Found(_independent(basis, prop, self.use), 1.0, {}, -1)
+        b_a, f_a, l_a = self.state([*self.found, fa])
+        w = self.test(b_a, f_a, l_a, both.columns[:, k:])
+        return w is not None and self._padj(w, both.multiplicity) < self.alpha
+
+    def _with_square(self, prop: Proposal) -> Proposal | None:
+        """A linear coupling together with its channel's square (one joint test).
+
+        The columns of ``prop`` followed by those of channel ``NAME^2``
+        (:func:`~accal.closure.candidates.squared_column`, with the coupling's lag and
+        low-pass), per data channel like ``prop``'s; twice the multiplicity.  Added,
+        it is split into the two effects the sequential search would give.
+        """
+        from accal.closure.candidates import SQUARED, squared_column
+
+        name = prop.channel
+        if (
+            prop.name != "auxiliary"
+            or name is None
+            or name.endswith(SQUARED)
+            or name not in self.aux
+            or prop.params.get("with_square")
+        ):
+            return None
+        col = squared_column(
+            self.t_all, self.aux[name], float(prop.params["lag"]), float(prop.params["tau"])
+        )
+        if prop.axes is None:
+            sq, labs = col[:, None], (f"aux:{name}{SQUARED}",)
+        else:
+            sq = np.column_stack([col * (self.chan_all == c) for c in range(len(self.names))])
+            labs = tuple(f"aux:{name}{SQUARED}:{n}" for n in self.names)
+        return dataclasses.replace(
+            prop,
+            columns=np.column_stack([prop.columns, sq]),
+            labels=(*prop.labels, *labs),
+            multiplicity=2.0 * prop.multiplicity,
+            params={**prop.params, "with_square": prop.columns.shape[1]},
+            axes=None if prop.axes is None else (*prop.axes, *self.names),
+        )
 
     def _modulated(self, prop: Proposal) -> Proposal | None:
         """A periodic proposal with a linearly changing amplitude of its fundamental.
@@ -1899,6 +1974,32 @@ def _same_member(a: Proposal, b: Proposal, use: NDArray[np.bool_], tol: float = 
     coef, *_ = np.linalg.lstsq(zb, za, rcond=None)
     left = np.linalg.norm(za - zb @ coef, axis=0)
     return bool(np.all(left <= tol * np.maximum(np.linalg.norm(za, axis=0), 1e-300)))
+
+
+def _split_square(prop: Proposal) -> tuple[Proposal, Proposal]:
+    """The coupling and its square from a :meth:`_Search._with_square` proposal."""
+    from accal.closure.candidates import SQUARED
+
+    k = int(prop.params["with_square"])
+    params = {kk: v for kk, v in prop.params.items() if kk != "with_square"}
+    axes = prop.axes
+    lin = dataclasses.replace(
+        prop,
+        columns=prop.columns[:, :k],
+        labels=prop.labels[:k],
+        params=params,
+        axes=None if axes is None else axes[:k],
+    )
+    sq = dataclasses.replace(
+        prop,
+        channel=f"{prop.channel}{SQUARED}",
+        columns=prop.columns[:, k:],
+        labels=prop.labels[k:],
+        params=dict(params),
+        axes=None if axes is None else axes[k:],
+        jacobian=None,
+    )
+    return lin, sq
 
 
 def _freqs(prop: Proposal) -> list[float]:
