@@ -974,10 +974,9 @@ def auxiliary(ctx: Context) -> list[Proposal]:
             # once coupled linearly, the square of the channel (about its mean): a
             # coupling c1·x + c2·x² (QA: demod with c2 = 2e-6 m/s²/K² on a platform
             # temperature, fitted as c1 plus three steps, a line and a shape; the a_Y
-            # error grew from std z 12 to 37).  Offered from the start, the square
-            # doubled the closure's time and, about the middle of the channel's range
-            # (linear part small), did not help: a settling shape still took the
-            # linear part
+            # error grew from std z 12 to 37).  Before the coupling is in, the square is
+            # tested together with it, at its lag and low-pass (select's _with_square):
+            # its own lag search for every channel made a run ~9x slower
             x = np.asarray(x, dtype=np.float64)
             channels.append((f"{name}{SQUARED}", (x - np.nanmean(x)) ** 2))
     for name, x in channels:
