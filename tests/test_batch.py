@@ -307,6 +307,38 @@ def _half_days(src: Path, n: int) -> Path:
     return src
 
 
+def test_an_input_that_turns_bad_keeps_its_earlier_outputs_and_says_so(archive, tmp_path):
+    """QA: a processed day replaced by a damaged copy failed on the re-run (rightly),
+    and its earlier calibrated file, report and table rows stayed with nothing saying
+    so.  Now a note follows the one-line error, every time until it is processed again."""
+    src = tmp_path / "in"
+    src.mkdir()
+    files = sorted(archive.rglob("ACC1B_*.asc"))[:2]
+    for p in files:
+        (src / p.name).write_bytes(p.read_bytes())
+    out = tmp_path / "out"
+    assert invoke("grace-bias", src, "-r", "--out", out, "-q")[0] == 0
+    bad = src / files[0].name
+    text = bad.read_bytes()
+    bad.write_bytes(text[: len(text) // 2] + b"x\n")  # cut mid-record
+    for _ in range(2):  # the note stays while the file is bad
+        code, _, err = invoke("grace-bias", src, "-r", "--out", out, "-q")
+        assert code == 1
+        lines = err.strip().splitlines()
+        assert len(lines) == 2, err
+        assert lines[0].startswith(f"accal: {bad}")
+        assert lines[1] == f"accal: {bad}: note: the outputs of an earlier run for it are kept " + (
+            "(calibrated file, report, table rows); they are replaced once it is processed again"
+        )
+        assert len(read_outputs(out)["table"]) == 2 * 3
+    assert "FAILED" in (out / "accal.log").read_text()
+    # a bad input that was never processed gets the error line only
+    new_bad = src / "ACC1B_2005-03-01_A_02.asc"
+    new_bad.write_bytes(text[: len(text) // 3])
+    code, _, err = invoke("grace-bias", new_bad, "--out", out, "-q")
+    assert code == 1 and len(err.strip().splitlines()) == 1, err
+
+
 def test_kill_minus_nine_then_rerun_gives_the_uninterrupted_outputs(tmp_path):
     """A batch killed with SIGKILL mid-way and re-run ends exactly like a clean run."""
     src = _half_days(tmp_path / "in", 10)

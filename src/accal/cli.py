@@ -215,7 +215,7 @@ def grace_bias(
     """
     from accal.batch import DEFAULT_INCLUDE, Interrupted, LockedError, default_workers, discover
     from accal.errors import AccalError
-    from accal.pipeline import GraceBiasOptions, run, write_closure_reports
+    from accal.pipeline import KEPT_EARLIER, GraceBiasOptions, run, write_closure_reports
 
     colmap = {}
     for item in columns:
@@ -273,6 +273,8 @@ def grace_bias(
     for o in summary.outcomes:
         if not o.ok:
             _err(o.message)
+            if o.kept_earlier:
+                _err(f"{o.path}: note: {KEPT_EARLIER}")
         elif o.warnings and not quiet:
             _err(f"{o.path}: warning: {'; '.join(o.warnings)}")
     if opts.close_loop or (out / "closure.json").exists():  # also drops stale entries

@@ -176,6 +176,9 @@ class FileOutcome(Outcome):
     signature : dict or None
         Size and mtime of the input before it was read (see
         :meth:`accal.batch.Manifest.record`).
+    kept_earlier : bool
+        A failed input whose calibrated file from an earlier run is in the directory:
+        those outputs (calibrated file, report, table rows) are kept, not removed.
     """
 
     rows: list[dict[str, Any]] = field(default_factory=list)
@@ -186,6 +189,7 @@ class FileOutcome(Outcome):
     warnings: tuple[str, ...] = ()
     peak_rss: float = 0.0
     signature: dict[str, Any] | None = None
+    kept_earlier: bool = False
 
 
 @dataclass(frozen=True)
@@ -253,6 +257,13 @@ class RunSummary:
             f"worker{'s' if self.workers != 1 else ''}{rss}); table: "
             f"{self.table_path or '(none written)'}"
         )
+
+
+#: What a failed input's earlier outputs are (said in the log and on stderr).
+KEPT_EARLIER = (
+    "the outputs of an earlier run for it are kept (calibrated file, report, table rows); "
+    "they are replaced once it is processed again"
+)
 
 
 def output_stem(path: Path) -> str:
@@ -1381,12 +1392,18 @@ def run(
             interrupted = False
             try:
                 for j, outcome in done:
+                    stem = output_stem(outcome.path)
+                    if not outcome.ok and (out_dir / f"{stem}.calibrated.{opts.fmt}").exists():
+                        # processed by an earlier run: its outputs stay (nothing is lost),
+                        # and the user is told they come from the file's earlier version
+                        outcome = dataclasses.replace(outcome, kept_earlier=True)
                     results[todo[j]] = outcome
                     pending.append(outcome)
                     rlog(
                         f"ok {outcome.path}: {outcome.n_samples} samples"
                         if outcome.ok
                         else f"FAILED {outcome.message}"
+                        + (f" ({KEPT_EARLIER})" if outcome.kept_earlier else "")
                     )
                     for w in outcome.warnings:
                         rlog(f"warning {outcome.path}: {w}")
