@@ -1392,8 +1392,12 @@ def run(
             interrupted = False
             try:
                 for j, outcome in done:
-                    stem = output_stem(outcome.path)
-                    if not outcome.ok and (out_dir / f"{stem}.calibrated.{opts.fmt}").exists():
+                    if (
+                        not outcome.ok
+                        and (
+                            out_dir / f"{output_stem(outcome.path)}.calibrated.{opts.fmt}"
+                        ).exists()
+                    ):
                         # processed by an earlier run: its outputs stay (nothing is lost),
                         # and the user is told they come from the file's earlier version
                         outcome = dataclasses.replace(outcome, kept_earlier=True)

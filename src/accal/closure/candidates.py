@@ -110,6 +110,8 @@ class Context:
         (its harmonics are then not searched as separate lines).
     n_lines : int
         Number of ``periodic``/``line`` effects already in the model.
+    model_freqs : tuple of float
+        Frequencies of the sinusoids in the model [Hz] (lines, orbit harmonics).
     cache : dict
         Shared by the contexts of one selection: what builders compute from the
         data alone (not the residual), e.g. filtered auxiliary channels.
@@ -132,6 +134,7 @@ class Context:
     channel_names: tuple[str, ...] = ()
     orbit_frequency: float | None = None
     n_lines: int = 0
+    model_freqs: tuple[float, ...] = ()
     cache: dict[Any, Any] = field(default_factory=dict)
 
     @property
@@ -738,15 +741,6 @@ def _line_background(pgram: NDArray[np.float64]) -> NDArray[np.float64]:
     return out / np.log(2.0)
 
 
-def _model_freqs(ctx: Context) -> list[float]:
-    """Frequencies of the sinusoids in the model [Hz] (from their ``cos@f`` labels)."""
-    out = []
-    for lab in ctx.labels:
-        if lab.startswith("cos@"):
-            out.append(float(lab[4:].split(":")[0]))
-    return out
-
-
 def _excluded(f: float, ctx: Context, width: float) -> bool:
     return any(abs(f - g) < width for g in ctx.excluded_freqs)
 
@@ -844,8 +838,7 @@ def periodic(ctx: Context) -> list[Proposal]:
             f = float(trial[int(np.argmax(pw))])
             harm = orbit_harmonics(f, n_max)
             # harmonics next to a line of the model stay out (nearly collinear columns)
-            in_model = _model_freqs(ctx)
-            harm = [n for n in harm if not any(abs(n * f - g) <= 1.5 * df for g in in_model)]
+            harm = [n for n in harm if not any(abs(n * f - g) <= 1.5 * df for g in ctx.model_freqs)]
         if harm:
             # no lines are kept off this trial's harmonics: a line competes with it
             # (QA: a 3e-9 m/s² line at 2500 s pulled this f 2.9 % high, 1.4 bins
@@ -884,7 +877,7 @@ def periodic(ctx: Context) -> list[Proposal]:
         period = _block_period(ctx)
         if period is not None:
             f = _unalias(ctx, tau, f, period, df, fmax)
-        taken = _model_freqs(ctx)
+        taken = list(ctx.model_freqs)
         if ctx.orbit_frequency is not None:
             taken += [n * ctx.orbit_frequency for n in range(1, n_max + 1)]
         if any(abs(f - g) <= 1.5 * df for g in taken):
@@ -926,6 +919,12 @@ SQUARED = "^2"
 """Suffix of a channel's square (about its mean) in the ``auxiliary`` proposals."""
 
 
+def square_about_mean(x: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``(x − mean x)²``, the mean over the finite values (channel ``NAME^2``)."""
+    x = np.asarray(x, dtype=np.float64)
+    return (x - np.nanmean(x)) ** 2
+
+
 def squared_column(
     t_all: NDArray[np.float64], x: NDArray[np.float64], lag: float, tau: float
 ) -> NDArray[np.float64]:
@@ -935,8 +934,7 @@ def squared_column(
     interpolated, filtered and shifted on the distinct sample times).
     """
     tu, first = np.unique(t_all, return_index=True)
-    x = np.asarray(x, dtype=np.float64)
-    sq = ((x - np.nanmean(x)) ** 2)[first]
+    sq = square_about_mean(x)[first]
     good = np.isfinite(sq)
     h = _first_order(np.interp(tu, tu[good], sq[good]), tu, tau)
     return np.interp(t_all - lag, tu, h)
@@ -977,8 +975,7 @@ def auxiliary(ctx: Context) -> list[Proposal]:
             # error grew from std z 12 to 37).  Before the coupling is in, the square is
             # tested together with it, at its lag and low-pass (select's _with_square):
             # its own lag search for every channel made a run ~9x slower
-            x = np.asarray(x, dtype=np.float64)
-            channels.append((f"{name}{SQUARED}", (x - np.nanmean(x)) ** 2))
+            channels.append((f"{name}{SQUARED}", square_about_mean(x)))
     for name, x in channels:
         x = np.asarray(x, dtype=np.float64)[first]
         good = np.isfinite(x)

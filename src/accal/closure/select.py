@@ -1366,6 +1366,7 @@ class _Search:
             channel_names=self.names,
             cache=self._cache,
             n_lines=sum(f.prop.name == "periodic" and f.prop.channel == "line" for f in found),
+            model_freqs=tuple(g for f in found for g in _freqs(f.prop)),
             orbit_frequency=next(
                 (
                     float(f.prop.params["frequency"])
@@ -1432,14 +1433,15 @@ class _Search:
                 else None
             )
             wm = None if mod is None else self.test(basis, fit, lev, mod.columns)
-            if wm is not None and self._padj(wm, mod.multiplicity) < self.alpha:
+            pm = 1.0 if wm is None else self._padj(wm, mod.multiplicity)
+            if pm < self.alpha:
                 # a periodic term whose amplitude changes over the record spreads its
                 # power over the neighbouring frequencies, which the noise estimate
                 # counts as noise: as it stands it is not significant (QA: a once-per-
                 # revolution term growing 0 -> 4e-9 m/s²; a 3000 s line growing alike
                 # was "no effect found"); a coupling mostly quadratic in its channel
                 # likewise (QA: c2 = 2e-9 m/s²/K² on a 20 ± 1.5 K channel)
-                prop, w, p_adj = mod, wm, self._padj(wm, mod.multiplicity)
+                prop, w, p_adj = mod, wm, pm
             elif p_adj < self.alpha and prop.name == "auxiliary":
                 # a significant coupling: with its square, when the square is
                 # significant given it, the pair competes on its own (QA: about the
@@ -1448,8 +1450,8 @@ class _Search:
                 both = self._with_square(prop)
                 if both is not None and self._square_adds(basis, prop, both):
                     wb = self.test(basis, fit, lev, both.columns)
-                    if wb is not None and self._padj(wb, both.multiplicity) < self.alpha:
-                        pb = self._padj(wb, both.multiplicity)
+                    pb = 1.0 if wb is None else self._padj(wb, both.multiplicity)
+                    if pb < self.alpha:
                         tested.append((pb, float(wb.gamma @ wb.gamma), both, wb, bi))
             tested.append((p_adj, float(w.gamma @ w.gamma), prop, w, bi))
         sig = sorted((e for e in tested if e[0] < self.alpha), key=lambda e: -e[1])
@@ -1492,10 +1494,10 @@ class _Search:
             mod = self._extended(prop)
             checked = False
             if mod is not None and prop.check_consistency:
-                # a periodic term whose amplitude changes over the record fails the
-                # thirds test as it stands; with a linear amplitude change it may pass
-                # (QA: a once-per-revolution term growing 0 -> 4e-9 m/s² over a day
-                # was fitted as two anti-phased sinusoids 0.0007 bins apart, 9e-7 each)
+                # a periodic term whose amplitude changes over the record (or a coupling
+                # with a quadratic part) fails the thirds test as it stands; its richer
+                # variant may pass (QA: a once-per-revolution term growing 0 -> 4e-9 m/s²
+                # over a day was fitted as two anti-phased sinusoids 0.0007 bins apart)
                 ok, cinfo = self._thirds(basis, prop)
                 if ok:
                     info.update(cinfo)
@@ -1604,16 +1606,12 @@ class _Search:
             return None
         f = float(prop.params["frequency"])
         u = (self.t_all - (self.t0 + 0.5 * self.span)) / self.span
-        cols = np.column_stack([prop.columns, prop.columns[:, :2] * u[:, None]])
-        return Proposal(
-            prop.name,
-            prop.channel,
-            cols,
-            (*prop.labels, f"ucos@{f!r}", f"usin@{f!r}"),
-            2.0 * prop.multiplicity,  # a second model of the same family member
-            {**prop.params, "modulated": True},
-            prop.check_consistency,
-            None,
+        return dataclasses.replace(
+            prop,
+            columns=np.column_stack([prop.columns, prop.columns[:, :2] * u[:, None]]),
+            labels=(*prop.labels, f"ucos@{f!r}", f"usin@{f!r}"),
+            multiplicity=2.0 * prop.multiplicity,  # a second model of the same member
+            params={**prop.params, "modulated": True},
         )
 
     def _thirds(self, basis: Basis, prop: Proposal) -> tuple[bool, dict[str, Any]]:
@@ -2056,6 +2054,13 @@ def _describe_smooth(grid: Grid, t: NDArray[np.float64], comp: NDArray[np.float6
     )
 
 
+def _amplitude(a: float, b: float, cov: NDArray[np.float64]) -> tuple[float, float]:
+    """``hypot(a, b)`` of a cos/sin pair and its σ from their 2×2 covariance ``cov``."""
+    amp = float(np.hypot(a, b))
+    g = np.array([a, b]) / amp if amp > 0 else np.zeros(2)
+    return amp, float(np.sqrt(max(g @ cov @ g, 0.0)))
+
+
 def _main_coefficient(prop: Proposal, c, cc, span: float) -> tuple[float, float, dict[str, Any]]:
     """The reported coefficient/sigma of one channel's columns of an effect, plus details."""
     sig = np.sqrt(np.clip(np.diag(cc), 0, None))
@@ -2073,22 +2078,14 @@ def _main_coefficient(prop: Proposal, c, cc, span: float) -> tuple[float, float,
         mod: dict[str, Any] = {}
         if prop.params.get("modulated") and prop.labels[-1].startswith("usin@"):
             # the last two columns: u·cos, u·sin with u = (t − t_mid)/span
-            a, b = c[-2], c[-1]
-            rate = float(np.hypot(a, b))
-            g = np.array([a, b]) / rate if rate > 0 else np.zeros(2)
-            sub = cc[-2:, -2:]
-            mod = {
-                "amplitude_rate": rate / span,
-                "amplitude_rate_sigma": float(np.sqrt(max(g @ sub @ g, 0.0))) / span,
-            }
+            rate, rate_sig = _amplitude(c[-2], c[-1], cc[-2:, -2:])
+            mod = {"amplitude_rate": rate / span, "amplitude_rate_sigma": rate_sig / span}
             q -= 2
         for h in range(q // 2):
             a, b = c[2 * h], c[2 * h + 1]
-            amp = float(np.hypot(a, b))
-            g = np.array([a, b]) / amp if amp > 0 else np.zeros(2)
-            sub = cc[2 * h : 2 * h + 2, 2 * h : 2 * h + 2]
+            amp, amp_s = _amplitude(a, b, cc[2 * h : 2 * h + 2, 2 * h : 2 * h + 2])
             amps.append(amp)
-            amp_sig.append(float(np.sqrt(max(g @ sub @ g, 0.0))))
+            amp_sig.append(amp_s)
             phases.append(float(np.arctan2(-b, a)))
         return (
             amps[0],
