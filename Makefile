@@ -74,7 +74,7 @@ bench-closure: $(STAMP)
 closure-detection: $(STAMP)
 	$(BIN)/python benchmarks/closure_detection.py
 
-## bench-archive: 200 synthetic 1 Hz days, 1 and 2 workers, vs raw pyarrow parse (~2 GB in /tmp)
+## bench-archive: 200 synthetic 1 Hz days, 1 and 2 workers, vs raw pyarrow parse (~4 GB in /tmp)
 bench-archive: $(STAMP)
 	$(BIN)/python benchmarks/bench_archive.py
 
