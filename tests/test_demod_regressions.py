@@ -429,3 +429,48 @@ def test_text_run_named_parquet_is_read_with_a_warning(run_csv, tmp_path):
     assert f"accal: {run}: warning: named .parquet but is text: read as CSV" in err.splitlines()
     s = json.loads((out / "summary.json").read_text())
     assert s["input"]["warnings"] == ["named .parquet but is text: read as CSV"]
+
+
+# --- absolute times: a regular 10 Hz run in GPS seconds was refused as irregular -----
+
+
+@pytest.mark.parametrize("offset", [1.4e9, 1e8])
+@pytest.mark.parametrize("extra", [[], ["--chunk-size", "16"], ["--resample"]])
+def test_10hz_run_in_gps_seconds_is_regular(tmp_path, offset, extra):
+    """QA: times of 1.4e9 s are stored to 2.4e-7 s, 2.4e-6 of a 10 Hz step.
+
+    The run was refused ("irregular sampling", or ``tau·fs = 6000.000358 is not an
+    integer``), also with --resample.  The step tolerance now includes the times' own
+    rounding, and the step is the mean one snapped to τ/q: the same periods as with
+    times from 0, to the rounding of the times.
+    """
+    run = tmp_path / "run.parquet"
+    write_simulated_gap(run, days=1300 / 86400, tau=TAU, mask=MASK, fs=10.0, seed=5)
+    rows = pd.read_parquet(run)
+    shifted = tmp_path / "gps.parquet"
+    write_table(rows.assign(time=rows["time"] + offset), shifted, units={"theta": "rad"})
+    out = {}
+    for name, f in (("plain", run), ("gps", shifted)):
+        code, _, err = invoke(
+            "demod", f, "--tau", TAU, "--mask", MASK, *extra, "--out", tmp_path / name, "-q"
+        )
+        assert code == 0, err
+        out[name] = pd.read_parquet(tmp_path / name / "periods.parquet")
+    assert len(out["plain"]) == len(out["gps"]) == 21
+    np.testing.assert_allclose(out["gps"]["a_Y"], out["plain"]["a_Y"], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(out["gps"]["sigma_Y"], out["plain"]["sigma_Y"], rtol=1e-9)
+    np.testing.assert_allclose(out["gps"]["t_mid"] - offset, out["plain"]["t_mid"], atol=1e-6)
+
+
+def test_irregular_10hz_in_gps_seconds_is_still_refused(tmp_path):
+    """The tolerance is the times' rounding, not more: a 1e-5 s slip is irregular."""
+    run = tmp_path / "run.parquet"
+    write_simulated_gap(run, days=1300 / 86400, tau=TAU, mask=MASK, fs=10.0, seed=5)
+    rows = pd.read_parquet(run)
+    t = rows["time"].to_numpy() + 1.4e9
+    t[500:] += 1e-5
+    bad = tmp_path / "gps.parquet"
+    write_table(rows.assign(time=t), bad, units={"theta": "rad"})
+    code, _, err = invoke("demod", bad, "--tau", TAU, "--mask", MASK, "--out", tmp_path / "o")
+    assert code == 1
+    assert "irregular sampling: 1 of" in err and "gps.parquet" in err

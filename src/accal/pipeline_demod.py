@@ -49,8 +49,6 @@ from accal.errors import AccalError, ValidationError, check_option
 
 #: Standard integration time for σ(T) in the summary: 3 h, as in the paper (Fig. 5) [s].
 STANDARD_INTEGRATION = 3 * 3600.0
-#: Relative tolerance on the sampling step before a record counts as irregular.
-STEP_RTOL = 1e-6
 #: Measured masked time differing from --mask by more than this fraction is flagged.
 MASK_RTOL = 0.1
 #: Rows read at a time (~3 days at 1 Hz; ~0.3 GB peak for LS, see docs/demod.md).
@@ -279,10 +277,14 @@ def load_psd(spec: str | None):
 def sampling_step(stream: Any, opts: DemodOptions) -> float:
     """Nominal sampling step of a run [s], from its first chunk.
 
-    The median step; with ``opts.resample`` the estimate of
-    :func:`accal.estimators.resample.nominal_step` (robust to jitter and snapped to
-    a whole number of samples per τ).  Only the first chunk is read.
+    The step of :func:`accal.estimators.demod.sampling_step` (the mean step of a regular chunk);
+    when ``τ/step`` is a whole number to within the rounding of the times (absolute
+    times such as GPS seconds carry ~1e-7 s of it), ``τ/round(τ/step)``.  With
+    ``opts.resample`` the estimate of :func:`accal.estimators.resample.nominal_step`
+    (robust to jitter and snapped to a whole number of samples per τ).  Only the
+    first chunk is read.
     """
+    from accal.estimators.demod import sampling_step as regular_step
     from accal.estimators.resample import nominal_step
 
     for chunk in stream:
@@ -290,7 +292,11 @@ def sampling_step(stream: Any, opts: DemodOptions) -> float:
             raise ValidationError(f"need at least 3 samples, got {len(chunk)}")
         if opts.resample:
             return nominal_step(chunk.time, opts.tau)
-        return float(np.median(np.diff(chunk.time)))
+        step, rtol = regular_step(np.asarray(chunk.time, float))
+        q = opts.tau / step if step > 0 else 0.0
+        if rtol > 0 and round(q) >= 1 and abs(q - round(q)) <= q * rtol:
+            step = opts.tau / round(q)
+        return step
     raise ValidationError("need at least 3 samples, got 0")  # pragma: no cover (reader raises)
 
 
@@ -327,6 +333,7 @@ def validated_chunks(stream: Any, opts: DemodOptions, step: float, info: RunInfo
     ------
     accal.estimators.demod.DemodChunk
     """
+    from accal.estimators.demod import step_tolerance
     from accal.estimators.resample import UniformResampler
 
     info.n_input = info.n_samples = 0
@@ -372,7 +379,8 @@ def validated_chunks(stream: Any, opts: DemodOptions, step: float, info: RunInfo
                 if problem["name"] == name:
                     problem["n"] += bad.size
         if not opts.resample and (problem is None or problem["kind"] == "step"):
-            off = np.flatnonzero(np.abs(steps - step) > STEP_RTOL * step)
+            tol = step_tolerance(step, max(abs(float(t[0])), abs(last_t))) if t.size else 0.0
+            off = np.flatnonzero(np.abs(steps - step) > tol)
             if off.size:
                 k = off[np.argmax(np.abs(steps[off] - step))]
                 if problem is None:

@@ -275,14 +275,83 @@ def _first_bad(name: str, x: NDArray, valid: NDArray | None = None, offset: int 
         )
 
 
-def _check_tau_mask(fs: float, tau: float, tm: float) -> int:
+#: Relative tolerance of a sampling step against the nominal step.
+STEP_RTOL = 1e-6
+
+
+def step_tolerance(dt: float, t_abs: float) -> float:
+    """Largest ``|step − dt|`` [s] still taken as regular sampling.
+
+    ``STEP_RTOL·dt`` plus the float64 rounding of the times themselves: each time
+    is stored to within half its ulp, so a difference of two is off by up to one
+    ulp of the larger.  With absolute times that is not negligible: at 1.4e9 s (GPS
+    seconds of 2024) the ulp is 2.4e-7 s, 2.4e-6 of a 10 Hz step (QA: a regular
+    10 Hz run was refused as irregular once its times were GPS seconds).
+
+    Parameters
+    ----------
+    dt : float
+        Nominal step [s].
+    t_abs : float
+        Largest ``|t|`` of the times compared [s].
+
+    Returns
+    -------
+    float
+        [s]
+    """
+    return STEP_RTOL * dt + 2.0 * float(np.spacing(abs(t_abs)))
+
+
+def sampling_step(t: NDArray[np.float64]) -> tuple[float, float]:
+    """The sampling step of increasing times, and its relative uncertainty.
+
+    The median step; when every step is within :func:`step_tolerance` of it, the
+    mean step ``(t[-1] − t[0])/(n − 1)`` instead, whose only error is the rounding
+    of the two end times (``2 ulp / span``, returned).  The median of steps that
+    are each rounded to the ulp of large absolute times is off by up to that ulp,
+    enough to make ``τ·fs`` non-integer (QA: ``tau·fs = 6000.0057`` for 10 Hz at
+    1.4e9 s).
+
+    Parameters
+    ----------
+    t : ndarray, shape (n,), n >= 2
+        Times [s].
+
+    Returns
+    -------
+    dt : float
+        [s]
+    rtol : float
+        Relative uncertainty of ``dt`` from the rounding of the times (0 when the
+        steps are irregular: the caller reports them).
+    """
+    steps = np.diff(t)
+    dt = float(np.median(steps))
+    if not dt > 0:
+        return dt, 0.0
+    t_abs = max(abs(float(t[0])), abs(float(t[-1])))
+    if np.all(np.abs(steps - dt) <= step_tolerance(dt, t_abs)):
+        span = float(t[-1] - t[0])
+        return span / (t.size - 1), 2.0 * float(np.spacing(t_abs)) / span
+    return dt, 0.0
+
+
+def _check_tau_mask(fs: float, tau: float, tm: float, fs_rtol: float = 0.0) -> int:
+    """``q = τ·fs`` (an integer within 1e-6, or within ``fs_rtol`` of ``fs``), after checking τ and TM."""
     q = tau * fs
     if not np.isfinite(q) or q <= 0:
         raise ValidationError(f"tau must be positive, got {tau}")
-    if abs(q - round(q)) > 1e-6:
+    if q < 1 - 1e-6:
+        raise ValidationError(
+            f"tau = {tau:.10g} s is shorter than one sample (fs = {fs:.10g} Hz): tau must be "
+            f"a whole number of samples, at least {1 / fs:.10g} s"
+        )
+    if abs(q - round(q)) > max(1e-6, q * fs_rtol):
         lo, hi = np.floor(q) / fs, np.ceil(q) / fs
         raise ValidationError(
-            f"tau·fs = {q:g} is not an integer (fs = {fs:g} Hz); use tau = {lo:g} s or {hi:g} s"
+            f"tau·fs = {q:.10g} is not an integer (fs = {fs:.10g} Hz); "
+            f"use tau = {lo:.10g} s or {hi:.10g} s"
         )
     if not 0 <= tm < tau:
         raise ValidationError(
@@ -309,16 +378,18 @@ def _validate(time, m_y, m_z, theta, aux, valid, tau, tm, theta_tol):
         _first_bad(name, a, None if name == "time" else ok)
     if n < 3:
         raise ValidationError(f"need at least 3 samples, got {n}")
-    dt_all = np.diff(arrs["time"])
-    dt = float(np.median(dt_all))
-    if dt <= 0 or np.any(np.abs(dt_all - dt) > 1e-6 * dt):
+    t = arrs["time"]
+    dt_all = np.diff(t)
+    dt, dt_rtol = sampling_step(t)
+    tol = step_tolerance(dt, max(abs(t[0]), abs(t[-1])))
+    if dt <= 0 or np.any(np.abs(dt_all - dt) > tol):
         k = int(np.argmax(np.abs(dt_all - dt)))
         raise ValidationError(
-            f"sampling is irregular: step {dt_all[k]:g} s at index {k} vs nominal {dt:g} s "
-            "(resample or split the record at gaps)"
+            f"sampling is irregular: step {dt_all[k]:.10g} s at index {k} vs nominal "
+            f"{dt:.10g} s (resample or split the record at gaps)"
         )
     fs = 1.0 / dt
-    _check_tau_mask(fs, tau, tm)
+    _check_tau_mask(fs, tau, tm, dt_rtol)
     th = arrs["theta"] if ok is None else arrs["theta"][ok]
     if th.size and th.max() > 2 * np.pi + theta_tol:
         raise ValidationError(
@@ -520,6 +591,7 @@ class _Checker:
         self.aux_names = tuple(aux_names)
         self.tau, self.tm, self.theta_tol = float(tau), float(tm), theta_tol
         self.fs = None if fs is None else float(fs)
+        self.fs_rtol = 0.0  # relative uncertainty of fs from the rounding of the times
         self.q = None  # checked when the first chunk arrives (its own checks come first)
         self.n = 0
         self.last_t = None
@@ -553,18 +625,21 @@ class _Checker:
                 raise ValidationError(
                     f"need at least 3 samples in the first chunk to find the sampling step, got {n}"
                 )
-            self.fs = 1.0 / float(np.median(np.diff(t)))
+            dt, self.fs_rtol = sampling_step(t)
+            self.fs = 1.0 / dt
         if self.q is None:
-            self.q = _check_tau_mask(self.fs, self.tau, self.tm)
+            self.q = _check_tau_mask(self.fs, self.tau, self.tm, self.fs_rtol)
         dt = 1.0 / self.fs
         steps = np.diff(t) if self.last_t is None else np.diff(np.concatenate([[self.last_t], t]))
-        off = np.abs(steps - dt) > 1e-6 * dt
+        off = (
+            np.abs(steps - dt) > step_tolerance(dt, max(abs(t[0]), abs(t[-1]))) if n else steps > 0
+        )
         if off.any():
             k = int(np.argmax(np.abs(steps - dt)))
             idx = self.n + k - (0 if self.last_t is None else 1)
             raise ValidationError(
-                f"sampling is irregular: step {steps[k]:g} s at index {idx} vs nominal {dt:g} s "
-                "(resample or split the record at gaps)"
+                f"sampling is irregular: step {steps[k]:.10g} s at index {idx} vs nominal "
+                f"{dt:.10g} s (resample or split the record at gaps)"
             )
         th = arrs["theta"][ok]
         if th.size:
