@@ -69,10 +69,53 @@ def test_time_not_increasing_names_line(tmp_path):
         read_rawlog(p)
 
 
-def test_theta_declared_in_degrees(tmp_path):
+def test_theta_declared_in_degrees_is_converted(tmp_path):
     p = tmp_path / "deg.csv"
-    p.write_text(CSV.replace('"theta": "rad"', '"theta": "deg"'))
-    with pytest.raises(FormatError, match="theta is declared in 'deg'; give it in radians"):
+    p.write_text(
+        CSV.replace('"theta": "rad"', '"theta": "deg"').replace("3.141592653589793", "180")
+    )
+    s = read_rawlog(p)
+    np.testing.assert_allclose(s.aux["theta"], [0, 0, np.pi, np.pi], rtol=1e-15)
+    assert s.units["theta"] == "rad"
+    assert any("theta from 'deg' (× 0.01745329252)" in w for w in s.report.warnings)
+
+
+@pytest.mark.parametrize(
+    ("unit", "factor"),
+    [
+        ("g", 9.80665),
+        ("mg", 9.80665e-3),
+        ("um/s^2", 1e-6),
+        ("µm/s²", 1e-6),
+        ("nm s^-2", 1e-9),
+        ("mGal", 1e-5),
+        ("m/s^2", 1.0),
+        ("m s-2 (raw)", 1.0),
+    ],
+)
+def test_declared_acceleration_units_are_converted(tmp_path, unit, factor):
+    """QA: m_y in g was read as m/s² (9.8× wrong, no warning); um/s² gave 0.46 "m/s²"."""
+    p = tmp_path / "run.csv"
+    p.write_text(CSV.replace('"theta": "rad"', f'"theta": "rad", "m_y": "{unit}", "m_z": "{unit}"'))
+    s = read_rawlog(p)
+    np.testing.assert_allclose(s.axis("y"), factor * np.array([1e-6, 1.5e-6, 1e-6, 0.5e-6]))
+    np.testing.assert_allclose(s.axis("z"), factor * np.array([2e-6, 2.5e-6, 2e-6, 1e-6]))
+    said = [w for w in s.report.warnings if "converted to SI" in w]
+    assert bool(said) == (factor != 1.0)
+
+
+@pytest.mark.parametrize(("unit", "factor"), [("ms", 1e-3), ("min", 60.0), ("s (GPS)", 1.0)])
+def test_declared_time_units_are_converted(tmp_path, unit, factor):
+    p = tmp_path / "run.csv"
+    p.write_text(CSV.replace('"theta": "rad"', f'"theta": "rad", "time": "{unit}"'))
+    np.testing.assert_allclose(read_rawlog(p).time, factor * np.arange(4.0))
+
+
+@pytest.mark.parametrize(("col", "unit"), [("m_y", "V"), ("theta", "turns"), ("time", "m")])
+def test_unknown_declared_unit_is_refused(tmp_path, col, unit):
+    p = tmp_path / "run.csv"
+    p.write_text(CSV.replace('"theta": "rad"', f'"theta": "rad", "{col}": "{unit}"'))
+    with pytest.raises(FormatError, match=rf"run\.csv: {col} is declared in '{unit}', not a unit"):
         read_rawlog(p)
 
 
@@ -177,8 +220,8 @@ def test_stream_header_checks_on_open(tmp_path):
     p.write_text("time,m_y,angle\n0,1,0\n")
     with pytest.raises(FormatError, match=r"missing column\(s\) m_z, theta"):
         open_rawlog(p, rows=5)
-    p.write_text(CSV.replace('"theta": "rad"', '"theta": "degrees"'))
-    with pytest.raises(FormatError, match="give it in radians"):
+    p.write_text(CSV.replace('"theta": "rad"', '"theta": "cycles"'))
+    with pytest.raises(FormatError, match="theta is declared in 'cycles', not a unit of angle"):
         open_rawlog(p, rows=5)
     p.write_text("time,m_y,m_z,theta\n")
     with pytest.raises(FormatError, match="header but no data rows"):

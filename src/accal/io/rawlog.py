@@ -9,7 +9,9 @@ names, the units and the checks that belong to the file.
 
 The reader normalises and checks, it does not repair: time must be finite and
 strictly increasing (a run file is not sorted or de-duplicated behind the user's
-back), and a θ column whose declared unit is degrees is refused.  Checks that
+back).  Columns declared in a non-SI unit (m_y in g, θ in degrees, time in ms)
+are converted to SI with a warning, and a unit accal does not know is refused
+(:mod:`accal.io.units`).  Checks that
 need the modulation period (uniform sampling, θ range, masking) are made by the
 demodulation, see :mod:`accal.estimators.demod`.
 
@@ -37,6 +39,7 @@ from accal.io.tables import (
     numeric_column,
     read_table_arrow,
 )
+from accal.io.units import SI, known_units, si_factor
 from accal.series import AccSeries, ReadReport
 
 #: Columns every run file must have.
@@ -49,8 +52,15 @@ UNITS = {
     "acc": "m/s^2",
     "theta": "rad",
 }
-#: Declared units of θ that mean degrees (refused: give radians).
-DEGREE_UNITS = ("deg", "degree", "degrees", "°")
+#: Kind of unit of each fixed column: a declared non-SI unit is converted
+#: (:mod:`accal.io.units`), an unknown one refused.
+COLUMN_KINDS = {
+    "time": "time",
+    "m_x": "acceleration",
+    "m_y": "acceleration",
+    "m_z": "acceleration",
+    "theta": "angle",
+}
 #: File-name suffixes that promise Parquet, and text (a mismatch is a warning).
 PARQUET_SUFFIXES = (".parquet", ".pq")
 TEXT_SUFFIXES = (".csv", ".txt")
@@ -132,17 +142,30 @@ class RawlogStream:
                 f"columns are {column_list(names)})",
                 self.path,
             )
-        th_unit = str(units.get("theta", "rad")).strip().lower()
-        if th_unit.split(" ")[0] in DEGREE_UNITS:
-            raise FormatError(
-                f"theta is declared in {units['theta']!r}; give it in radians", self.path
-            )
+        #: Factor to SI of each fixed column whose declared unit is not SI.
+        self.factors: dict[str, float] = {}
+        conversions = []
+        for col, kind in COLUMN_KINDS.items():
+            if col not in names or col not in units:
+                continue
+            f = si_factor(units[col], kind)
+            if f is None:
+                raise FormatError(
+                    f"{col} is declared in {units[col]!r}, not a unit of {kind} accal knows "
+                    f"({known_units(kind)}); declare one of these (or convert the column to "
+                    f"{SI[kind]})",
+                    self.path,
+                )
+            if f != 1.0:
+                self.factors[col] = f
+                conversions.append(f"{col} from {units[col]!r} (× {f:.10g})")
         self.names = names
         self.first_line = first_line
         self.file_meta = fmeta
         self.axes = (("x",) if "m_x" in names else ()) + ("y", "z")
         self.units = dict(UNITS)
-        self.units["acc"] = units.get("m_y", UNITS["acc"])
+        if "m_y" in units and "m_y" not in self.factors:
+            self.units["acc"] = units["m_y"]  # the file's own spelling of m/s²
         self.units.update(
             {
                 k: units.get(k, "unknown")
@@ -156,6 +179,8 @@ class RawlogStream:
         named = name_mismatch(self.path, parquet=parquet)
         if named:
             self.file_warnings.append(named)
+        if conversions:
+            self.file_warnings.append(f"declared units converted to SI: {'; '.join(conversions)}")
         self.warnings: list[str] = list(self.file_warnings)
 
     def _line(self, row: int) -> int | None:
@@ -194,6 +219,9 @@ class RawlogStream:
                 c: numeric_column(table.column(c), c, path, line_of, locate=True).astype(np.float64)
                 for c in REQUIRED_COLUMNS
             }
+            for c in REQUIRED_COLUMNS:
+                if c in self.factors:
+                    cols[c] *= self.factors[c]
             time = cols["time"]
             bad = np.flatnonzero(~np.isfinite(time))
             if bad.size:
@@ -218,6 +246,7 @@ class RawlogStream:
                     numeric_column(table.column("m_x"), "m_x", path, line_of, locate=True).astype(
                         np.float64
                     )
+                    * self.factors.get("m_x", 1.0)
                 )
             acc += [cols["m_y"], cols["m_z"]]
             acc_names = (["m_x"] if "x" in self.axes else []) + ["m_y", "m_z"]
@@ -289,8 +318,8 @@ def open_rawlog(path: str | Path, *, rows: int | None = STREAM_ROWS) -> RawlogSt
     Raises
     ------
     FormatError
-        On opening: unreadable or corrupt file, missing columns (all listed), θ
-        declared in degrees.  While iterating: non-numeric required columns,
+        On opening: unreadable or corrupt file, missing columns (all listed), a
+        fixed column declared in a unit accal does not know.  While iterating: non-numeric required columns,
         non-finite or not strictly increasing time (checked across chunks, with
         the CSV line or the Parquet row).
     """
@@ -319,7 +348,8 @@ def read_rawlog(path: str | Path) -> AccSeries:
     ------
     FormatError
         Unreadable or corrupt file, missing columns (all listed), non-numeric
-        columns, non-finite or not strictly increasing time, θ declared in degrees.
+        columns, non-finite or not strictly increasing time, a fixed column declared in a unit
+        accal does not know.
     """
     stream = open_rawlog(path, rows=None)
     (chunk,) = list(stream)
