@@ -11,6 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 from click.testing import CliRunner
 
@@ -226,6 +227,24 @@ def test_demod_tau_below_one_sample(run_file, tmp_path, tau):
     assert f"--tau {tau} s is shorter than one sample" in line
     assert "at least 1 s" in line and "internal error" not in line and "0 s or" not in line
     assert not out.exists()
+
+
+def test_demod_tau_below_one_sample_of_one_run_fails_that_run_only(run_file, tmp_path):
+    """QA: one run sampled every 1000 s beside a 1 Hz run stopped the batch (exit 2)."""
+    from accal.io.writers import write_table
+
+    rows = pd.read_parquet(run_file)
+    coarse = tmp_path / "coarse.parquet"
+    write_table(rows.assign(time=rows["time"] * 1000.0), coarse, units={"theta": "rad"})
+    out = tmp_path / "o"
+    code, _, err, _ = invoke(
+        "demod", run_file, coarse, "--tau", "600", "--mask", "200", "--out", out
+    )
+    assert code == 1
+    (line,) = [x for x in err.splitlines() if "coarse.parquet" in x]
+    assert "tau = 600 s is shorter than one sample (fs = 0.001 Hz)" in line
+    assert (out / "periods.parquet").exists()  # the good run is processed
+    assert set(pd.read_parquet(out / "periods.parquet")["source"]) == {run_file.name}
 
 
 def test_demod_valid_tau_still_works(run_file, tmp_path):
