@@ -797,3 +797,70 @@ def test_sigterm_mid_write_leaves_no_temporary(tmp_path):
     assert res.returncode != 0 and time.monotonic() - t0 < 25
     assert "Traceback" not in res.stderr
     assert sorted(p.name for p in out.parent.iterdir()) == []  # no target, no temporary
+
+
+# ---------------------------------------------------------------- a table lost or replaced
+
+
+def test_deleted_table_is_rebuilt_by_the_next_run(archive, tmp_path):
+    """QA: with the table deleted, every input was 'current' and the run wrote no table.
+
+    An input is current only while its rows are in the table: the next run redoes
+    them and the table comes back identical.
+    """
+    out = tmp_path / "o"
+    assert invoke("grace-bias", archive, "-r", "--out", out, "-q", "-j", "1")[0] == 0
+    before = read_outputs(out)
+    (out / "bias_drift.parquet").unlink()
+    code, _, err = invoke("grace-bias", archive, "-r", "--out", out, "-j", "1")
+    assert code == 0 and "6 ok, 0 skipped" in err
+    after = read_outputs(out)
+    pd.testing.assert_frame_equal(before["table"], after["table"], check_exact=True)
+    code, _, err = invoke("grace-bias", archive, "-r", "--out", out, "-j", "1")
+    assert code == 0 and "0 ok, 6 skipped" in err  # and current again
+
+
+def test_export_cannot_replace_the_live_table(archive, tmp_path):
+    """QA: exporting B's rows over OUT/bias_drift.parquet lost A's rows for good."""
+    out = tmp_path / "o"
+    assert invoke("grace-bias", archive, "-r", "--out", out, "-q", "-j", "1")[0] == 0
+    table = (out / "bias_drift.parquet").read_bytes()
+    for name in ("bias_drift.parquet", "bias_drift.csv", "BIAS_DRIFT.parquet"):
+        code, _, err = invoke("table", out, "--export", out / name, "--satellite", "B")
+        assert code == 2 and "is the name of the cumulative table" in err
+    assert (out / "bias_drift.parquet").read_bytes() == table
+    assert not (out / "bias_drift.csv").exists()
+    code, _, err = invoke("table", out, "--export", tmp_path / "nope" / "x.csv")
+    assert code == 2 and "does not exist" in err and not (tmp_path / "nope").exists()
+    code, _, err = invoke("table", out, "--export", tmp_path / "b.csv", "--satellite", "B")
+    assert code == 0 and len(pd.read_csv(tmp_path / "b.csv", comment="#")) == 9
+
+
+def test_damaged_table_fails_every_run_not_only_when_work_is_due(archive, tmp_path):
+    """QA: a truncated table went unnoticed (exit 0) while every input was current."""
+    out = tmp_path / "o"
+    assert invoke("grace-bias", archive, "-r", "--out", out, "-q", "-j", "1")[0] == 0
+    t = out / "bias_drift.parquet"
+    t.write_bytes(t.read_bytes()[:500])
+    code, _, err = invoke("grace-bias", archive, "-r", "--out", out, "-j", "1")
+    assert code == 1 and "damaged bias_drift table" in err and str(t) in err
+
+
+def test_date_is_the_day_of_a_file_that_starts_before_midnight(tmp_path):
+    """QA: a 2005-01-01 file whose first record is 10 s before midnight was dated
+    2004-12-31 (the day of t0), and ``--start 2005-01-01`` missed it."""
+    from accal.io.grace_l1b import read_grace_acc1b, write_grace_acc1b
+    from accal.simulate.grace import write_simulated_grace
+
+    f = tmp_path / "ACC1B_2005-01-01_A_02.asc"
+    write_simulated_grace(f, date="2005-01-01", satellite="A", seed=1, duration=7200.0)
+    s = read_grace_acc1b(f)
+    write_grace_acc1b(s.replace(time=s.time - 10.0), f)
+    out = tmp_path / "o"
+    assert invoke("grace-bias", f, "--out", out, "-q")[0] == 0
+    code, text, _ = invoke("table", out, "--start", "2005-01-01", "--end", "2005-01-01")
+    assert code == 0 and text.count("ACC1B_2005-01-01_A_02.asc") == 3
+    from accal.pipeline import read_bias_drift
+
+    t = read_bias_drift(out / "bias_drift.parquet")
+    assert set(t["date"]) == {"2005-01-01"} and (t["t0"] < 157809600.0).all()

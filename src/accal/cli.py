@@ -390,6 +390,7 @@ def table_cmd(
             fmt = "parquet" if export.suffix.lower() == ".parquet" else "csv"
             if export.suffix.lower() not in (".csv", ".parquet"):
                 raise click.BadParameter("--export FILE must end in .csv or .parquet")
+            _check_export_target(export)
             write_table(
                 {c: df[c].to_numpy() for c in df.columns},
                 export,
@@ -417,6 +418,28 @@ def table_cmd(
 def _short_satellite(name: str) -> str:
     """``GRACE-A``, ``grace-a``, ``a`` → ``A``; ``GRACE-FO-C`` → ``C`` (others: upper case)."""
     return name.upper().removeprefix("GRACE-FO-").removeprefix("GRACE-")
+
+
+def _check_export_target(export: Path) -> None:
+    """Usage error for an export that would replace an output directory's own table.
+
+    QA: ``accal table OUT --export OUT/bias_drift.parquet --satellite B`` replaced
+    the cumulative table with B's rows; the next runs skipped A's inputs as current,
+    so their rows were lost until ``--force``.  A ``bias_drift.csv`` beside a
+    Parquet table made every later run refuse the directory.  A missing directory
+    is an error too, not created (a typo in the path would go unnoticed).
+    """
+    from accal.batch import MANIFEST
+
+    parent = export.parent
+    if not parent.is_dir():
+        usage_fail(f"--export {export}: directory {parent} does not exist")
+    stem = export.name.lower().rsplit(".", 1)[0]
+    if stem == "bias_drift" and ((parent / MANIFEST).exists() or any(parent.glob("bias_drift.*"))):
+        usage_fail(
+            f"--export {export} is the name of the cumulative table of the output "
+            f"directory {parent}; export to another name or directory"
+        )
 
 
 def _is_date(s: str) -> bool:

@@ -37,7 +37,7 @@ from accal.series import AccSeries
 BIAS_DRIFT_UNITS = {
     "source": "input file name",
     "satellite": "satellite identifier",
-    "date": "GPS-calendar date of t0 (YYYY-MM-DD; the L1B file day)",
+    "date": "GPS-calendar date of the record's midpoint (YYYY-MM-DD; the L1B file day)",
     "axis": "accelerometer axis (x|y|z), frame in 'frame'",
     "frame": "reference frame of the axes",
     "method": "estimator (wavelet|lsq)",
@@ -398,6 +398,11 @@ def table_rows(
     periods = load_periods(opts.degraded_days) if opts.degraded_days else None
     status: dict[str, tuple[str, str]] = {}
     rows = []
+    # the day of the record's midpoint: a day file may start a few seconds before
+    # midnight (QA: first record 10 s early; the date of t0 was the day before, and
+    # date filters missed the day)
+    t = series.time
+    date = gps_to_date(0.5 * (float(t[0]) + float(t[-1]))) if len(t) else ""
     for (ax, m), fit in fits.items():
         sig = fit.sigma
         s = 1.0 if scale is None else float(scale["xyz".index(ax)])
@@ -407,7 +412,7 @@ def table_rows(
             {
                 "source": path.name,
                 "satellite": series.satellite,
-                "date": gps_to_date(fit.t0),
+                "date": date or gps_to_date(fit.t0),
                 "axis": ax,
                 "frame": series.frame,
                 "method": m,
@@ -1355,6 +1360,16 @@ def run(
             for k, (p, msg) in enumerate(unmatched):  # expanded to nothing: a failure
                 results[k - len(unmatched)] = FileOutcome(Path(p), False, msg)
                 rlog(f"FAILED {msg}")
+            # an input is current only if its rows are still in the table: a deleted
+            # or replaced table (QA: deleted, or overwritten by a filtered export) has
+            # its inputs redone instead of skipped with no rows; a damaged one stops
+            # the run here, every run, with its message (not only when work is due)
+            table_path = _table_if_exists(out_dir, opts.fmt)
+            tabled = (
+                set(_read_bias_drift_arrow(table_path).column("source").to_pylist())
+                if table_path is not None
+                else set()
+            )
             todo: list[int] = []
             owners: dict[str, Path] = {}
             for i, p in enumerate(paths):
@@ -1369,16 +1384,17 @@ def run(
                         "in this run; rename one or give it another --out",
                     )
                     rlog(f"FAILED {results[i].message}")
-                elif not force and manifest.is_current(p, key, checksum=checksum):
+                elif (
+                    not force
+                    and p.name in tabled
+                    and manifest.is_current(p, key, checksum=checksum)
+                ):
                     results[i] = FileOutcome(p, True, skipped=True)
                     rlog(f"skip {p}: outputs current")
                 else:
                     todo.append(i)
             task = functools.partial(process_one, out_dir=out_dir, opts=opts)
             pending: list[FileOutcome] = []
-            table_path = _table_if_exists(out_dir, opts.fmt)
-            if table_path is not None and todo:
-                _read_bias_drift_arrow(table_path)  # a damaged table: say so before the work
             last = _time.monotonic()
             gen = execute(
                 task,
