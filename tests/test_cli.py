@@ -601,3 +601,18 @@ def test_noise_free_simulation_has_no_warning_and_no_noise():
         warnings.simplefilter("error")
         z = coloured_noise(1000, 1.0, 0.0, 1e-3, np.random.default_rng(1))
     assert z.shape == (1000,) and not z.any()
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_simulated_truth_counts_the_gaps_in_the_file(tmp_path, seed):
+    """QA: gaps that overlap merge into one; the truth counted the gaps asked for."""
+    import json
+
+    from accal.io.grace_l1b import read_grace_acc1b
+    from accal.simulate.grace import write_simulated_grace
+
+    f = tmp_path / "ACC1B_2005-01-01_A_02.asc"
+    truth = write_simulated_grace(f, seed=seed, duration=20000.0, n_gaps=8)
+    t = json.loads(truth.read_text())
+    assert t["n_gaps_requested"] == 8
+    assert t["n_gaps"] == read_grace_acc1b(f).report.n_gaps
