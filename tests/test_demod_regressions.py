@@ -474,3 +474,31 @@ def test_irregular_10hz_in_gps_seconds_is_still_refused(tmp_path):
     code, _, err = invoke("demod", bad, "--tau", TAU, "--mask", MASK, "--out", tmp_path / "o")
     assert code == 1
     assert "irregular sampling: 1 of" in err and "gps.parquet" in err
+
+
+# --- θ noisy at rest: no usable period, and no way to say so -----------------------
+
+
+def test_theta_noisy_at_rest_needs_and_takes_rest_tol(run_csv, tmp_path):
+    """QA: N(0, 1e-8 rad) on θ left no period at rest (tolerance 1e-9 rad, not settable)."""
+    rows = _rows(run_csv)
+    rng = np.random.default_rng(1)
+    noisy = tmp_path / "noisy.csv"
+    theta = rows["theta"] + 1e-8 * rng.standard_normal(len(rows))
+    write_table(rows.assign(theta=theta), noisy, units={"theta": "rad"})
+    code, _, err = invoke("demod", noisy, "--tau", TAU, "--mask", MASK, "--out", tmp_path / "a")
+    assert code == 1 and "--rest-tol" in err and "no period has enough" in err
+    code, _, err = invoke(
+        "demod", noisy, "--tau", TAU, "--mask", MASK, "--rest-tol", "1e-6", "--out", tmp_path / "b"
+    )
+    assert code == 0, err
+    assert invoke("demod", run_csv, "--tau", TAU, "--mask", MASK, "--out", tmp_path / "c")[0] == 0
+    got, ref = (pd.read_parquet(tmp_path / d / "periods.parquet") for d in ("b", "c"))
+    assert len(got) == len(ref) == 60
+    np.testing.assert_allclose(got["a_Y"], ref["a_Y"], rtol=0, atol=1e-13)
+    summary = json.loads((tmp_path / "b" / "summary.json").read_text())
+    assert summary["options"]["rest_tol"] == 1e-6
+    code, _, err = invoke(
+        "demod", run_csv, "--tau", TAU, "--mask", MASK, "--rest-tol", "0", "--out", tmp_path / "d"
+    )
+    assert code == 2 and "rest tolerance" in err

@@ -115,6 +115,15 @@ PSD_HELP = "Noise PSD: 'microstar' (eq. 1 of Lenoir et al. 2013) or a CSV/Parque
     help="With --resample: a step longer than this many grid steps is a gap.",
 )
 @click.option(
+    "--rest-tol",
+    type=float,
+    default=1e-9,
+    show_default=True,
+    metavar="RAD",
+    help="θ is at rest where its first and second differences are within this [rad]; "
+    "raise it for an angle readout that is noisy at rest.",
+)
+@click.option(
     "--chunk-size",
     "chunk_rows",
     type=click.IntRange(min=16),
@@ -148,6 +157,7 @@ def demod(
     sinusoid_constant: bool,
     resample: bool,
     gap_factor: float,
+    rest_tol: float,
     chunk_rows: int,
     close_loop: bool,
     alpha: float,
@@ -182,6 +192,7 @@ def demod(
             sinusoid_constant=sinusoid_constant,
             resample=resample,
             gap_factor=gap_factor,
+            rest_tol=rest_tol,
             integration=integration,
             chunk_rows=chunk_rows,
             close_loop=close_loop,

@@ -122,6 +122,10 @@ class DemodOptions:
         False-detection probability per selection step of the closure.
     chunk_rows : int
         Rows read at a time (memory knob; results do not depend on it).
+    rest_tol : float
+        A sample is at rest when θ's first and second differences are within this
+        [rad] (section 4.2).  Raise it for an angle readout with noise at rest
+        (QA: N(0, 1e-8 rad) on θ left no usable period at the default 1e-9 rad).
     """
 
     tau: float
@@ -139,6 +143,7 @@ class DemodOptions:
     chunk_rows: int = CHUNK_ROWS
     close_loop: bool = False
     alpha: float = 0.01
+    rest_tol: float = 1e-9
 
     def __post_init__(self) -> None:
         check_option("method", self.method, ("ls", "gls"))
@@ -164,6 +169,10 @@ class DemodOptions:
         if not 0 < self.integration < np.inf:
             raise ValidationError(
                 f"integration time must be positive and finite, got {self.integration} s"
+            )
+        if not 0 < self.rest_tol < 0.1:
+            raise ValidationError(
+                f"rest tolerance must be in (0, 0.1) rad, got {self.rest_tol} rad"
             )
         if not self.gap_factor > 1:
             raise ValidationError(f"gap factor must be > 1 step, got {self.gap_factor}")
@@ -449,6 +458,7 @@ def estimate(path: Path, opts: DemodOptions, psd: Any) -> tuple[Any, RunInfo]:
         fs=1.0 / step,
         method=opts.method,
         signal_model=opts.signal_model,
+        rest_tol=opts.rest_tol,
         bias_aux=opts.aux_channels,
         psd=psd,
     )
@@ -554,6 +564,7 @@ def summarise(
             "psd": opts.psd,
             "signal_model": opts.signal_model,
             "bias_model": opts.bias_model,
+            "rest_tol": opts.rest_tol,
         },
         "solver": res.solver,
         "n_periods": res.n_periods,
@@ -1167,6 +1178,7 @@ def close_run(
         bias_aux=bias_aux or None,
         aux=aux or None,
         alpha=opts.alpha,
+        rest_tol=opts.rest_tol,
         # sigmas before/after with the demodulation's own noise model (--psd)
         noise_psd=psd if psd is not None else load_psd(opts.psd),
     )
@@ -1253,6 +1265,7 @@ def _gls_after(
             bias_aux=bias_aux or None,
             psd=psd if psd is not None else load_psd(opts.psd),
             valid=valid,
+            rest_tol=opts.rest_tol,
         )
 
     # declared (as the periods rows have it) and with the effects subtracted
@@ -1853,6 +1866,7 @@ def diagnose_demod_dir(
                 psd=str(o.get("psd") or "microstar"),
                 close_loop=True,
                 alpha=alpha,
+                rest_tol=float(o.get("rest_tol", 1e-9)),
             )
             step = float(rs["step"]) if rs and "step" in rs else None
             out_dir.mkdir(parents=True, exist_ok=True)  # not before a run is found

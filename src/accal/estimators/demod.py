@@ -1073,7 +1073,9 @@ def demodulate_stream(
     if n_keep == 0:
         raise ValidationError(
             f"no period has enough unmasked samples at both θ = 0 and π (need {st.need:g} of "
-            f"{st.q}; best period has {best})"
+            f"{st.q}; best period has {best}). A sample is at rest where θ's first and second "
+            f"differences are within {rest_tol:g} rad (--rest-tol; raise it if θ is noisy at "
+            "rest), and the rests must be at θ = 0 and π"
         )
     all_shifts = np.concatenate(shifts) if shifts else np.empty(0)
     if method == "gls":
