@@ -502,3 +502,27 @@ def test_theta_noisy_at_rest_needs_and_takes_rest_tol(run_csv, tmp_path):
         "demod", run_csv, "--tau", TAU, "--mask", MASK, "--rest-tol", "0", "--out", tmp_path / "d"
     )
     assert code == 2 and "rest tolerance" in err
+
+
+@pytest.mark.parametrize(
+    ("tau", "says"),
+    [
+        (
+            TAU / 2,
+            "repeat every 2 periods: the pattern's period is 60 s, not --tau 30 s; give --tau 60",
+        ),
+        (TAU + 7, "move by -7 s from one period to the next: the pattern repeats every 60 s"),
+        (TAU * 2, None),  # two patterns per period: it repeats every --tau
+    ],
+)
+def test_tau_a_fraction_of_the_pattern_says_the_pattern_period(run_csv, tmp_path, tau, says):
+    """QA: --tau 300 on a 600 s pattern was told "give --tau 332" (the shift between the
+    pattern's two halves), and --tau 332 then passed without a word."""
+    out = tmp_path / "o"
+    code, _, err = invoke("demod", run_csv, "--tau", tau, "--mask", MASK, "--out", out)
+    assert code == 0, err
+    pattern = json.loads((out / "summary.json").read_text())["pattern"]
+    if says is None:
+        assert "rotations" not in err and pattern["pattern_periods"] == 1
+    else:
+        assert says in err and "give --tau 3" not in err

@@ -528,9 +528,21 @@ def summarise(
             f"the mean over {opts.integration:g} s of consecutive periods needs it"
         )
     shift = float(getattr(res, "rotation_shift", float("nan")))
-    # a shift of a few samples: the pattern's period is tau + shift; a large one says
-    # only that the pattern does not repeat every tau
-    near = bool(np.isfinite(shift) and abs(shift) / res.fs < SHIFT_NEAR * res.tau)
+    m_periods = int(getattr(res, "pattern_periods", 0))
+    # a steady shift of a few samples: the pattern's period is tau + shift; layouts that
+    # repeat every m periods: m·tau (QA: --tau 300 on a 600 s pattern was told "give
+    # --tau 332" from the shift between its two halves); otherwise it does not repeat
+    near = bool(
+        np.isfinite(shift)
+        and abs(shift) / res.fs < SHIFT_NEAR * res.tau
+        and getattr(res, "rotation_shift_steady", True)
+    )
+    if m_periods >= 1:
+        every = m_periods * res.tau
+    elif near:
+        every = res.tau + shift / res.fs
+    else:
+        every = None
     dropped = sorted(set(range(res.n_periods)) - set(res.period_index.tolist()))
     mt = res.masked_time
     measured = float(np.median(mt))
@@ -583,9 +595,11 @@ def summarise(
         "leakage_max": res.max_leakage,
         "pattern": {
             "rotation_shift": shift / res.fs if np.isfinite(shift) else None,
-            "repeats_every": res.tau + shift / res.fs if near else None,
+            "repeats_every": every,
+            "pattern_periods": m_periods,
             "units": "s (median shift of the rotations from one period to the next: 0 when "
-            "the rotation pattern repeats every tau; the period it repeats with)",
+            "the rotation pattern repeats every tau; the period it repeats with); "
+            "pattern_periods: the layout repeats every that many periods (0: not found)",
         },
         "Rd": rd.tolist(),
         "Rd_units": "m^2/s^4 (autocovariance of a_Y per period lag, eq. 23)",
@@ -766,7 +780,24 @@ def summary_warnings(summary: dict[str, Any]) -> tuple[str, ...]:
     # rotations move from one period to the next.
     pat = summary.get("pattern") or {}
     shift, tau = pat.get("rotation_shift"), tau_of(summary)
-    if shift is not None and np.isfinite(shift) and abs(shift) * fs > SHIFT_WARN:
+    m_periods = int(pat.get("pattern_periods") or 0)
+    if m_periods > 1:
+        w.append(
+            f"the rotations differ from one period to the next and repeat every {m_periods} "
+            f"periods: the pattern's period is {m_periods * tau:.9g} s, not --tau {tau:g} s; "
+            f"give --tau {m_periods * tau:.9g}"
+        )
+    elif m_periods == 0 and pat.get("repeats_every") is None and "pattern_periods" in pat:
+        from accal.estimators.demod import LAYOUT_LAGS
+
+        w.append(
+            f"the rotations differ from one period to the next and do not repeat within "
+            f"{LAYOUT_LAGS} periods: the pattern does not repeat every --tau {tau:g} s; give "
+            "--tau its period (or fix the time column)"
+        )
+    elif (
+        m_periods != 1 and shift is not None and np.isfinite(shift) and abs(shift) * fs > SHIFT_WARN
+    ):
         leak = summary.get("leakage_max")
         leak_text = (
             f"; eq. 16 leakage up to {leak:.2g}, removed by the joint fit of eq. 17"

@@ -135,6 +135,15 @@ class DemodResult:
         to the next [samples]: 0 when the pattern repeats every τ; ``d`` when it
         repeats every ``τ + d/fs`` (``--tau`` does not match the pattern).  NaN
         with fewer than two periods.
+    pattern_periods : int
+        Smallest ``m`` in 1…:data:`LAYOUT_LAGS` such that the rotation layout of
+        (nearly) every period is that of ``m`` periods before: 1 when the pattern
+        repeats every τ, ``m`` when ``--tau`` is 1/m of its period (QA: a 600 s
+        pattern demodulated with ``--tau 300``); 0 when none is (a steady shift,
+        see ``rotation_shift``, or no repeat at all), or with too few periods.
+    rotation_shift_steady : bool
+        True when (nearly) every period's layout is shifted by ``rotation_shift``
+        from the one before: the pattern then repeats every ``τ + d/fs``.
     """
 
     period_index: NDArray[np.int64]
@@ -166,6 +175,8 @@ class DemodResult:
     solver: str
     signal_model: str
     rotation_shift: float = float("nan")
+    pattern_periods: int = 0
+    rotation_shift_steady: bool = False
 
     @property
     def max_leakage(self) -> float:
@@ -795,38 +806,68 @@ def _scan_block(st: _Setup, blk: _Block) -> tuple[NDArray, NDArray, NDArray]:
     return n_used, keep, _leakage(va, vb, c * m, s * m, m)
 
 
-def _layout_shifts(rest: NDArray, prev: NDArray | None) -> tuple[NDArray, NDArray]:
-    """Shift of each period's rotation layout against the period before it [samples].
+#: Period lags at which rotation layouts are compared (a pattern of up to this many τ).
+LAYOUT_LAGS = 4
+#: Fraction of period pairs that must agree for a layout to count as repeating.
+LAYOUT_AGREE = 0.9
 
-    The circular cross-correlation of the masked samples (``~rest``) of
-    consecutive periods peaks at the shift ``d`` by which the rotations moved:
-    0 when the pattern repeats every τ, ``d`` when it repeats every ``τ + d/fs``.
+
+def _layout_shifts(rest: NDArray, prev: NDArray | None) -> tuple[dict[int, NDArray], NDArray]:
+    """Shift of each period's rotation layout against the periods before it [samples].
+
+    The circular cross-correlation of the masked samples (``~rest``) of two
+    periods peaks at the shift ``d`` by which the rotations moved: at lag 1, 0
+    when the pattern repeats every τ, ``d`` when it repeats every ``τ + d/fs``.
     Circular, so a rotation that leaves the end of a period and comes back at
-    its start does not break the estimate.
+    its start does not break the estimate.  Lags up to :data:`LAYOUT_LAGS` tell a
+    ``--tau`` that is a fraction of the pattern's period (layouts that differ
+    from one period to the next but repeat every m periods).
 
     Parameters
     ----------
     rest : ndarray of bool, shape (P, q)
         Rest masks of consecutive periods.
     prev : ndarray of complex or None
-        Spectrum of the mask of the period before the first one (from the previous block).
+        Spectra of the masks of the (up to :data:`LAYOUT_LAGS`) periods before the
+        first one (from the previous block).
 
     Returns
     -------
-    shifts : ndarray of int
-        One per pair of consecutive periods, in ``(-q/2, q/2]``.
+    shifts : dict of int to ndarray of int
+        Per lag ``m``: one shift per pair (period, period − m) whose later period
+        is in ``rest``, in ``(-q/2, q/2]``.
     last : ndarray of complex
-        Spectrum of the last period's mask (``prev`` of the next block).
+        Spectra of the last periods' masks (``prev`` of the next block).
     """
     q = rest.shape[1]
     spec = np.fft.rfft((~rest).astype(np.float64), axis=1)
+    n_prev = 0 if prev is None else prev.shape[0]
     if prev is not None:
-        spec = np.concatenate([prev[None, :], spec])
-    if spec.shape[0] < 2:
-        return np.empty(0, np.int64), spec[-1]
-    xc = np.fft.irfft(spec[1:] * np.conj(spec[:-1]), n=q, axis=1)
-    shift = np.argmax(np.round(xc, 6), axis=1)  # rounding: ties (no rotation) go to 0
-    return np.where(shift > q // 2, shift - q, shift).astype(np.int64), spec[-1]
+        spec = np.concatenate([prev, spec])
+    out: dict[int, NDArray] = {}
+    for lag in range(1, LAYOUT_LAGS + 1):
+        i = np.arange(max(n_prev, lag), spec.shape[0])
+        if not i.size:
+            out[lag] = np.empty(0, np.int64)
+            continue
+        xc = np.fft.irfft(spec[i] * np.conj(spec[i - lag]), n=q, axis=1)
+        shift = np.argmax(np.round(xc, 6), axis=1)  # rounding: ties (no rotation) go to 0
+        out[lag] = np.where(shift > q // 2, shift - q, shift).astype(np.int64)
+    return out, spec[-LAYOUT_LAGS:]
+
+
+def _pattern_of_shifts(shifts: dict[int, list[NDArray]]) -> tuple[float, int, bool]:
+    """(median lag-1 shift [samples], pattern_periods, steady) of :class:`DemodResult`."""
+    lag1 = np.concatenate(shifts[1]) if shifts[1] else np.empty(0, np.int64)
+    if not lag1.size:
+        return float("nan"), 0, False
+    med = float(np.median(lag1))
+    steady = bool(np.mean(np.abs(lag1 - med) <= 1) >= LAYOUT_AGREE)
+    for lag in range(1, LAYOUT_LAGS + 1):
+        d = np.concatenate(shifts[lag]) if shifts[lag] else np.empty(0, np.int64)
+        if d.size and np.mean(d == 0) >= LAYOUT_AGREE:
+            return med, lag, steady
+    return med, 0, steady
 
 
 def _estimate_block(st: _Setup, blk: _Block, solver: str, cache: dict) -> dict[str, Any]:
@@ -1028,7 +1069,7 @@ def demodulate_stream(
     cutter = None
     st = None
     n_per, n_keep, best, leak_max = 0, 0, 0, 0.0
-    shifts: list[NDArray] = []
+    shifts: dict[int, list[NDArray]] = {lag: [] for lag in range(1, LAYOUT_LAGS + 1)}
     last_spec: NDArray | None = None
 
     def scan(blk: _Block | None) -> None:
@@ -1037,7 +1078,8 @@ def demodulate_stream(
             return
         n_used, keep, leak = _scan_block(st, blk)
         sh, last_spec = _layout_shifts(blk.rest, last_spec)
-        shifts.append(sh)
+        for lag, d in sh.items():
+            shifts[lag].append(d)
         n_per += n_used.size
         n_keep += int(keep.sum())
         best = max(best, int(n_used.max()))
@@ -1077,7 +1119,7 @@ def demodulate_stream(
             f"differences are within {rest_tol:g} rad (--rest-tol; raise it if θ is noisy at "
             "rest), and the rests must be at θ = 0 and π"
         )
-    all_shifts = np.concatenate(shifts) if shifts else np.empty(0)
+    rotation_shift, pattern_periods, steady = _pattern_of_shifts(shifts)
     if method == "gls":
         used = "gls-eq17"
     elif solver == "auto":
@@ -1172,7 +1214,9 @@ def demodulate_stream(
         method=method,
         solver=used,
         signal_model=signal_model,
-        rotation_shift=float(np.median(all_shifts)) if all_shifts.size else float("nan"),
+        rotation_shift=rotation_shift,
+        pattern_periods=pattern_periods,
+        rotation_shift_steady=steady,
     )
 
 
