@@ -137,7 +137,7 @@ def _nan(d):
 BAD = {
     "not_monotonic": ({"time": _time_back}, [], r"bad\.csv:\d+: time is not strictly increasing"),
     "irregular": ({"time": _time_jitter}, [], r"bad\.csv: irregular sampling: 2 of 1199 steps .*--resample"),
-    "degrees": ({"theta": lambda d: np.degrees(d["theta"])}, [], r"bad\.csv: theta reaches 180 > 2π: it looks like degrees"),
+    "degrees": ({"theta": lambda d: np.degrees(d["theta"])}, [], r"bad\.csv: theta reaches 180 > 2π and its rests are not at multiples of π/2 rad: it looks like degrees"),
     "short": ({}, ["--tau", 1800, "--mask", 600], r"bad\.csv: run lasts 1200 s .* shorter than one modulation period"),
     "tau_not_integer": ({}, ["--tau", 60.5], r"bad\.csv: tau·fs = 60.5 is not an integer .* use tau = 60 s or 61 s"),
     "nan": ({"m_y": _nan}, [], r"bad\.csv: m_y has 1 NaN/inf value\(s\), first at t = 10 s \(row 11\)"),

@@ -526,3 +526,41 @@ def test_tau_a_fraction_of_the_pattern_says_the_pattern_period(run_csv, tmp_path
         assert "rotations" not in err and pattern["pattern_periods"] == 1
     else:
         assert says in err and "give --tau 3" not in err
+
+
+# --- θ in another radian convention ----------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "convert",
+    [
+        pytest.param(lambda th: np.where(th > np.pi - 1e-9, th - 2 * np.pi, th), id="atan2"),
+        pytest.param(lambda th: th + 2 * np.pi * 7, id="offset-7-turns"),
+        pytest.param(  # always rotating forward: 0, π, 2π, 3π, ...
+            lambda th: th[0] + np.concatenate([[0.0], np.cumsum(np.abs(np.diff(th)))]),
+            id="unwrapped",
+        ),
+    ],
+)
+def test_theta_in_another_radian_convention_is_wrapped(run_csv, tmp_path, convert):
+    """QA: θ of [−π, π) was refused ("must lie in [0, 2π]") and unwrapped radians were
+    "degrees"; rests at multiples of π/2 tell radians, so they are wrapped into [0, 2π)."""
+    rows = _rows(run_csv)
+    other = tmp_path / "other.csv"
+    write_table(rows.assign(theta=convert(rows["theta"].to_numpy())), other, units={"theta": "rad"})
+    for name, f in (("a", run_csv), ("b", other)):
+        code, _, err = invoke("demod", f, "--tau", TAU, "--mask", MASK, "--out", tmp_path / name)
+        assert code == 0, err
+    ref, got = (pd.read_parquet(tmp_path / d / "periods.parquet") for d in "ab")
+    assert len(got) == len(ref) == 60
+    np.testing.assert_allclose(got["a_Y"], ref["a_Y"], rtol=0, atol=1e-16)
+    np.testing.assert_allclose(got["a_Z"], ref["a_Z"], rtol=0, atol=1e-16)
+
+
+def test_theta_in_degrees_is_still_refused(run_csv, tmp_path):
+    rows = _rows(run_csv)
+    deg = tmp_path / "deg.csv"
+    write_table(rows.assign(theta=np.degrees(rows["theta"]) - 90.0), deg, units={})
+    code, _, err = invoke("demod", deg, "--tau", TAU, "--mask", MASK, "--out", tmp_path / "o")
+    assert code == 1 and "deg.csv" in err
+    assert "must lie in [0, 2π]" in err or "looks like degrees" in err

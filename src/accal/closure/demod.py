@@ -290,7 +290,7 @@ def close_loop_demod(
         )
     if n < 3:
         raise ValidationError(f"need at least 3 samples, got {n}")
-    from accal.estimators.demod import sampling_step, step_tolerance
+    from accal.estimators.demod import sampling_step, step_tolerance, theta_in_range
 
     dt_all = np.diff(t)
     dt, dt_rtol = sampling_step(t)
@@ -304,10 +304,7 @@ def close_loop_demod(
     if not np.isfinite(qf) or qf <= 0 or abs(qf - round(qf)) > max(1e-6, qf * dt_rtol):
         raise ValidationError(f"tau·fs = {qf:g} must be a positive integer (fs = {fs:g} Hz)")
     q = int(round(qf))
-    if np.nanmax(th) > 2 * np.pi + 1e-6:
-        raise ValidationError(
-            f"theta reaches {np.nanmax(th):g} > 2π: it looks like degrees; give theta in radians"
-        )
+    th = theta_in_range(th, None, 1e-6)
     v = np.ones(n, bool) if valid is None else np.asarray(valid, dtype=bool)
     if v.shape != t.shape:
         raise ValidationError(f"valid must have shape {t.shape}, got {v.shape}")

@@ -371,6 +371,62 @@ def _check_tau_mask(fs: float, tau: float, tm: float, fs_rtol: float = 0.0) -> i
     return int(round(q))
 
 
+#: A θ value this close to a multiple of π/2 [rad] counts as a rest angle of a pattern.
+REST_ANGLE_TOL = 1e-6
+
+
+def theta_in_range(th: NDArray[np.float64], valid: NDArray | None, tol: float) -> NDArray:
+    """θ in ``[0, 2π]``: as given, or wrapped when it is radians in another convention.
+
+    A θ outside ``[−tol, 2π + tol]`` whose rests are at multiples of π/2 (over a tenth
+    of the samples away from 0 lie within :data:`REST_ANGLE_TOL` of one) is radians
+    in another convention, ``[−π, π)`` (atan2) or unwrapped (always rotating one
+    way): it is wrapped into ``[0, 2π)``, with values within ``REST_ANGLE_TOL`` below
+    2π taken as 0, so a rest at 0 stays continuous.  Degrees rest at 90, 180, 270,
+    which are not multiples of π/2 rad: refused with that diagnosis.  QA: θ of
+    ``[−π, π)`` was refused ("must lie in [0, 2π]"), unwrapped radians were taken for
+    degrees.
+
+    Parameters
+    ----------
+    th : ndarray
+        θ [rad].
+    valid : ndarray of bool or None
+        Samples to judge by (others may hold anything).
+    tol : float
+        Tolerance on the ``[0, 2π]`` range [rad].
+
+    Returns
+    -------
+    ndarray
+        θ in ``[−REST_ANGLE_TOL, 2π + tol]`` [rad].
+
+    Raises
+    ------
+    ValidationError
+        θ outside the range and not radians of another convention.
+    """
+    x = th if valid is None else th[valid]
+    x = x[np.isfinite(x)]
+    if not x.size or (x.min() >= -tol and x.max() <= 2 * np.pi + tol):
+        return th
+    away = x[np.abs(x) > REST_ANGLE_TOL]
+    r = np.mod(away, 0.5 * np.pi)
+    at_rest_angle = np.minimum(r, 0.5 * np.pi - r) < REST_ANGLE_TOL
+    if away.size and at_rest_angle.mean() > 0.1:
+        w = np.mod(th, 2 * np.pi)
+        return np.where(w > 2 * np.pi - REST_ANGLE_TOL, w - 2 * np.pi, w)
+    if x.max() > 2 * np.pi + tol:
+        raise ValidationError(
+            f"theta reaches {x.max():g} > 2π and its rests are not at multiples of π/2 rad: "
+            "it looks like degrees; give theta in radians (or declare its unit 'deg')"
+        )
+    raise ValidationError(
+        f"theta must lie in [0, 2π] rad (or be radians resting at multiples of π/2 in "
+        f"another convention), got minimum {x.min():g}"
+    )
+
+
 def _validate(time, m_y, m_z, theta, aux, valid, tau, tm, theta_tol):
     arrs = {}
     for name, x in (("time", time), ("m_y", m_y), ("m_z", m_z), ("theta", theta), *aux.items()):
@@ -401,11 +457,7 @@ def _validate(time, m_y, m_z, theta, aux, valid, tau, tm, theta_tol):
         )
     fs = 1.0 / dt
     _check_tau_mask(fs, tau, tm, dt_rtol)
-    th = arrs["theta"] if ok is None else arrs["theta"][ok]
-    if th.size and th.max() > 2 * np.pi + theta_tol:
-        raise ValidationError(
-            f"theta reaches {th.max():g} > 2π: it looks like degrees; give theta in radians"
-        )
+    arrs["theta"] = theta_in_range(arrs["theta"], ok, theta_tol)
     return arrs, ok, fs
 
 
@@ -652,14 +704,9 @@ class _Checker:
                 f"sampling is irregular: step {steps[k]:.10g} s at index {idx} vs nominal "
                 f"{dt:.10g} s (resample or split the record at gaps)"
             )
+        arrs["theta"] = theta_in_range(arrs["theta"], ok, self.theta_tol)
         th = arrs["theta"][ok]
         if th.size:
-            if th.max() > 2 * np.pi + self.theta_tol:
-                raise ValidationError(
-                    f"theta reaches {th.max():g} > 2π: it looks like degrees; give theta in radians"
-                )
-            if th.min() < -self.theta_tol:
-                raise ValidationError(f"theta must lie in [0, 2π] rad, got minimum {th.min():g}")
             self.th_min = min(self.th_min, float(th.min()))
             self.th_max = max(self.th_max, float(th.max()))
             self.reaches_pi |= bool(np.any(np.abs(np.cos(th) + 1.0) < 1e-3))
