@@ -184,7 +184,7 @@ def test_budget_bad_mask_is_a_usage_error(mask):
 def test_budget_valid_values_still_work():
     code, stdout, err, _ = invoke("budget", "--mask", "200", "--tau", "600", "--integration", "0.5")
     assert code == 0, err
-    assert "sigma over T = 0.5 s (1 periods)" in stdout
+    assert "sigma over T = 0.5 s (1 period of 600 s = 600 s, the whole periods nearest T)" in stdout
     code, stdout, err, _ = invoke("budget", "--mask", "200", "--taus", "400:1000:200", "--json")
     assert code == 0, err
 

@@ -430,8 +430,14 @@ def budget(
     )
     for k, r in enumerate(rep["Rd"][:6]):
         click.echo(f"Rd[{k}] = {r:.4e} m^2/s^4")
+    # σ is of whole periods: say how many and how long they are (QA: T = 100 s with
+    # tau 600 s printed "(1 periods)", the σ of one 600 s period under T = 100 s)
+    n_per, tau_b = int(rep["n_periods"]), float(rep["tau_budget"])
+    span = f"{n_per} period{'' if n_per == 1 else 's'} of {tau_b:g} s"
+    if abs(n_per * tau_b - integration) > 1e-9 * integration:
+        span += f" = {n_per * tau_b:g} s, the whole periods nearest T"
     click.echo(
-        f"sigma over T = {integration:g} s ({rep['n_periods']} periods): {rep['sigma_T']:.4e} m/s^2 "
+        f"sigma over T = {integration:g} s ({span}): {rep['sigma_T']:.4e} m/s^2 "
         f"(independent periods: {rep['sigma_T_indep']:.4e})"
     )
     if plot is not None:
