@@ -465,12 +465,50 @@ def test_blank_lines_keep_line_numbers(samples, tmp_path):
     assert e.value.line == 32
 
 
-def test_irregular_spacing_message(samples, tmp_path):
+@pytest.mark.parametrize(
+    "respace",
+    [
+        pytest.param(
+            lambda lines: [
+                ln.replace("  00", " 00", 1) if i == 3 else ln for i, ln in enumerate(lines)
+            ],
+            id="one-record-single",
+        ),
+        pytest.param(lambda lines: [ln.replace("\n", " \n") for ln in lines], id="trailing"),
+        pytest.param(lambda lines: [" " + ln for ln in lines], id="leading"),
+        pytest.param(
+            lambda lines: [" ".join(f"{t:>24}" for t in ln.split()) + "\n" for ln in lines],
+            id="padded",
+        ),
+        pytest.param(
+            lambda lines: ["\t".join(ln.split()) + "\r\n" for ln in lines], id="tabs-crlf"
+        ),
+    ],
+)
+def test_records_in_another_spacing_are_read_with_a_warning(samples, tmp_path, respace):
+    """QA: a trailing blank, right-aligned columns or a leading blank on each record were
+    refused as "irregular spacing ... as on the first record" (the first was alike)."""
     head, data = _data_lines(samples["grace_a"])
-    data[3] = data[3].replace("  00100000", " 00100000")
-    with pytest.raises(FormatError, match="irregular spacing: .* two before qualflg") as e:
+    ref = read_grace_acc1b(samples["grace_a"])
+    got = read_grace_acc1b(_write(tmp_path, "".join(head + respace(data)).encode()))
+    np.testing.assert_array_equal(got.time, ref.time)
+    np.testing.assert_array_equal(got.acc, ref.acc)
+    np.testing.assert_array_equal(got.quality, ref.quality)
+    for c in ref.aux:
+        np.testing.assert_array_equal(got.aux[c], ref.aux[c])
+    assert any("not in the L1B layout" in w for w in got.report.warnings)
+    assert not any("not in the L1B layout" in w for w in ref.report.warnings)
+
+
+def test_a_value_missing_in_loose_spacing_is_still_an_error(samples, tmp_path):
+    head, data = _data_lines(samples["grace_a"])
+    data = [ln.replace("\n", " \n") for ln in data]
+    fields = data[6].split(" ")
+    del fields[4]  # a value gone with its blank: one column short
+    data[6] = " ".join(fields)
+    with pytest.raises(FormatError, match="wrong number of columns: expected 12, got 11") as e:
         read_grace_acc1b(_write(tmp_path, "".join(head + data).encode()))
-    assert e.value.line == 34
+    assert e.value.line == 37
 
 
 def test_long_header_value_cut_in_message(samples, tmp_path):

@@ -556,11 +556,51 @@ _NON_SPACE = re.compile(rb"\S")
 _LIN_ACCL = {"lin_accl_x": 0, "lin_accl_y": 1, "lin_accl_z": 2}
 
 
+#: Runs of blanks, and a blank at either end of a line (records in another layout).
+_BLANKS = re.compile(rb"[ \t]+")
+_EDGE_BLANK = re.compile(rb"(?m)^ | (?=\r?$)")
+_BLANK_LINE = re.compile(rb"(?m)^[ \t]+\r?$")
+
+#: Warning for records read with any blanks as separators.
+LOOSE_LAYOUT = (
+    "records are not in the L1B layout (one space between fields, two before qualflg): "
+    "read with any run of blanks as the separator"
+)
+
+
+def _respaced(data: bytes) -> bytes:
+    """``data`` with every run of blanks one space, and none at either end of a line."""
+    return _EDGE_BLANK.sub(b"", _BLANKS.sub(b" ", data))
+
+
+def _loose_table(data: bytes, convert: Any, parse: Any, read: Any) -> Any | None:
+    """The records ``data`` parsed with any run of blanks as the separator, or None.
+
+    JPL writes one space between fields and two before ``qualflg``; a file re-written by
+    other tools may pad columns, end records with a blank or use tabs (QA: a trailing
+    blank, right-aligned columns and a leading blank were refused as "irregular
+    spacing").  The blanks are collapsed (lines stay where they are, so line numbers
+    hold) and the 12 fields parsed again.  None when that fails too, or when a line
+    holds only blanks: the strict scan then names the line and the fault (an empty
+    field, a missing column, ...).
+    """
+    import pyarrow as pa
+
+    if _BLANK_LINE.search(data):
+        return None
+    try:
+        return read(pa.py_buffer(_respaced(data)), parse_options=parse, convert_options=convert)
+    except (pa.ArrowException, ValueError):
+        return None
+
+
 def _parse_ascii(raw: bytes, start: int, first_line: int, path: Path) -> dict[str, Any]:
     """Parse the ASCII records ``raw[start:]`` (``first_line``: file line of the first).
 
     The records are handed to pyarrow as a slice of ``raw`` (a day file is ~9 MB:
-    no copy); the error paths, which need the records as bytes, slice them.
+    no copy); the error paths, which need the records as bytes, slice them.  Records
+    in another layout than JPL's spacing are read by :func:`_loose_table`, with a
+    warning (``out["warnings"]``).
     """
     import pyarrow as pa
     import pyarrow.csv as pacsv
@@ -584,25 +624,43 @@ def _parse_ascii(raw: bytes, start: int, first_line: int, path: Path) -> dict[st
     types.update(gps_time=pa.float64(), GRACE_id=pa.string(), qualflg=pa.string())
     if double:
         types["_blank"] = pa.null()
+    parse = pacsv.ParseOptions(
+        delimiter=" ", quote_char=False, double_quote=False, ignore_empty_lines=True
+    )
+
+    def convert(names: list[str]) -> Any:
+        kinds = {n: pa.null() if n == "_blank" else types[n] for n in names}
+        return pacsv.ConvertOptions(
+            column_types=kinds,
+            null_values=[""],
+            strings_can_be_null=False,
+            quoted_strings_can_be_null=False,
+            include_columns=[n for n in names if n != "_blank"],
+            # ids and flags are checked byte by byte below (A-D, 0/1): no UTF-8 pass
+            check_utf8=False,
+        )
+
+    notes: list[str] = []
     try:
         table = pacsv.read_csv(
             pa.py_buffer(raw).slice(start),
             read_options=csv_read_options(column_names=names, block_size=1 << 22),
-            parse_options=pacsv.ParseOptions(
-                delimiter=" ", quote_char=False, double_quote=False, ignore_empty_lines=True
-            ),
-            convert_options=pacsv.ConvertOptions(
-                column_types=types,
-                null_values=[""],
-                strings_can_be_null=False,
-                quoted_strings_can_be_null=False,
-                include_columns=[n for n in names if n != "_blank"],
-                # ids and flags are checked byte by byte below (A-D, 0/1): no UTF-8 pass
-                check_utf8=False,
-            ),
+            parse_options=parse,
+            convert_options=convert(names),
         )
     except (pa.ArrowException, ValueError) as exc:
-        raise _locate_bad_line(raw[start:], first_line, len(names), path, str(exc)) from None
+        single = [*COLUMNS[:11], "qualflg"]
+        read = functools.partial(
+            pacsv.read_csv, read_options=csv_read_options(column_names=single, block_size=1 << 22)
+        )
+        table = _loose_table(raw[start:], convert(single), parse, read)
+        if table is None:
+            err = _locate_bad_line(raw[start:], first_line, len(names), path, str(exc))
+            if "irregular spacing" in str(err):  # not the fault: find it in any spacing
+                err = _locate_bad_line(_respaced(raw[start:]), first_line, 12, path, str(exc))
+            raise err from None
+        names = single
+        notes.append(LOOSE_LAYOUT)
     if table.num_rows == 0:  # only what pyarrow skips (e.g. a byte-order mark, blank lines)
         raise FormatError("header but no data records", path, first_line)
     out: dict[str, Any] = {}
@@ -629,6 +687,7 @@ def _parse_ascii(raw: bytes, start: int, first_line: int, path: Path) -> dict[st
     out["GRACE_id"] = table.column("GRACE_id")
     out["qualflg"] = bits_from_strings(table.column("qualflg"), path, first_line, line_of=line_of)
     out["line_of"] = line_of
+    out["warnings"] = notes
     return out
 
 
@@ -885,6 +944,7 @@ def read_grace_acc1b(path: str | Path, *, invalid_bits: int = DEFAULT_INVALID_BI
         else _parse_ascii(raw, data_start, first_line, path)
     )
     warn, letter = _check_ids(cols["GRACE_id"], info["letter"], path, cols["line_of"])
+    warn = [*cols.get("warnings", ()), *warn]
     time = cols["gps_time"]
     warn += _check_header_span(time, info.get("span"), path, cols["line_of"])
     acc = cols["acc"]
