@@ -178,6 +178,22 @@ def test_diagnose_previous_run_reports_without_rewriting(undeclared, tmp_path):
     assert "Removed from calibrated" not in md and "Would remove (re-run grace-bias" in md
 
 
+def test_diagnose_of_a_scaled_run_reports_in_raw_units_like_close_loop(undeclared, tmp_path):
+    """QA: after --scale tn02, diagnose gave the step times the z scale (0.9485), 4.5σ off."""
+    d = undeclared
+    a, b = tmp_path / "close", tmp_path / "diag"
+    args = ["--scale", "tn02", "--method", "lsq", "-q"]
+    assert invoke("grace-bias", d["day"], "--close-loop", "--out", a, *args)[0] == 0
+    assert invoke("grace-bias", d["day"], "--out", b, *args)[0] == 0
+    assert invoke("diagnose", b, "-q")[0] == 0
+    name = d["day"].name
+    ca = json.loads((a / "closure.json").read_text())["sources"][name]
+    cb = json.loads((b / "diagnose" / "closure.json").read_text())["sources"][name]
+    sa, sb = effects(ca, "z")["bias_step"], effects(cb, "z")["bias_step"]
+    assert abs(sb["coefficient"] - STEP) < 3 * sb["sigma"]
+    assert sb["coefficient"] == pytest.approx(sa["coefficient"], rel=1e-3)
+
+
 def test_diagnose_uses_the_reference_of_the_run(undeclared, tmp_path):
     """QA: diagnose analysed the calibrated series alone ('no --reference: not tested')
     after a run with --reference; it now subtracts the run's reference again."""

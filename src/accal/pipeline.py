@@ -1657,34 +1657,37 @@ def find_bias_drift(directory: Path) -> Path:
 def _diagnosis_input(
     series: AccSeries, run: dict[str, Any]
 ) -> tuple[AccSeries, Path | None, list[str]]:
-    """The series ``accal diagnose`` analyses: calibrated − reference when the run had one.
+    """The series ``accal diagnose`` analyses: calibrated / scale (− reference).
 
-    The calibrated series is ``scale · (raw − trend)``; a run with ``--reference``
+    The calibrated series is ``scale · (raw − trend)``: divided by the run's scale
+    it is the residual ``--close-loop`` analyses, so both report effects in the
+    raw data's units (QA: after ``--scale tn02`` diagnose gave a 3e-9 m/s² step as
+    2.84e-9, the z scale 0.9485 times it, 4.5σ off).  A run with ``--reference``
     fitted ``raw − reference``, so its residual is ``calibrated / scale −
     reference`` (the reference named in the manifest, read again).  Returns the
     series, the reference path (None without one) and warnings.
     """
     from accal.calibration import parse_scale
 
+    scale = parse_scale(run.get("scale"), series.satellite)
+    raw = series
+    if scale is not None:
+        s = np.asarray(scale, dtype=np.float64)[: len(series.axes)]
+        raw = series.replace(acc=series.acc / s[None, :])
     ref = run.get("reference")
     path = ref.get("path") if isinstance(ref, dict) else ref
     if not path:
-        return series, None, []
+        return raw, None, []
     ref_path = Path(str(path))
     if not ref_path.is_file():
         return (
-            series,
+            raw,
             None,
             [
                 f"the run used --reference {ref_path}, which is gone: analysed without it "
                 "(polynomial drifts not tested)"
             ],
         )
-    scale = parse_scale(run.get("scale"), series.satellite)
-    raw = series
-    if scale is not None:
-        s = np.asarray(scale, dtype=np.float64)[: len(series.axes)]
-        raw = series.replace(acc=series.acc / s[None, :])
     ref_series = read_input(ref_path, GraceBiasOptions(columns=run.get("columns") or {}))
     out = subtract_reference(raw, ref_series, ref_path)
     return out, ref_path, list(out.report.warnings[len(raw.report.warnings) :])
