@@ -830,12 +830,10 @@ def close_the_loop(
     for v in aux.values():
         covered &= np.isfinite(v)
     n_out = int(np.count_nonzero(use & ~covered))
-    if n_out:
-        warnings.append(
-            f"--aux covers {1 - n_out / max(int(use.sum()), 1):.1%} of the used samples: the "
-            f"closure analyses those only ({n_out} samples outside it keep the plain fit's "
-            "treatment and get no coupling correction)"
-        )
+    covered_note = (
+        f"--aux covers {1 - n_out / max(int(use.sum()), 1):.1%} of the used samples: the "
+        "closure analyses those only"
+    )
     use_cl = use & covered
     t_used = fit_series.time[use_cl]
     span = float(t_used[-1] - t_used[0]) if t_used.size else 0.0
@@ -878,15 +876,22 @@ def close_the_loop(
         f"accal {__version__}: close_loop(alpha={opts.alpha}) removed "
         + "; ".join(f"{ax}: {out[ax]['model']}" for ax in series.axes)
     )
-    coupled = any("auxiliary(" in out[ax]["model"] for ax in series.axes)
+    coupled = [ax for ax in series.axes if "auxiliary(" in out[ax]["model"]]
     if coupled and n_out:
         # a removed coupling is not removed where its channel is missing: those samples
         # would bias the refit (QA: a channel starting 3000 s late left c × 293 K there,
         # a 5.9e-7 m/s² jump in the calibrated series and a 6e-8 bias error)
         fit_series = fit_series.replace(valid=fit_series.valid & covered)
         warnings.append(
-            f"{n_out} used samples outside --aux: their coupling cannot be removed, so they "
-            "are marked invalid and left out of the refit"
+            f"{covered_note}; a coupling was removed on axis {', '.join(coupled)}, which "
+            f"cannot be removed at the {n_out} samples outside --aux, so they are marked "
+            "invalid and left out of the refit on every axis (the sample mask is shared "
+            "by the axes)"
+        )
+    elif n_out:
+        warnings.append(
+            f"{covered_note} (the {n_out} samples outside it keep the plain fit's treatment: "
+            "no coupling was removed)"
         )
     return fit_series, out, plots, warnings
 
