@@ -616,3 +616,22 @@ def test_simulated_truth_counts_the_gaps_in_the_file(tmp_path, seed):
     t = json.loads(truth.read_text())
     assert t["n_gaps_requested"] == 8
     assert t["n_gaps"] == read_grace_acc1b(f).report.n_gaps
+
+
+def test_day_with_every_sample_flagged_says_so(tmp_path):
+    """QA: "only 0 usable samples; an order-1 trend needs at least 3" did not say why."""
+    from accal.io.grace_l1b import read_grace_acc1b, write_grace_acc1b
+    from accal.simulate.grace import write_simulated_grace
+
+    f = tmp_path / "ACC1B_2005-01-01_A_02.asc"
+    write_simulated_grace(f, seed=2, duration=600.0)
+    s = read_grace_acc1b(f)
+    write_grace_acc1b(
+        s.replace(quality=np.ones(len(s), np.uint32), valid=np.zeros(len(s), bool)), f
+    )
+    code, _, err = invoke("grace-bias", f, "--out", tmp_path / "o")
+    assert code == 1
+    assert "only 0 usable samples of 600: 600 are flagged invalid" in err and f.name in err
+    assert not list((tmp_path / "o").glob("*.calibrated.*"))
+    code, _, err = invoke("grace-bias", f, "--keep-flagged", "--out", tmp_path / "k", "-q")
+    assert code == 0, err

@@ -354,6 +354,16 @@ def estimate(series: AccSeries, opts: GraceBiasOptions) -> dict[tuple[str, str],
     from accal.estimators.trend import fit_trends
 
     use = np.ones(len(series), bool) if opts.keep_flagged else series.valid
+    n_use = int(np.count_nonzero(use))
+    if n_use < opts.order + 2 and n_use < len(series):
+        # say why (QA: a day with every sample flagged got "only 0 usable samples")
+        from accal.errors import ValidationError
+
+        raise ValidationError(
+            f"only {n_use} usable samples of {len(series)}: {len(series) - n_use} are flagged "
+            f"invalid (qualflg, gaps or --reference holes); an order-{opts.order} trend needs "
+            f"at least {opts.order + 2} (--keep-flagged fits them all)"
+        )
     fits = {}
     for m in opts.methods:
         for ax, fit in zip(
