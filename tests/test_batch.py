@@ -864,3 +864,16 @@ def test_date_is_the_day_of_a_file_that_starts_before_midnight(tmp_path):
 
     t = read_bias_drift(out / "bias_drift.parquet")
     assert set(t["date"]) == {"2005-01-01"} and (t["t0"] < 157809600.0).all()
+
+
+def test_diagnose_refuses_a_directory_in_use(archive, tmp_path):
+    """QA: diagnose ran (exit 0) beside a grace-bias run holding DIR, reading half-written files."""
+    out = tmp_path / "o"
+    one = next(archive.rglob("ACC1B_2005-01-01_A_02.asc"))
+    assert invoke("grace-bias", one, "--out", out, "-q")[0] == 0
+    with OutputLock(out, "accal grace-bias"):
+        code, _, err = invoke("diagnose", out, "-q")
+    assert code == 1 and "output directory is in use by another accal run" in err
+    assert not (out / "diagnose").exists()
+    assert invoke("diagnose", out, "-q")[0] == 0  # and released after
+    assert (out / "diagnose" / "closure.json").exists()

@@ -480,6 +480,28 @@ def diagnose(
     with plots.  The calibrated files themselves are not changed: re-run
     grace-bias with --close-loop to calibrate with the extended model.
     """
+    from accal.batch import LockedError, OutputLock
+
+    # a grace-bias or demod run writing DIRECTORY now: its files are half-written (QA:
+    # diagnose ran beside a live run and wrote into DIR/diagnose)
+    lock = OutputLock(directory, "accal diagnose")
+    try:
+        if directory.is_dir():
+            lock.acquire()
+    except LockedError as exc:
+        _err(str(exc))
+        sys.exit(1)
+    except OSError:  # a read-only results directory (--out elsewhere): nothing to guard
+        pass
+    try:
+        _diagnose(directory, out, aux, alpha, quiet)
+    finally:
+        lock.release()
+
+
+def _diagnose(
+    directory: Path, out: Path | None, aux: Path | None, alpha: float, quiet: bool
+) -> None:
     from accal.pipeline import diagnose_dir, write_closure_reports
 
     out = out or directory / "diagnose"
