@@ -431,6 +431,21 @@ def test_step_epoch_not_pulled_to_an_eclipse_edge():
     assert abs(step[0].coefficient + 3e-9) < 3 * step[0].sigma
 
 
+def test_first_eclipse_edge_of_the_day_is_not_a_step_pair():
+    """QA case: simulated GRACE-FO C 2006-03-11, y: the first eclipse edge (00:12:54)
+    came out as two opposite steps 86 s apart (−1.96e-8, +1.72e-8 m/s²).
+
+    The orbit-phase template of the epoch scan had ~30 s bins, which cannot hold a
+    one-sample jump: the dipole left about every edge won the scan at the record's
+    end, where the step's norm is smallest.
+    """
+    from accal.simulate.grace import simulate_grace_day
+
+    sim = simulate_grace_day(date="2006-03-11", satellite="C")
+    res = close_loop(sim.time, sim.raw[:, 1], valid=sim.valid, orbit_period=ORBIT)
+    assert not [e for e in res.effects if e.name == "bias_step"], res.effects
+
+
 @pytest.mark.parametrize("lag", [600.0, 1500.0])
 def test_lagged_coupling_start_is_not_an_exponential_or_a_step(sim, lag):
     """QA: the lagged channel is unknown for the first `lag` seconds (the regressor held
