@@ -564,3 +564,12 @@ def test_theta_in_degrees_is_still_refused(run_csv, tmp_path):
     code, _, err = invoke("demod", deg, "--tau", TAU, "--mask", MASK, "--out", tmp_path / "o")
     assert code == 1 and "deg.csv" in err
     assert "must lie in [0, 2π]" in err or "looks like degrees" in err
+
+
+def test_a_run_of_one_period_has_no_pattern_warning(tmp_path):
+    """A single period has nothing to compare its rotations with: no "do not repeat"."""
+    run = tmp_path / "one.parquet"
+    write_simulated_gap(run, days=600 / 86400, tau=600.0, mask=200.0, seed=2)
+    code, _, err = invoke("demod", run, "--tau", 600, "--mask", 200, "--out", tmp_path / "o")
+    assert code == 0, err
+    assert "rotations" not in err and "1/1 periods" in err

@@ -787,7 +787,13 @@ def summary_warnings(summary: dict[str, Any]) -> tuple[str, ...]:
             f"periods: the pattern's period is {m_periods * tau:.9g} s, not --tau {tau:g} s; "
             f"give --tau {m_periods * tau:.9g}"
         )
-    elif m_periods == 0 and pat.get("repeats_every") is None and "pattern_periods" in pat:
+    elif (
+        m_periods == 0
+        and pat.get("repeats_every") is None
+        and "pattern_periods" in pat
+        and shift is not None
+        and np.isfinite(shift)  # at least two periods to compare
+    ):
         from accal.estimators.demod import LAYOUT_LAGS
 
         w.append(
