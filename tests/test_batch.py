@@ -877,3 +877,19 @@ def test_diagnose_refuses_a_directory_in_use(archive, tmp_path):
     assert not (out / "diagnose").exists()
     assert invoke("diagnose", out, "-q")[0] == 0  # and released after
     assert (out / "diagnose" / "closure.json").exists()
+
+
+def test_table_missing_some_rows_of_a_source_redoes_it(archive, tmp_path):
+    """QA: with a source's lsq rows gone from the table it was still 'current'."""
+    import pyarrow.compute as pc
+    import pyarrow.parquet as pq
+
+    out = tmp_path / "o"
+    args = ("grace-bias", archive, "-r", "--out", out, "-j", "1", "--method", "both")
+    assert invoke(*args, "-q")[0] == 0
+    before = read_outputs(out)["table"]
+    t = pq.read_table(out / "bias_drift.parquet")
+    pq.write_table(t.filter(pc.equal(t["method"], "wavelet")).slice(1), out / "bias_drift.parquet")
+    code, _, err = invoke(*args)
+    assert code == 0 and "6 ok, 0 skipped" in err
+    pd.testing.assert_frame_equal(read_outputs(out)["table"], before, check_exact=True)

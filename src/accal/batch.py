@@ -448,8 +448,11 @@ class Manifest:
         *,
         checksum: bool = False,
         before: dict[str, Any] | None = None,
+        n_rows: int | None = None,
     ) -> None:
         """Record ``path`` as processed (call only after its table rows are merged).
+
+        ``n_rows``: how many table rows it has (a re-run redoes it when fewer are there).
 
         ``before``: the input's size and mtime taken before it was read.  If the
         file has changed since (replaced while the batch ran), that earlier
@@ -469,6 +472,8 @@ class Manifest:
             "source": source,
             "processed": _time.strftime("%Y-%m-%dT%H:%M:%SZ", _time.gmtime()),
         }
+        if n_rows is not None:
+            self.entries[self.key(path)]["n_rows"] = int(n_rows)
 
     def save(self) -> None:
         """Write the manifest atomically."""

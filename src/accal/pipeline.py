@@ -8,6 +8,7 @@ reported as a :class:`FileOutcome` with a one-line message.
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import dataclasses
 import json
@@ -1380,10 +1381,10 @@ def run(
             # its inputs redone instead of skipped with no rows; a damaged one stops
             # the run here, every run, with its message (not only when work is due)
             table_path = _table_if_exists(out_dir, opts.fmt)
-            tabled = (
-                set(_read_bias_drift_arrow(table_path).column("source").to_pylist())
+            tabled = collections.Counter(
+                _read_bias_drift_arrow(table_path).column("source").to_pylist()
                 if table_path is not None
-                else set()
+                else ()
             )
             todo: list[int] = []
             owners: dict[str, Path] = {}
@@ -1401,7 +1402,7 @@ def run(
                     rlog(f"FAILED {results[i].message}")
                 elif (
                     not force
-                    and p.name in tabled
+                    and tabled[p.name] >= manifest.entries.get(manifest.key(p), {}).get("n_rows", 1)
                     and manifest.is_current(p, key, checksum=checksum)
                 ):
                     results[i] = FileOutcome(p, True, skipped=True)
@@ -1516,7 +1517,13 @@ def _commit(
     for o in outcomes:
         if o.ok:
             manifest.record(
-                o.path, key, o.outputs, o.path.name, checksum=checksum, before=o.signature
+                o.path,
+                key,
+                o.outputs,
+                o.path.name,
+                checksum=checksum,
+                before=o.signature,
+                n_rows=len(o.rows),
             )
         else:
             manifest.entries.pop(manifest.key(o.path), None)
