@@ -573,3 +573,23 @@ def test_a_run_of_one_period_has_no_pattern_warning(tmp_path):
     code, _, err = invoke("demod", run, "--tau", 600, "--mask", 200, "--out", tmp_path / "o")
     assert code == 0, err
     assert "rotations" not in err and "1/1 periods" in err
+
+
+def test_theta_in_range_with_noise_at_the_zero_rest(run_csv, tmp_path):
+    """QA: θ mod 2π with N(0, 1e-8 rad) at rest flipped between ~0 and ~2π − ε: 352 s
+    masked per period instead of ~208 s, a_Y off by 5σ, exit 0.  Values just under 2π
+    are the rest at 0."""
+    rows = _rows(run_csv)
+    rng = np.random.default_rng(0)
+    th = np.mod(rows["theta"].to_numpy() + 1e-8 * rng.standard_normal(len(rows)), 2 * np.pi)
+    noisy = tmp_path / "noisy.csv"
+    write_table(rows.assign(theta=th), noisy, units={"theta": "rad"})
+    for name, f in (("a", run_csv), ("b", noisy)):
+        code, _, err = invoke(
+            "demod", f, "--tau", TAU, "--mask", MASK, "--rest-tol", "1e-6", "--out", tmp_path / name
+        )
+        assert code == 0 and "rotations" not in err, err
+    ref, got = (pd.read_parquet(tmp_path / d / "periods.parquet") for d in "ab")
+    # the θ noise itself enters cos θ, sin θ: ~1e-15 m/s², against 2.1e-11 (5σ) before
+    np.testing.assert_allclose(got["a_Y"], ref["a_Y"], rtol=0, atol=1e-13)
+    np.testing.assert_allclose(got["a_Z"], ref["a_Z"], rtol=0, atol=1e-13)
