@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import gzip
+import re
 
 import numpy as np
 import pandas as pd
@@ -89,6 +90,8 @@ def test_theta_declared_in_degrees_is_converted(tmp_path):
         ("µm/s²", 1e-6),
         ("nm s^-2", 1e-9),
         ("mGal", 1e-5),
+        ("milli-g", 9.80665e-3),
+        ("milligal", 1e-5),
         ("m/s^2", 1.0),
         ("m s-2 (raw)", 1.0),
     ],
@@ -111,11 +114,24 @@ def test_declared_time_units_are_converted(tmp_path, unit, factor):
     np.testing.assert_allclose(read_rawlog(p).time, factor * np.arange(4.0))
 
 
-@pytest.mark.parametrize(("col", "unit"), [("m_y", "V"), ("theta", "turns"), ("time", "m")])
+@pytest.mark.parametrize(
+    ("col", "unit"),
+    [
+        ("m_y", "V"),
+        ("theta", "turns"),
+        ("time", "m"),
+        ("m_y", "Mm/s^2"),
+        ("time", "Ms"),
+        ("theta", "Mrad"),
+        ("m_y", "MG"),
+    ],
+)
 def test_unknown_declared_unit_is_refused(tmp_path, col, unit):
     p = tmp_path / "run.csv"
     p.write_text(CSV.replace('"theta": "rad"', f'"theta": "rad", "{col}": "{unit}"'))
-    with pytest.raises(FormatError, match=rf"run\.csv: {col} is declared in '{unit}', not a unit"):
+    with pytest.raises(
+        FormatError, match=rf"run\.csv: {col} is declared in '{re.escape(unit)}', not a unit"
+    ):
         read_rawlog(p)
 
 

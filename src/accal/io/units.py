@@ -20,30 +20,23 @@ import re
 #: Standard gravity [m/s²] (CGPM 1901), for accelerations declared in g.
 STANDARD_GRAVITY = 9.80665
 
-_PREFIX = {"": 1.0, "k": 1e3, "m": 1e-3, "u": 1e-6, "n": 1e-9, "p": 1e-12}
+#: SI prefixes accal converts (lower case only: ``M`` is mega, not milli).
+_PREFIX = {"k": 1e3, "m": 1e-3, "u": 1e-6, "n": 1e-9, "p": 1e-12}
+_PREFIX_WORDS = (("milli", "m"), ("micro", "u"), ("nano", "n"), ("kilo", "k"))
 
-#: Factors to SI per kind: acceleration [m/s²], time [s], angle [rad].
-KINDS: dict[str, dict[str, float]] = {
-    "acceleration": {
-        **{f"{p}m/s^2": f for p, f in _PREFIX.items()},
-        **{f"{p}g": f * STANDARD_GRAVITY for p, f in _PREFIX.items() if p != "k"},
-        **{f"{p}gal": f * 1e-2 for p, f in _PREFIX.items() if p != "k"},
-    },
-    "time": {
-        **{f"{p}s": f for p, f in _PREFIX.items() if p != "k"},
-        "min": 60.0,
-        "h": 3600.0,
-        "d": 86400.0,
-    },
+#: Base units per kind and their factors to SI: acceleration [m/s²], time [s], angle [rad].
+BASES: dict[str, dict[str, float]] = {
+    "acceleration": {"m/s^2": 1.0, "g": STANDARD_GRAVITY, "gal": 1e-2},
+    "time": {"s": 1.0, "min": 60.0, "h": 3600.0, "d": 86400.0},
     "angle": {
         "rad": 1.0,
-        "mrad": 1e-3,
-        "urad": 1e-6,
         "deg": math.pi / 180.0,
         "arcmin": math.pi / 10800.0,
         "arcsec": math.pi / 648000.0,
     },
 }
+#: Bases that take a prefix (mm/s², mGal, ms, mrad; not "mmin" or "mdeg").
+_PREFIXED = {"m/s^2", "g", "gal", "s", "rad"}
 
 #: The SI unit of each kind, as accal writes it.
 SI = {"acceleration": "m/s^2", "time": "s", "angle": "rad"}
@@ -68,16 +61,33 @@ _ALIASES = {
     "gn": "g",
 }
 # m/s^2 spellings: m/s2, m s^-2, m.s-2, m*s^-2, m/s/s, ms^-2 (after spaces are dropped)
-_ACC = re.compile(r"^([kmunp]?)m(?:/s\^?2|/s/s|[.*]?s\^?-2)$")
+_ACC = re.compile(r"^m(?:/s\^?2|/s/s|[.*]?s\^?-2)$")
 
 
-def _canonical(text: str) -> str:
-    u = text.replace("µ", "u").replace("μ", "u").replace("²", "^2").replace("⁻", "-")
-    u = u.replace("**", "^").replace(" ", "").lower()
-    m = _ACC.match(u)
-    if m:
-        return f"{m.group(1)}m/s^2"
+def _base(text: str) -> str:
+    u = text.lower()
+    if _ACC.match(u):
+        return "m/s^2"
     return _ALIASES.get(u, u)
+
+
+def _factor(text: str, kind: str) -> float | None:
+    """Factor of one spelling: a base unit, or a lower-case SI prefix and a base."""
+    u = text.replace("µ", "u").replace("μ", "u").replace("²", "^2").replace("⁻", "-")
+    u = u.replace("**", "^").replace(" ", "")
+    for word, short in _PREFIX_WORDS:  # milli-g, milligal, micro-rad
+        if u.lower().startswith(word):
+            u = short + u[len(word) :].lstrip("-")
+            break
+    bases = BASES[kind]
+    b = _base(u)
+    if b in bases:
+        return bases[b]
+    if len(u) > 1 and u[0] in _PREFIX:  # case-sensitive: "Mm/s^2", "Ms", "MGal" are not milli
+        b = _base(u[1:])
+        if b in bases and b in _PREFIXED:
+            return _PREFIX[u[0]] * bases[b]
+    return None
 
 
 def si_factor(unit: str | None, kind: str) -> float | None:
@@ -99,11 +109,10 @@ def si_factor(unit: str | None, kind: str) -> float | None:
     text = re.split(r"[(\[]", str(unit), maxsplit=1)[0].strip()
     if not text or text.lower() == "unknown":
         return 1.0
-    table = KINDS[kind]
     for candidate in (text, text.split()[0]):  # the whole unit, or its first word
-        u = _canonical(candidate)
-        if u in table:
-            return table[u]
+        f = _factor(candidate, kind)
+        if f is not None:
+            return f
     return None
 
 
