@@ -773,3 +773,15 @@ def test_header_saying_binary_over_text_records_says_so(samples, tmp_path):
     with pytest.raises(FormatError, match=r"header says binary records \(FILE FORMAT 0\)"):
         read_grace_acc1b(_write(tmp_path, raw))
     assert len(read_grace_acc1b(samples["grace_a_bin"])) == 60  # real binary still read
+
+
+def test_a_fault_in_a_tab_separated_file_is_named_at_its_line(samples, tmp_path):
+    """QA: any fault in a tab-separated file was "tab character inside a record" at line 31."""
+    head, data = _data_lines(samples["grace_a"])
+    data = ["\t".join(ln.split()) + "\n" for ln in data]
+    fields = data[19].split("\t")
+    fields[3] = "-2.85x1e-05"
+    data[19] = "\t".join(fields)
+    with pytest.raises(FormatError, match="lin_accl_y: ") as e:
+        read_grace_acc1b(_write(tmp_path, "".join(head + data).encode()))
+    assert e.value.line == 50

@@ -656,7 +656,8 @@ def _parse_ascii(raw: bytes, start: int, first_line: int, path: Path) -> dict[st
         table = _loose_table(raw[start:], convert(single), parse, read)
         if table is None:
             err = _locate_bad_line(raw[start:], first_line, len(names), path, str(exc))
-            if "irregular spacing" in str(err):  # not the fault: find it in any spacing
+            if "irregular spacing" in str(err) or "tab character" in str(err):
+                # not the fault (the loose parse allows it): find the fault in any spacing
                 err = _locate_bad_line(_respaced(raw[start:]), first_line, 12, path, str(exc))
             raise err from None
         names = single
