@@ -474,6 +474,12 @@ def test_irregular_10hz_in_gps_seconds_is_still_refused(tmp_path):
     code, _, err = invoke("demod", bad, "--tau", TAU, "--mask", MASK, "--out", tmp_path / "o")
     assert code == 1
     assert "irregular sampling: 1 of" in err and "gps.parquet" in err
+    # the place, readable at GPS times (QA: "at t = 1.4000005e+09 s", no row)
+    assert "after t = 1400000049.9000 s, before row 501)" in err
+    code, _, err = invoke(
+        "demod", bad, "--tau", TAU, "--mask", MASK, "--chunk-size", "16", "--out", tmp_path / "p"
+    )
+    assert code == 1 and "after t = 1400000049.9000 s, before row 501)" in err
 
 
 # --- θ noisy at rest: no usable period, and no way to say so -----------------------

@@ -392,11 +392,15 @@ def validated_chunks(stream: Any, opts: DemodOptions, step: float, info: RunInfo
             off = np.flatnonzero(np.abs(steps - step) > tol)
             if off.size:
                 k = off[np.argmax(np.abs(steps[off] - step))]
+                # the 1-based row of the sample after the step (the first chunk's steps
+                # start at its first row; later ones at the previous chunk's last)
+                row = row0 + int(k) + (2 if row0 == 0 else 1)
                 if problem is None:
                     problem = {"kind": "step", "n": 0, "big": steps[k], "t": t_of_step[k]}
+                    problem["row"] = row
                 problem["n"] += off.size
                 if abs(steps[k] - step) > abs(problem["big"] - step):
-                    problem["big"], problem["t"] = steps[k], t_of_step[k]
+                    problem["big"], problem["t"], problem["row"] = steps[k], t_of_step[k], row
         if problem is not None:
             continue
         if resampler is not None:
@@ -422,8 +426,8 @@ def validated_chunks(stream: Any, opts: DemodOptions, step: float, info: RunInfo
     if problem is not None:
         raise ValidationError(
             f"irregular sampling: {problem['n']} of {n_steps} steps differ from the nominal "
-            f"{step:.9g} s (largest: {problem['big']:.9g} s at t = {problem['t']:.9g} s); "
-            "use --resample to interpolate onto a uniform grid"
+            f"{step:.9g} s (largest: {problem['big']:.9g} s after t = {problem['t']:.4f} s, "
+            f"before row {problem['row']}); use --resample to interpolate onto a uniform grid"
         )
     duration = info.n_samples * step
     if duration < opts.tau * (1 - 1e-9):
