@@ -599,3 +599,14 @@ def test_theta_in_range_with_noise_at_the_zero_rest(run_csv, tmp_path):
     # the θ noise itself enters cos θ, sin θ: ~1e-15 m/s², against 2.1e-11 (5σ) before
     np.testing.assert_allclose(got["a_Y"], ref["a_Y"], rtol=0, atol=1e-13)
     np.testing.assert_allclose(got["a_Z"], ref["a_Z"], rtol=0, atol=1e-13)
+
+
+def test_theta_declared_deg_but_in_radians_says_so(run_csv, tmp_path):
+    """QA: radians declared 'deg' failed with "theta never reaches π (range 0 to 0.0548
+    rad)", not a word about the declaration."""
+    rows = _rows(run_csv)
+    wrong = tmp_path / "wrong.csv"
+    write_table(rows, wrong, units={"theta": "deg"})
+    code, _, err = invoke("demod", wrong, "--tau", TAU, "--mask", MASK, "--out", tmp_path / "o")
+    assert code == 1 and "wrong.csv" in err
+    assert "theta is declared in 'deg' and was converted to rad" in err

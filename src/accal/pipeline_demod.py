@@ -455,17 +455,29 @@ def estimate(path: Path, opts: DemodOptions, psd: Any) -> tuple[Any, RunInfo]:
     stream = open_rawlog(path, rows=int(opts.chunk_rows))
     step = sampling_step(stream, opts)
     info = RunInfo()
-    res = demodulate_stream(
-        lambda: validated_chunks(stream, opts, step, info),
-        tau=opts.tau,
-        mask=opts.mask,
-        fs=1.0 / step,
-        method=opts.method,
-        signal_model=opts.signal_model,
-        rest_tol=opts.rest_tol,
-        bias_aux=opts.aux_channels,
-        psd=psd,
-    )
+    try:
+        res = demodulate_stream(
+            lambda: validated_chunks(stream, opts, step, info),
+            tau=opts.tau,
+            mask=opts.mask,
+            fs=1.0 / step,
+            method=opts.method,
+            signal_model=opts.signal_model,
+            rest_tol=opts.rest_tol,
+            bias_aux=opts.aux_channels,
+            psd=psd,
+        )
+    except ValidationError as exc:
+        # a θ the file declared in another unit and accal converted: the declaration may
+        # be what is wrong (QA: radians declared 'deg' said only "never reaches π")
+        factor = getattr(stream, "factors", {}).get("theta")
+        if factor is not None and "theta" in str(exc):
+            unit = stream.declared_units.get("theta", "?")
+            raise ValidationError(
+                f"{exc} (theta is declared in {unit!r} and was converted to rad by "
+                f"× {factor:.10g}: is that its unit?)"
+            ) from None
+        raise
     return res, info
 
 

@@ -144,6 +144,8 @@ class RawlogStream:
             )
         #: Factor to SI of each fixed column whose declared unit is not SI.
         self.factors: dict[str, float] = {}
+        #: The units the file declares, as written.
+        self.declared_units: dict[str, str] = {k: str(v) for k, v in units.items()}
         conversions = []
         for col, kind in COLUMN_KINDS.items():
             if col not in names or col not in units:
