@@ -354,6 +354,12 @@ def test_aux_covering_part_of_the_day_is_used_where_it_is(undeclared, tmp_path):
     cal = pd.read_parquet(next((tmp_path / "o").glob("*.calibrated.parquet")))
     late = cal["gps_time"] > temp["time"].iloc[-1] + 1.0
     assert late.any() and not cal.loc[late, "valid"].any() and cal.loc[~late, "valid"].mean() > 0.9
+    # ... out of the refit of the coupled axis only (QA: x and y lost them too, and the
+    # x bias moved by 2e-11 m/s² with only z coupled)
+    from accal.pipeline import read_bias_drift
+
+    n = read_bias_drift(tmp_path / "o" / "bias_drift.parquet").set_index("axis")["n"]
+    assert n["y"] < n["x"] == n["z"] and n["x"] - n["y"] == int((~cal["valid"]).sum())
 
 
 def test_no_step_test_on_a_record_shorter_than_two_revolutions(tmp_path):

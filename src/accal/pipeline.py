@@ -350,11 +350,30 @@ def subtract_reference(series: AccSeries, reference: AccSeries, ref_path: Path) 
     return _with_warnings(out, *warnings)
 
 
-def estimate(series: AccSeries, opts: GraceBiasOptions) -> dict[tuple[str, str], Any]:
-    """Fit every (axis, method) of ``series``; returns ``{(axis, method): TrendFit}``."""
+def estimate(
+    series: AccSeries,
+    opts: GraceBiasOptions,
+    exclude: dict[str, np.ndarray] | None = None,
+) -> dict[tuple[str, str], Any]:
+    """Fit every (axis, method) of ``series``; returns ``{(axis, method): TrendFit}``.
+
+    ``exclude``: per axis, samples left out of that axis' fit only (where a coupling
+    removed from it is unknown: ``--aux`` does not cover them).
+    """
     from accal.estimators.trend import fit_trends
 
     use = np.ones(len(series), bool) if opts.keep_flagged else series.valid
+    if exclude:
+        fits: dict[tuple[str, str], Any] = {}
+        plain = [ax for ax in series.axes if ax not in exclude]
+        groups = ([(plain, use)] if plain else []) + [
+            ([ax], use & ~exclude[ax]) for ax in series.axes if ax in exclude
+        ]
+        for axes, mask in groups:
+            idx = [series.axes.index(ax) for ax in axes]
+            sub = series.replace(acc=series.acc[:, idx], axes=tuple(axes), valid=mask)
+            fits.update(estimate(sub, dataclasses.replace(opts, keep_flagged=False)))
+        return {(ax, m): fits[(ax, m)] for ax in series.axes for m in opts.methods}
     n_use = int(np.count_nonzero(use))
     if n_use < opts.order + 2 and n_use < len(series):
         # say why (QA: a day with every sample flagged got "only 0 usable samples")
@@ -509,9 +528,10 @@ def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutco
             path, series, fit_series, use, opts, out_dir / stem
         )
         series = _with_warnings(series, *notes)
-        if not opts.keep_flagged:  # samples a removed coupling does not cover
-            use = use & fit_series.valid
-    fits = estimate(fit_series, opts)
+    exclude = {ax: c["exclude"] for ax, c in closure.items() if c.get("exclude") is not None}
+    if exclude and not opts.keep_flagged:  # samples a removed coupling does not cover
+        use = use & ~np.logical_or.reduce(list(exclude.values()))
+    fits = estimate(fit_series, opts, exclude)
     if close_loop:
         fits = _with_effect_uncertainty(fits, closure)
         truth = load_truth(opts.truth, series, opts.reference is not None) if opts.truth else {}
@@ -891,13 +911,17 @@ def close_the_loop(
     if coupled and n_out:
         # a removed coupling is not removed where its channel is missing: those samples
         # would bias the refit (QA: a channel starting 3000 s late left c × 293 K there,
-        # a 5.9e-7 m/s² jump in the calibrated series and a 6e-8 bias error)
-        fit_series = fit_series.replace(valid=fit_series.valid & covered)
+        # a 5.9e-7 m/s² jump in the calibrated series and a 6e-8 bias error).  They leave
+        # the refit of the coupled axes only (QA: with z coupled, x and y lost them too and
+        # x's bias moved by 2e-11 m/s²); the calibrated file's valid column, shared by
+        # the axes, marks them invalid
+        for ax in coupled:
+            out[ax]["exclude"] = ~covered
         warnings.append(
             f"{covered_note}; a coupling was removed on axis {', '.join(coupled)}, which "
-            f"cannot be removed at the {n_out} samples outside --aux, so they are marked "
-            "invalid and left out of the refit on every axis (the sample mask is shared "
-            "by the axes)"
+            f"cannot be removed at the {n_out} samples outside --aux: they are left out of "
+            f"the refit of axis {', '.join(coupled)} (the other axes keep them) and marked "
+            "invalid in the calibrated file (its valid column is shared by the axes)"
         )
     elif n_out:
         warnings.append(
