@@ -470,7 +470,7 @@ def estimate(path: Path, opts: DemodOptions, psd: Any) -> tuple[Any, RunInfo]:
     except ValidationError as exc:
         # a θ the file declared in another unit and accal converted: the declaration may
         # be what is wrong (QA: radians declared 'deg' said only "never reaches π")
-        factor = getattr(stream, "factors", {}).get("theta")
+        factor = stream.factors.get("theta")
         if factor is not None and "theta" in str(exc):
             unit = stream.declared_units.get("theta", "?")
             raise ValidationError(

@@ -290,15 +290,9 @@ def close_loop_demod(
         )
     if n < 3:
         raise ValidationError(f"need at least 3 samples, got {n}")
-    from accal.estimators.demod import sampling_step, step_tolerance, theta_in_range
+    from accal.estimators.demod import regular_step, theta_in_range
 
-    dt_all = np.diff(t)
-    dt, dt_rtol = sampling_step(t)
-    if dt <= 0 or np.any(np.abs(dt_all - dt) > step_tolerance(dt, max(abs(t[0]), abs(t[-1])))):
-        k = int(np.argmax(np.abs(dt_all - dt)))
-        raise ValidationError(
-            f"sampling is irregular: step {dt_all[k]:.10g} s at index {k} vs nominal {dt:.10g} s"
-        )
+    dt, dt_rtol = regular_step(t)
     fs = 1.0 / dt
     qf = float(tau) * fs
     if not np.isfinite(qf) or qf <= 0 or abs(qf - round(qf)) > max(1e-6, qf * dt_rtol):

@@ -348,6 +348,26 @@ def sampling_step(t: NDArray[np.float64]) -> tuple[float, float]:
     return dt, 0.0
 
 
+def regular_step(t: NDArray[np.float64]) -> tuple[float, float]:
+    """:func:`sampling_step` of times that must be regular.
+
+    Raises
+    ------
+    ValidationError
+        A step further than :func:`step_tolerance` from the nominal one (the worst is
+        named, with its index), or times that do not increase.
+    """
+    dt, rtol = sampling_step(t)
+    steps = np.diff(t)
+    if dt <= 0 or np.any(np.abs(steps - dt) > step_tolerance(dt, max(abs(t[0]), abs(t[-1])))):
+        k = int(np.argmax(np.abs(steps - dt)))
+        raise ValidationError(
+            f"sampling is irregular: step {steps[k]:.10g} s at index {k} vs nominal "
+            f"{dt:.10g} s (resample or split the record at gaps)"
+        )
+    return dt, rtol
+
+
 def _check_tau_mask(fs: float, tau: float, tm: float, fs_rtol: float = 0.0) -> int:
     """``q = τ·fs`` (an integer within 1e-6, or within ``fs_rtol`` of ``fs``), after checking τ and TM."""
     q = tau * fs
@@ -449,16 +469,7 @@ def _validate(time, m_y, m_z, theta, aux, valid, tau, tm, theta_tol):
         _first_bad(name, a, None if name == "time" else ok)
     if n < 3:
         raise ValidationError(f"need at least 3 samples, got {n}")
-    t = arrs["time"]
-    dt_all = np.diff(t)
-    dt, dt_rtol = sampling_step(t)
-    tol = step_tolerance(dt, max(abs(t[0]), abs(t[-1])))
-    if dt <= 0 or np.any(np.abs(dt_all - dt) > tol):
-        k = int(np.argmax(np.abs(dt_all - dt)))
-        raise ValidationError(
-            f"sampling is irregular: step {dt_all[k]:.10g} s at index {k} vs nominal "
-            f"{dt:.10g} s (resample or split the record at gaps)"
-        )
+    dt, dt_rtol = regular_step(arrs["time"])
     fs = 1.0 / dt
     _check_tau_mask(fs, tau, tm, dt_rtol)
     arrs["theta"] = theta_in_range(arrs["theta"], ok, theta_tol)

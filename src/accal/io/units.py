@@ -45,8 +45,6 @@ _ALIASES = {
     "sec": "s",
     "second": "s",
     "seconds": "s",
-    "msec": "ms",
-    "usec": "us",
     "hour": "h",
     "hours": "h",
     "hr": "h",
