@@ -4,10 +4,11 @@ Generates N synthetic 1 Hz ACC1B day files (default 200; 10 distinct simulated
 days, each copied under 20 dates, so the runs log a file-name/day warning for
 most of them) whose records look like the real ones: every one of the 12 columns
 at full precision, as in the bundled 2003 GRACE files (angular accelerations
-~3e-4 rad/s², L1B residuals ~5e-9 m/s²), ~18 MB a day (``shared/data/SOURCES.md``:
-a real day is 14–17 MB of ASCII; the 2003 sample's records are 224 bytes).
-``--zero-aux`` writes those six columns as ``0`` instead (9 MB a day; what the
-simulator writes, and what this benchmark used before 2026-11-22).  Then it
+~3e-4 rad/s², L1B residuals ~5e-9 m/s², as ``accal simulate grace`` writes them),
+~18–20 MB a day (``shared/data/SOURCES.md``: a real day is 14–17 MB of ASCII; the
+2003 sample's records are 224 bytes).  ``--zero-aux`` writes those six columns as
+``0`` instead (9 MB a day; what the simulator wrote, and what this benchmark used,
+before 2026-11-22).  Then it
 measures, in this run:
 
 * the baseline: pyarrow's raw CSV parse of the same bytes (one process, files in
@@ -45,30 +46,19 @@ from pathlib import Path
 MISSION_FILES = 11_000
 
 
-#: Standard deviations of the columns calibration does not use, as in the 2003
-#: GRACE files in data/samples: angular accelerations [rad/s²], L1B residuals [m/s²].
-AUX_SCALES = {"ang_accl": 3e-4, "res": 5e-9}
+def with_zero_aux(path: Path) -> None:
+    """Rewrite the simulated day at PATH with its six unused columns as ``0`` (--zero-aux).
 
-
-def with_real_aux(path: Path, seed: int) -> None:
-    """Rewrite the simulated day at PATH with its six unused columns filled like real ones.
-
-    The simulator writes the angular accelerations and the L1B residuals as ``0``;
-    real files carry them at full precision (~20 characters each), which is about half
-    of a record's bytes, and every reader (accal's and the baseline) parses them.
+    The simulator writes the angular accelerations and the L1B residuals like the
+    real files (full precision, about half of a record's bytes, parsed by every
+    reader, accal's and the baseline); before 2026-11 it wrote them as ``0``.
     """
     import dataclasses
 
-    import numpy as np
-
     from accal.io.grace_l1b import read_grace_acc1b, write_grace_acc1b
 
-    series = read_grace_acc1b(path)
-    rng = np.random.default_rng([seed, 1])
-    n = len(series)
-    aux = {f"ang_accl_{a}": AUX_SCALES["ang_accl"] * rng.standard_normal(n) for a in "xyz"}
-    aux |= {f"acl_{a}_res": AUX_SCALES["res"] * rng.standard_normal(n) for a in "xyz"}
-    write_grace_acc1b(dataclasses.replace(series, aux=aux), path)
+    # without aux channels the writer puts "0" in those columns
+    write_grace_acc1b(dataclasses.replace(read_grace_acc1b(path), aux={}), path)
 
 
 def make_archive(
@@ -81,8 +71,8 @@ def make_archive(
     for k in range(distinct):
         p = seeds / f"seed_{k}.asc"
         write_simulated_grace(p, date="2005-01-01", satellite="AB"[k % 2], seed=k)
-        if not zero_aux:
-            with_real_aux(p, k)
+        if zero_aux:
+            with_zero_aux(p)
         days.append(p)
     out = []
     import datetime as dt

@@ -13,7 +13,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from accal.simulate.grace import default_seed, simulate_grace_day
+from accal.simulate.grace import STREAMS, default_seed, simulate_grace_day
 
 dates = st.dates(dt.date(2002, 4, 1), dt.date(2030, 12, 31)).map(dt.date.isoformat)
 satellites = st.sampled_from("ABCD")
@@ -47,10 +47,12 @@ def test_explicit_seed_is_exact(a, b, seed):
     da = simulate_grace_day(date=a[0], satellite=a[1], duration=DURATION, seed=seed)
     db = simulate_grace_day(date=b[0], satellite=b[1], duration=DURATION, seed=seed)
     assert da.truth["seed"] == seed
-    assert da.truth["drift"] == db.truth["drift"]  # drawn before anything date-dependent
-    rng = np.random.default_rng(seed)
-    rng.random(3)  # the three scalar draws before the drift: phase, drag level, slow phase
+    assert da.truth["drift"] == db.truth["drift"]  # its own stream, nothing date-dependent
+    # the drift is the first draw of the day's "instrument" stream, [seed, 0]
+    rng = np.random.default_rng([seed, STREAMS["instrument"]])
     assert da.truth["drift"] == rng.uniform(-5e-14, 5e-14, 3).tolist()
+    # and the orbit stream does not depend on the date either
+    assert da.truth["orbit_period"] == db.truth["orbit_period"]
 
 
 def test_default_seed_is_stable():

@@ -1,31 +1,69 @@
-"""Synthetic GRACE / GRACE-FO ACC1B days with a known bias, drift and scale.
+"""Synthetic GRACE / GRACE-FO ACC1B days that look like the real Level-1B files.
 
-The simulated raw reading follows the wavelet paper's eq. (9),
-``a_raw = s·a_true + b + d·(t − t0)``, with
+The simulated raw reading follows the wavelet paper's eq. (9) plus injected
+instrument effects, ``a_raw = s·a_true + b + d·(t − t0) + noise + Σ effects``:
 
-* ``a_true``: non-gravitational acceleration at GRACE altitude (magnitudes from
-  ``shared/data/REFERENCE_VALUES.md``): along-track (x) drag ~ −2e-7 m/s² modulated
-  once and twice per revolution (orbital period ~5,600 s) with a slow day-scale
-  variation; solar-radiation pressure ~5e-8 m/s² once per revolution on y and z,
-  switched off in eclipse;
+* ``a_true``: the non-gravitational acceleration of :mod:`accal.simulate.orbit_signal`
+  (drag with once- and twice-per-revolution terms and a slow density trend, solar
+  radiation pressure with eclipses and smoothed entry/exit, Earth albedo; optionally a
+  geomagnetic storm and thruster pulses), on an orbit whose period is drawn per day
+  in 5,550–5,700 s;
 * ``b``, ``s``: the GRACE TN-02 a-priori values for the satellite and date
-  (``s = 1/scale``, raw-data sign ``b = −bias_TN02·s``), GRACE-FO C/D values from the
-  measured 2023 means;
+  (``s = 1/scale``, raw-data sign ``b = −bias_TN02·s``), GRACE-FO C/D values from
+  the measured 2023 means (:data:`GRACEFO_OFFSETS`);
 * ``d``: a random drift of a few 1e-14 m/s³;
-* noise: white at ``noise`` m/s²/√Hz plus a 1/f rise below 1 mHz
-  (SuperSTAR-like), drawn by FFT shaping.
+* noise: one-sided ASD ``noise·sqrt(1 + f_c/f)·sqrt(1 + (f/f_r)⁴)`` (white in the
+  measurement band, a 1/f rise below ``f_c`` = 1 mHz, a rise above ``f_r`` =
+  20 mHz), through a CRN-like low-pass (:data:`CRN_BOXCAR`, :data:`CRN_ORDER`) as the
+  Level-1B processing applies to the 10 Hz data before decimating to 1 Hz;
+* effects: ``--effect`` specifications (:mod:`accal.simulate.effects`).
 
-Random draws (noise, drift, phases, gaps, flags) come from one seed.  Without an
-explicit seed it is :func:`default_seed` of the date and satellite, so different
-days and satellites get different noise while every run of the same day gives the
-same file; an explicit seed is used as given.
+The other nine ACC1B columns are filled as in the real files: ``ang_accl_x/y/z`` are
+the offset of the sample files plus an orbit-periodic signal of ~2e-7 rad/s² plus
+white noise of the samples' level (GRACE A/B); GRACE-FO C/D are written as ACT1B,
+whose angular columns are 0 in the real files, and keep that.  ``acl_x/y/z_res`` are
+Gaussian with the samples' robust spread plus rarer spikes (heavy tails, as in the samples).
+
+Magnitudes measured on the real samples (``data/samples``, 60 s of 2003-09-14 and
+100 s of 2023-06-01; ``σ_d`` = std of first differences / √2, robust σ = 1.4826·MAD)
+and used here:
+
+=====  ================================  ===========================  ===============================
+sat    ang_accl mean [rad/s²]            ang_accl σ_d [rad/s²]        acl_res robust σ [m/s²]
+=====  ================================  ===========================  ===============================
+A      3.3220e-4, −3.9353e-5, −2.9153e-4  7.87e-7, 2.40e-7, 6.42e-8    2.45e-9, 3.68e-9, 7.26e-9
+B      −4.1715e-4, −7.4392e-6, −5.8413e-4 1.11e-7, 2.89e-8, 3.53e-8    3.42e-9, 2.72e-9, 1.64e-8
+C, D   0 (ACT1B)                          0                           C 1.43e-9, 1.25e-9, 1.63e-9;
+                                                                      D 7.11e-10, 3.19e-10, 6.82e-10
+=====  ================================  ===========================  ===============================
+
+The lin_accl first differences of the samples (std, 60–100 s) are 2e-11 – 5e-10
+m/s² (median 3e-11), the second differences / √6 2e-13 – 4e-11 (median 2.5e-12):
+the noise's rise ``f_r`` and the CRN-like filter are chosen to give 2.7e-11 and
+5e-12 at the default ``noise`` of 1e-10 m/s²/√Hz (``tests/test_simulate_realism.py``).
+
+Random draws come from one seed, split into independent streams (:data:`STREAMS`):
+the instrument drift, the orbit and forces, the noise, the angular and residual
+columns, the gaps and flags, the storm, the thrusters and each auxiliary channel
+have their own, so that adding a storm, thrusters or an effect changes nothing
+else of the day.  Without an explicit seed it is :func:`default_seed` of the date
+and satellite, so different days and satellites differ while every run of the same
+day gives the same file; an explicit seed is used as given.
+
+References
+----------
+.. [1] Bettadpur, S. (2009). Recommendation for a-priori bias & scale parameters for
+   Level-1B ACC data (version 2), GRACE TN-02 (``shared/data/REFERENCE_VALUES.md``).
+.. [2] Case, K., Kruizinga, G., Wu, S.-C. (2010). GRACE Level 1B Data Product User
+   Handbook, JPL D-22027 (ACC1B columns; the CRN filter of the Level-1B processing).
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -33,8 +71,21 @@ import numpy as np
 from numpy.typing import NDArray
 
 from accal.errors import ValidationError
+from accal.simulate.effects import (
+    CHANNEL_PREROLL,
+    PARAMETER_UNITS,
+    Effect,
+    channel_seed,
+    effect_term,
+    effect_truth,
+    first_order_recursion,
+    parse_effect,
+    temperature_channel,
+)
 
-ORBIT_PERIOD = 5600.0  # [s]
+#: Nominal orbital period [s] (the simulated day draws its own, see ``orbit_period``
+#: in the truth and :data:`accal.simulate.orbit_signal.ORBIT_PERIOD_RANGE`).
+ORBIT_PERIOD = 5600.0
 
 #: Most samples of a simulated record (about 1 GB of memory; 11.6 days at 1 s).
 MAX_SAMPLES = 1_000_000
@@ -42,6 +93,56 @@ MAX_SAMPLES = 1_000_000
 #: Raw-data offsets (m/s², eq. 9 sign) for GRACE-FO C and D, from the measured
 #: 100-s means on 2023-06-01 (shared/data/SOURCES.md).
 GRACEFO_OFFSETS = {"C": (-0.278e-6, -10.651e-6, -0.182e-6), "D": (0.278e-6, 10.650e-6, -0.183e-6)}
+
+#: ang_accl offsets [rad/s²]: the means of the real 2003-09-14 ACC1B samples.
+ANGULAR_OFFSETS = {
+    "A": (3.3220e-4, -3.9353e-5, -2.9153e-4),
+    "B": (-4.1715e-4, -7.4392e-6, -5.8413e-4),
+}
+
+#: ang_accl white noise σ [rad/s²]: std of first differences / √2 of the samples.
+ANGULAR_NOISE = {"A": (7.87e-7, 2.40e-7, 6.42e-8), "B": (1.11e-7, 2.89e-8, 3.53e-8)}
+
+#: ang_accl slow wander [rad/s²]: a first-order Gauss-Markov process of correlation
+#: time :data:`ANGULAR_WANDER_TAU`.  σ from the samples: the spread of the values
+#: beyond the white noise, ``sqrt(σ_robust² − σ_d²)``, is the within-60-s spread of
+#: the process, 0.51 σ for a 60 s correlation time.
+ANGULAR_WANDER = {"A": (1.0e-6, 2.8e-7, 1.7e-7), "B": (6.1e-7, 2.5e-7, 5.2e-8)}
+ANGULAR_WANDER_TAU = 60.0
+
+#: acl_*_res robust σ (1.4826·MAD) [m/s²] of the real samples: the Gaussian core.
+RESIDUAL_SIGMA = {
+    "A": (2.45e-9, 3.68e-9, 7.26e-9),
+    "B": (3.42e-9, 2.72e-9, 1.64e-8),
+    "C": (1.43e-9, 1.25e-9, 1.63e-9),
+    "D": (7.11e-10, 3.19e-10, 6.82e-10),
+}
+#: acl_*_res spikes: the fraction of samples that get an extra Gaussian draw of
+#: ``RESIDUAL_SPIKE_SIZE`` × the core σ.  In the samples the std of first differences
+#: is 4.5–19 times the robust σ for GRACE A/B and 3–6 times for C/D (1.4 for Gaussian
+#: noise); with spikes the ratio is ``sqrt(2(1 + p·size²))``: p from the median ratio
+#: of each satellite's three axes (A 7.8, B 10, C 3.3, D 6).
+RESIDUAL_SPIKES = {"A": 0.07, "B": 0.12, "C": 0.011, "D": 0.043}
+RESIDUAL_SPIKE_SIZE = 20.0
+
+#: Noise shape: 1/f corner [Hz], f⁴ rise of the PSD above [Hz].
+NOISE_CORNER, NOISE_RISE = 1e-3, 0.02
+
+#: CRN-like low-pass of the noise: ``CRN_ORDER`` cascaded boxcars of ``CRN_BOXCAR``
+#: seconds (−3 dB at 35 mHz, first zero at 0.2 Hz).
+CRN_BOXCAR, CRN_ORDER = 5.0, 7
+
+#: Random streams of a day: ``numpy.random.default_rng([seed, STREAMS[name]])``.
+STREAMS = {
+    "instrument": 0,
+    "orbit": 1,
+    "noise": 2,
+    "angular": 3,
+    "residual": 4,
+    "gaps": 5,
+    "storm": 6,
+    "thrusters": 7,
+}
 
 
 def default_seed(date: str, satellite: str) -> int:
@@ -65,6 +166,11 @@ def default_seed(date: str, satellite: str) -> int:
     return int.from_bytes(digest[:8], "little")
 
 
+def stream(seed: int, name: str) -> np.random.Generator:
+    """The random generator of one part of a simulated day (:data:`STREAMS`)."""
+    return np.random.default_rng([seed, STREAMS[name]])
+
+
 @dataclass(frozen=True)
 class SimulatedDay:
     """A simulated day: times, raw accelerations and the truth.
@@ -74,15 +180,25 @@ class SimulatedDay:
     time : ndarray, shape (n,)
         GPS seconds [s].
     raw : ndarray, shape (n, 3)
-        Raw readings [m/s²].
+        Raw readings ``lin_accl_x/y/z`` [m/s²].
     true : ndarray, shape (n, 3)
-        True non-gravitational acceleration [m/s²].
+        True non-gravitational acceleration [m/s²] (thruster pulses included).
     valid : ndarray of bool, shape (n,)
         False for flagged samples.
     truth : dict
         ``bias`` [m/s²] (at ``t0``), ``drift`` [m/s³], ``scale_s`` (eq. 9 ``s``),
-        ``t0`` [s], ``seed`` (the one used), plus ``signal_trend``: the LS bias/drift of ``s·a_true`` alone
-        (the part of the true signal any trend estimator will also see).
+        ``t0`` [s], ``seed`` (the one used), ``signal_trend``: the LS bias/drift of
+        ``s·a_true`` alone (the part of the true signal any trend estimator will
+        also see), ``effects`` and ``effects_trend`` (the LS bias/drift of the
+        injected effects), the orbit, eclipses, forces, storm and thrusters.
+    aux : dict
+        The other ACC1B columns: ``ang_accl_x/y/z`` [rad/s²], ``acl_x/y/z_res`` [m/s²].
+    instrument : ndarray, shape (n, 3)
+        The sum of the injected effects [m/s²] (``raw`` minus the same day without them).
+    channel_time : ndarray, shape (m,)
+        GPS seconds of the auxiliary channels [s] (empty without a coupling).
+    channels : dict
+        Auxiliary channels on ``channel_time`` (e.g. ``temperature`` [K]).
     """
 
     time: NDArray[np.float64]
@@ -90,6 +206,10 @@ class SimulatedDay:
     true: NDArray[np.float64]
     valid: NDArray[np.bool_]
     truth: dict[str, Any]
+    aux: dict[str, NDArray[np.float64]] = field(default_factory=dict)
+    instrument: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 3)))
+    channel_time: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+    channels: dict[str, NDArray[np.float64]] = field(default_factory=dict)
 
 
 def coloured_noise(
@@ -98,8 +218,9 @@ def coloured_noise(
     """Gaussian noise with one-sided ASD ``level·sqrt(1 + corner/f)`` [m/s²/√Hz].
 
     A thin wrapper of :func:`accal.simulate.noise.coloured_noise` (two-sided PSD
-    ``level²(1 + corner/|f|)/2``, white samples drawn in time, no padding: the
-    same draws, hence the same noise for a given seed, as before the merge).
+    ``level²(1 + corner/|f|)/2``, white samples drawn in time, no padding), kept for
+    the tests and benchmarks that draw GRACE-like noise of their own; the simulated
+    day uses :func:`instrument_noise`.
 
     Parameters
     ----------
@@ -131,6 +252,147 @@ def coloured_noise(
     return shaped(n, psd, 1.0 / dt, rng, pad=False, white="time")[0]
 
 
+def crn_lowpass(x: NDArray[np.float64], dt: float) -> NDArray[np.float64]:
+    """CRN-like low-pass along the last axis: :data:`CRN_ORDER` boxcars of :data:`CRN_BOXCAR` s.
+
+    Returns the fully overlapped part (``CRN_ORDER·(L − 1)`` samples shorter, ``L``
+    the boxcar length in samples); with ``L < 2`` (``dt`` > 3.3 s) ``x`` unchanged.
+    """
+    length = int(round(CRN_BOXCAR / dt))
+    if length < 2:
+        return x
+    kernel = np.ones(length) / length
+    for _ in range(CRN_ORDER):
+        x = np.apply_along_axis(np.convolve, -1, x, kernel, mode="valid")
+    return x
+
+
+def instrument_noise(n: int, dt: float, level: float, rng: np.random.Generator) -> NDArray:
+    """Accelerometer noise of the three axes [m/s²], shape (n, 3).
+
+    One-sided ASD ``level·sqrt(1 + NOISE_CORNER/f)·sqrt(1 + (f/NOISE_RISE)⁴)`` drawn
+    by FFT shaping, then :func:`crn_lowpass`: in the measurement band (0.1–20 mHz)
+    the ASD is ``level``; at 1 Hz sampling the first differences have a std of
+    ~0.27·``level``·√Hz and the samples ~0.75·``level``·√Hz.
+    """
+    from accal.simulate.noise import coloured_noise as shaped
+
+    if level == 0:
+        return np.zeros((n, 3))
+    length = int(round(CRN_BOXCAR / dt))
+    pad = CRN_ORDER * (length - 1) if length >= 2 else 0
+
+    def psd(f):
+        f = np.abs(f)
+        with np.errstate(divide="ignore"):
+            return 0.5 * level**2 * (1.0 + NOISE_CORNER / f) * (1.0 + (f / NOISE_RISE) ** 4)
+
+    x = shaped(n + pad, psd, 1.0 / dt, rng, size=3, pad=False, white="time")
+    return crn_lowpass(x, dt).T.copy()
+
+
+def _check(satellite: str, duration: float, dt: float, n_gaps: int, seed: int | None) -> None:
+    if satellite not in ("A", "B", "C", "D"):
+        raise ValidationError(f"satellite must be A, B, C or D, got {satellite!r}")
+    if not 0 < duration < np.inf or not 0 < dt < np.inf:
+        raise ValidationError(
+            f"duration and dt must be positive and finite, got duration = {duration} s, dt = {dt} s"
+        )
+    if not duration / dt <= MAX_SAMPLES:
+        raise ValidationError(
+            f"duration / dt = {duration / dt:.4g} samples; at most {MAX_SAMPLES} are simulated"
+        )
+    if not 0 <= n_gaps <= MAX_SAMPLES:
+        raise ValidationError(f"n_gaps must be in [0, {MAX_SAMPLES}], got {n_gaps}")
+    if seed is not None and seed < 0:
+        raise ValidationError(f"seed must be an integer >= 0, got {seed}")
+
+
+def _offsets(satellite: str, t0: float) -> tuple[NDArray, NDArray, NDArray]:
+    """(s, TN-02 scale, b): eq. 9 scale and bias of the satellite on the day."""
+    from accal.calibration import tn02_bias, tn02_scale
+
+    if satellite in ("A", "B"):
+        sat = f"GRACE-{satellite}"
+        scale = np.array(tn02_scale(sat))
+        mjd = 51544.0 + (t0 + 43200.0) / 86400.0
+        bias = -np.array(tn02_bias(sat, mjd)) / scale
+    else:
+        scale = np.ones(3)
+        bias = np.array(GRACEFO_OFFSETS[satellite])
+    return 1.0 / scale, scale, bias
+
+
+def _other_columns(satellite: str, angular: NDArray, seed: int, dt: float) -> dict[str, NDArray]:
+    """ang_accl_x/y/z and acl_x/y/z_res of the ACC1B file (module docstring)."""
+    n = angular.shape[0]
+    if satellite in ANGULAR_OFFSETS:
+        rng = stream(seed, "angular")
+        white = np.array(ANGULAR_NOISE[satellite]) * rng.standard_normal((n, 3))
+        # Gauss-Markov wander, stationary from the first sample
+        a = float(np.exp(-dt / ANGULAR_WANDER_TAU))
+        g = rng.standard_normal((n, 3)) * np.sqrt(1.0 - a * a)
+        g[0] = rng.standard_normal(3)
+        wander = np.column_stack([first_order_recursion(g[:, i], a) for i in range(3)])
+        ang = np.array(ANGULAR_OFFSETS[satellite]) + angular + white
+        ang = ang + np.array(ANGULAR_WANDER[satellite]) * wander
+    else:  # GRACE-FO ACT1B: the angular columns are 0 in the real files
+        ang = np.zeros((n, 3))
+    rng = stream(seed, "residual")
+    core = np.array(RESIDUAL_SIGMA[satellite])
+    res = core * rng.standard_normal((n, 3))
+    spikes = rng.random((n, 3)) < RESIDUAL_SPIKES[satellite]
+    res += np.where(spikes, RESIDUAL_SPIKE_SIZE * core * rng.standard_normal((n, 3)), 0.0)
+    out = {f"ang_accl_{a}": ang[:, i] for i, a in enumerate("xyz")}
+    out.update({f"acl_{a}_res": res[:, i] for i, a in enumerate("xyz")})
+    return out
+
+
+def _gaps_and_flags(
+    n: int, dt: float, n_gaps: int, flagged_fraction: float, rng: np.random.Generator
+) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+    """(keep, valid): samples left in the file (gaps of 60–1800 s cut out) and unflagged."""
+    keep = np.ones(n, dtype=bool)
+    for _ in range(n_gaps):
+        length = int(rng.uniform(60, 1800) / dt)
+        start = int(rng.integers(1, max(2, n - length - 1)))
+        keep[start : start + length] = False
+    keep[0] = True  # t0 of the truth is the first sample
+    valid = np.ones(n, dtype=bool)
+    n_flag = int(flagged_fraction * n)
+    while n_flag > 0:
+        burst = int(min(n_flag, rng.integers(5, 120)))
+        start = int(rng.integers(1, max(2, n - burst)))
+        valid[start : start + burst] = False
+        n_flag -= burst
+    return keep, valid
+
+
+def _channels(
+    effects: Sequence[Effect], t0: float, n: int, dt: float, seed: int, orbit_period: float
+) -> tuple[NDArray, dict[str, NDArray], dict[str, dict]]:
+    """The auxiliary channels the couplings need, from CHANNEL_PREROLL before t0 to the end."""
+    names = sorted({e.params["channel"] for e in effects if e.name == "coupling"})
+    if not names:
+        return np.zeros(0), {}, {}
+    pre = int(np.ceil(CHANNEL_PREROLL / dt))
+    tc = dt * np.arange(-pre, n)  # elapsed time since t0
+    values, params = {}, {}
+    for name in names:
+        rng = np.random.default_rng(channel_seed(seed, name))
+        values[name], params[name] = temperature_channel(tc, orbit_period, rng)
+        params[name]["unit"] = "K"
+    return tc, values, params
+
+
+def _trend(t: NDArray, y: NDArray, valid: NDArray) -> dict[str, list[float]]:
+    """Per-axis LS bias (at t[0]) and drift of ``y`` (n, 3) over the valid samples."""
+    from accal.estimators.trend import fit_trend
+
+    fits = [fit_trend(t, y[:, i], method="lsq", valid=valid) for i in range(3)]
+    return {"bias": [f.bias for f in fits], "drift": [f.drift for f in fits]}
+
+
 def simulate_grace_day(
     *,
     date: str = "2005-01-01",
@@ -141,6 +403,9 @@ def simulate_grace_day(
     n_gaps: int = 0,
     flagged_fraction: float = 0.0,
     noise: float = 1e-10,
+    storm: bool = False,
+    thrusters: bool = False,
+    effects: Sequence[str | Effect] = (),
 ) -> SimulatedDay:
     """Simulate one day of raw ACC1B data.
 
@@ -163,7 +428,14 @@ def simulate_grace_day(
     flagged_fraction : float
         Fraction of samples flagged invalid (in short bursts).
     noise : float
-        White noise level [m/s²/√Hz].
+        Noise level in the measurement band [m/s²/√Hz] (0: no noise).
+    storm : bool
+        Add a geomagnetic storm (:func:`accal.simulate.orbit_signal.draw_storm`).
+    thrusters : bool
+        Add thruster pulses to the true signal (:func:`~accal.simulate.orbit_signal.draw_thrusters`).
+    effects : sequence of str or Effect
+        Instrument effects (``"step:axis=x,epoch=43200,size=3e-9"``, see
+        :mod:`accal.simulate.effects`).
 
     Returns
     -------
@@ -173,79 +445,47 @@ def simulate_grace_day(
     ------
     ValidationError
         For a bad satellite, a non-positive or non-finite ``duration`` or ``dt``,
-        more than :data:`MAX_SAMPLES` samples or gaps, or a negative ``seed``.
+        more than :data:`MAX_SAMPLES` samples or gaps, a negative ``seed`` or a bad
+        effect specification.
     """
-    from accal.calibration import tn02_bias, tn02_scale
+    from accal.simulate.orbit_signal import environment
     from accal.timescale import gps_day_start
 
-    if satellite not in ("A", "B", "C", "D"):
-        raise ValidationError(f"satellite must be A, B, C or D, got {satellite!r}")
-    if not 0 < duration < np.inf or not 0 < dt < np.inf:
-        raise ValidationError(
-            f"duration and dt must be positive and finite, got duration = {duration} s, dt = {dt} s"
-        )
-    if not duration / dt <= MAX_SAMPLES:
-        raise ValidationError(
-            f"duration / dt = {duration / dt:.4g} samples; at most {MAX_SAMPLES} are simulated"
-        )
-    if not 0 <= n_gaps <= MAX_SAMPLES:
-        raise ValidationError(f"n_gaps must be in [0, {MAX_SAMPLES}], got {n_gaps}")
-    if seed is None:
-        seed = default_seed(date, satellite)
-    elif seed < 0:
-        raise ValidationError(f"seed must be an integer >= 0, got {seed}")
-    rng = np.random.default_rng(seed)
-    t0 = gps_day_start(date)
+    _check(satellite, duration, dt, n_gaps, seed)
+    seed = default_seed(date, satellite) if seed is None else int(seed)
     n = int(round(duration / dt))
-    t = t0 + dt * np.arange(n)
-    tau = t - t0
-    phase = rng.uniform(0, 2 * np.pi)
-    w = 2 * np.pi / ORBIT_PERIOD
-    drag_level = rng.uniform(0.5e-7, 3e-7)
-    slow = 1.0 + 0.3 * np.sin(2 * np.pi * tau / 86400.0 + rng.uniform(0, 2 * np.pi))
-    ax = (
-        -drag_level
-        * slow
-        * (1 + 0.25 * np.cos(w * tau + phase) + 0.08 * np.cos(2 * w * tau + 2 * phase))
+    span = n * dt
+    parsed = [e if isinstance(e, Effect) else parse_effect(e, duration=span) for e in effects]
+    drift = stream(seed, "instrument").uniform(-5e-14, 5e-14, 3)
+    t0 = gps_day_start(date)
+    tau = dt * np.arange(n)
+    t = t0 + tau
+    env = environment(
+        tau,
+        t0=t0,
+        satellite=satellite,
+        orbit_rng=stream(seed, "orbit"),
+        storm_rng=stream(seed, "storm") if storm else None,
+        thruster_rng=stream(seed, "thrusters") if thrusters else None,
+        dt=dt,
+        duration=span,
     )
-    sun = np.cos(w * tau + phase + 1.0)
-    eclipse = sun < -0.55
-    srp = 5e-8 * np.where(eclipse, 0.0, 1.0)
-    ay = srp * (0.3 + 0.7 * np.sin(w * tau + phase)) + 2e-9 * np.cos(2 * w * tau)
-    az = srp * 0.4 * np.cos(w * tau + phase) + 1e-8 * np.sin(w * tau)
-    true = np.column_stack([ax, ay, az])
-
-    if satellite in ("A", "B"):
-        sat = f"GRACE-{satellite}"
-        scale = np.array(tn02_scale(sat))
-        mjd = 51544.0 + (t0 + 43200.0) / 86400.0
-        bias = -np.array(tn02_bias(sat, mjd)) / scale
-    else:
-        scale = np.ones(3)
-        bias = np.array(GRACEFO_OFFSETS[satellite])
-    s = 1.0 / scale
-    drift = rng.uniform(-5e-14, 5e-14, 3)
-    nz = np.column_stack([coloured_noise(n, dt, noise, 1e-3, rng) for _ in range(3)])
-    raw = s * true + bias + np.outer(tau, drift) + nz
-
-    keep = np.ones(n, dtype=bool)
-    for _ in range(n_gaps):
-        length = int(rng.uniform(60, 1800) / dt)
-        start = int(rng.integers(1, max(2, n - length - 1)))
-        keep[start : start + length] = False
-    keep[0] = True  # t0 of the truth is the first sample
-    valid = np.ones(n, dtype=bool)
-    n_flag = int(flagged_fraction * n)
-    while n_flag > 0:
-        burst = int(min(n_flag, rng.integers(5, 120)))
-        start = int(rng.integers(1, max(2, n - burst)))
-        valid[start : start + burst] = False
-        n_flag -= burst
-    t, raw, true, valid = t[keep], raw[keep], true[keep], valid[keep]
-
-    from accal.estimators.trend import fit_trend
-
-    sig_trend = [fit_trend(t, s[i] * true[:, i], method="lsq", valid=valid) for i in range(3)]
+    true = env.linear
+    s, scale, bias = _offsets(satellite, t0)
+    tc, channels, channel_params = _channels(parsed, t0, n, dt, seed, env.truth["orbit_period"])
+    instrument = _effects(parsed, tau, span, s * true, {k: (tc, v) for k, v in channels.items()})
+    raw = (
+        s * true
+        + bias
+        + np.outer(tau, drift)
+        + instrument_noise(n, dt, noise, stream(seed, "noise"))
+    )
+    if parsed:
+        raw = raw + instrument
+    aux = _other_columns(satellite, env.angular, seed, dt)
+    keep, valid = _gaps_and_flags(n, dt, n_gaps, flagged_fraction, stream(seed, "gaps"))
+    t, raw, true, valid, instrument = t[keep], raw[keep], true[keep], valid[keep], instrument[keep]
+    aux = {k: v[keep] for k, v in aux.items()}
     truth = {
         "satellite": satellite,
         "date": date,
@@ -256,26 +496,119 @@ def simulate_grace_day(
         "scale_s": s.tolist(),
         "scale_tn02": scale.tolist(),
         "noise_asd": noise,
-        "signal_trend": {
-            "bias": [f.bias for f in sig_trend],
-            "drift": [f.drift for f in sig_trend],
-        },
+        "signal_trend": _trend(t, s * true, valid),
         "n_samples": int(t.size),
         "n_flagged": int((~valid).sum()),
         # gaps in the file: cut-outs that overlap or touch merge into one (QA: 3 asked,
         # 2 in the file, and the truth said 3)
         "n_gaps": int(np.count_nonzero(np.diff(keep.astype(np.int8)) == -1)),
         "n_gaps_requested": n_gaps,
-        "units": {"bias": "m/s^2", "drift": "m/s^3", "t0": "s (GPS)"},
+        **env.truth,
+        **_model_truth(satellite),
+        "effects": [effect_truth(e, t0, float(s[e.index])) for e in parsed],
+        "channels": channel_params,
     }
-    return SimulatedDay(t, raw, true, valid, truth)
+    if parsed:
+        truth["effects_trend"] = _trend(t, instrument, valid)
+    return SimulatedDay(t, raw, true, valid, truth, aux, instrument, t0 + tc, channels)
 
 
-def write_simulated_grace(out: str | Path, **kwargs: Any) -> Path:
+_UNITS = {
+    "bias": "m/s^2",
+    "drift": "m/s^3",
+    "t0": "s (GPS)",
+    "orbit_period": "s",
+    "eclipses": "s (GPS), centres of the entry and exit ramps",
+    "penumbra_s": "s",
+    "thrusters": "epoch s (GPS), epoch_s and length s, amplitude m/s^2",
+    "storm": "onset s (GPS), onset_s, rise_s and decay_s s, factor 1",
+    "drag": "level m/s^2",
+    "srp": "level m/s^2",
+    "angular": "rad/s^2",
+    "effects": PARAMETER_UNITS,
+}
+
+
+def _effects(
+    effects: Sequence[Effect],
+    tau: NDArray,
+    span: float,
+    scaled_true: NDArray,
+    channels: dict[str, tuple[NDArray, NDArray]],
+) -> NDArray[np.float64]:
+    """The sum of the effects' terms per axis [m/s²], shape (n, 3)."""
+    out = np.zeros((tau.size, 3))
+    for e in effects:
+        i = e.index
+        out[:, i] += effect_term(
+            e, tau, duration=span, scaled_true=scaled_true[:, i], channels=channels
+        )
+    return out
+
+
+def _model_truth(satellite: str) -> dict[str, Any]:
+    """The fixed parts of the model in the truth: noise, other columns, units."""
+    return {
+        "noise_model": {
+            "corner_hz": NOISE_CORNER,
+            "rise_hz": NOISE_RISE,
+            "crn_boxcar_s": CRN_BOXCAR,
+            "crn_order": CRN_ORDER,
+        },
+        "ang_accl": _angular_truth(satellite),
+        "acl_res": {
+            "core_sigma": list(RESIDUAL_SIGMA[satellite]),
+            "spike_fraction": RESIDUAL_SPIKES[satellite],
+            "spike_size": RESIDUAL_SPIKE_SIZE,
+        },
+        "units": _UNITS,
+    }
+
+
+def _angular_truth(satellite: str) -> dict[str, Any]:
+    if satellite in ANGULAR_OFFSETS:
+        return {
+            "offset": list(ANGULAR_OFFSETS[satellite]),
+            "noise_sigma": list(ANGULAR_NOISE[satellite]),
+            "wander_sigma": list(ANGULAR_WANDER[satellite]),
+            "wander_tau_s": ANGULAR_WANDER_TAU,
+            "signal": "truth['angular']: once and twice per revolution",
+        }
+    zero = [0.0] * 3
+    return {
+        "offset": zero,
+        "noise_sigma": zero,
+        "wander_sigma": zero,
+        "signal": "none: ACT1B writes 0",
+    }
+
+
+def aux_path(out: str | Path) -> Path:
+    """The auxiliary-channel table written beside a simulated file: ``<out>.aux.parquet``."""
+    out = Path(out)
+    return out.with_name(out.name + ".aux.parquet")
+
+
+def write_simulated_grace(
+    out: str | Path, *, reference_out: str | Path | None = None, **kwargs: Any
+) -> Path:
     """Simulate a day and write it as an ACC1B file plus ``<out>.truth.json``.
 
     Keyword arguments go to :func:`simulate_grace_day`.  GRACE A/B days are
-    written in the GRACE RL02 ASCII layout, C/D in the GRACE-FO RL04 YAML layout.
+    written in the GRACE RL02 ASCII layout, C/D in the GRACE-FO RL04 YAML layout,
+    with all 12 columns.  A day with couplings also gets its channels in
+    ``<out>.aux.parquet`` (:func:`aux_path`; columns ``gps_time`` [s] and one per
+    channel, units in the Parquet metadata, readable by ``accal grace-bias --aux``).
+
+    Parameters
+    ----------
+    out : str or Path
+        The ACC1B file.
+    reference_out : str or Path, optional
+        Also write the true non-gravitational acceleration ``s·a_true`` (nominal
+        scale, thrusters included, scale errors of ``--effect scale`` not) at the
+        data epochs, as a table (``gps_time``, ``lin_accl_x/y/z``; CSV for a
+        ``.csv`` name, else Parquet) readable by ``accal grace-bias --reference``.
 
     Returns
     -------
@@ -283,7 +616,7 @@ def write_simulated_grace(out: str | Path, **kwargs: Any) -> Path:
         The truth file.
     """
     from accal.io.grace_l1b import DEFAULT_INVALID_BITS, write_grace_acc1b
-    from accal.io.writers import atomic_path
+    from accal.io.writers import atomic_path, write_table
     from accal.series import AccSeries
 
     out = Path(out)
@@ -297,8 +630,28 @@ def write_simulated_grace(out: str | Path, **kwargs: Any) -> Path:
         acc=day.raw,
         valid=day.valid,
         quality=quality,
+        aux=day.aux,
         satellite=f"GRACE-{sat}" if sat in "AB" else f"GRACE-FO-{sat}",
     )
+    source = {"source": f"accal simulate grace ({out.name})", "seed": day.truth["seed"]}
+    if day.channels:
+        units = {"gps_time": "s", **{k: "K" for k in day.channels}}
+        write_table(
+            {"gps_time": day.channel_time, **day.channels},
+            aux_path(out),
+            fmt="parquet",
+            units=units,
+            meta={**source, "channels": day.truth["channels"]},
+        )
+    if reference_out is not None:
+        ref = np.asarray(day.truth["scale_s"]) * day.true
+        write_table(
+            {"gps_time": day.time, **{f"lin_accl_{a}": ref[:, i] for i, a in enumerate("xyz")}},
+            reference_out,
+            units={"gps_time": "s", **{f"lin_accl_{a}": "m/s^2" for a in "xyz"}},
+            meta={**source, "content": "s * a_true (nominal scale_s of the truth)"},
+        )
+    # the data file and its truth last: a side file that cannot be written leaves no day
     write_grace_acc1b(series, out, flavour="grace" if sat in "AB" else "gracefo")
     truth_path = out.with_name(out.name + ".truth.json")
     with atomic_path(truth_path) as tmp:
