@@ -605,6 +605,30 @@ def simulate() -> None:
     show_default=True,
     help="Noise level [m/s^2/sqrt(Hz)] in the measurement band.",
 )
+@click.option(
+    "--storm", is_flag=True, help="Add a geomagnetic storm (density x2-4 within hours, decaying)."
+)
+@click.option(
+    "--thrusters",
+    is_flag=True,
+    help="Add thruster pulses (1e-8-1e-7 m/s^2, a few s, a few per hour) to the true signal.",
+)
+@click.option(
+    "--effect",
+    "effects",
+    multiple=True,
+    metavar="SPEC",
+    help="Inject an instrument effect NAME:key=value,... into the raw reading (repeatable; "
+    "the effects are listed above).",
+)
+@click.option(
+    "--reference-out",
+    "reference_out",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Also write the true non-gravitational acceleration s*a_true as a table "
+    "(for grace-bias --reference; .csv or Parquet).",
+)
 @config_option
 def simulate_grace(
     date: str,
@@ -615,9 +639,30 @@ def simulate_grace(
     gaps: int,
     flagged: float,
     noise: float,
+    storm: bool,
+    thrusters: bool,
+    effects: tuple[str, ...],
+    reference_out: Path | None,
 ) -> None:
-    """Write a realistic synthetic GRACE/GRACE-FO ACC1B day file and its truth JSON."""
+    """Write a real-like synthetic GRACE/GRACE-FO ACC1B day file and its truth JSON.
+
+    All 12 ACC1B columns are filled at the magnitudes of the real files; the truth
+    (<out>.truth.json) has the bias, drift and scale, the orbit period, eclipses,
+    storm, thruster pulses and every injected effect with its parameters.
+
+    \b
+    --effect NAME:key=value,... (times in s, epochs from the start of the day):
+      step:axis=x,epoch=43200,size=3e-9
+      coupling:axis=y,channel=temperature,coef=3e-9[,lag=600][,tau=300][,tau2=100]
+      quadratic:axis=z,coef=1e-18               (m/s^4, about the start)
+      scale:axis=x,factor=1.02                  (raw = s*factor*a_true + ...)
+      sawtooth:axis=y,period=3000,amp=1e-9[,phase=0]
+      growing:axis=y,period=2000,amp0=1e-9,amp1=3e-9[,phase=0]
+      exponential:axis=x,amp=3e-9,tau=3000
+    A coupling's channel (K) goes to <out>.aux.parquet, for grace-bias --aux.
+    """
     from accal.errors import AccalError
+    from accal.simulate.effects import parse_effect
     from accal.simulate.grace import write_simulated_grace
 
     if not _is_date(date) or not "1980-01-06" <= date < "2100-01-01":
@@ -640,10 +685,17 @@ def simulate_grace(
     check_number("--gaps", gaps, low=0, high=MAX_SAMPLES)
     check_number("--flagged", flagged, low=0, high=1, high_open=True, what="fraction")
     check_number("--noise", noise, low=0, unit=" m/s^2/sqrt(Hz)")
+    parsed = []
+    for spec in effects:
+        try:
+            parsed.append(parse_effect(spec, duration=round(duration) * 1.0))
+        except AccalError as exc:
+            usage_fail(f"--effect {spec!r}: {exc}")
 
     try:
         truth_path = write_simulated_grace(
             out,
+            reference_out=reference_out,
             date=date,
             satellite=satellite,
             seed=seed,
@@ -651,11 +703,21 @@ def simulate_grace(
             n_gaps=gaps,
             flagged_fraction=flagged,
             noise=noise,
+            storm=storm,
+            thrusters=thrusters,
+            effects=parsed,
         )
     except AccalError as exc:
         _err(str(exc))
         sys.exit(1)
-    click.echo(f"wrote {out} and {truth_path}", err=True)
+    from accal.simulate.grace import aux_path
+
+    written = [str(out)]
+    if aux_path(out).exists() and any(e.name == "coupling" for e in parsed):
+        written.append(str(aux_path(out)))
+    if reference_out is not None:
+        written.append(str(reference_out))
+    click.echo(f"wrote {', '.join(written)} and {truth_path}", err=True)
 
 
 from accal.cli_demod import budget, demod, design, simulate_gap  # noqa: E402
