@@ -232,10 +232,22 @@ def first_order_recursion(g: NDArray[np.float64], a: float) -> NDArray[np.float6
 def lowpass(x: NDArray[np.float64], h: float, tau: float) -> NDArray[np.float64]:
     """First-order low-pass of a piecewise-linear channel sampled every ``h`` [s].
 
-    The exact solution of ``tau·y' + y = x`` for ``x`` linear between samples,
-    with ``y[0] = x[0]`` (steady state); ``tau = 0`` returns ``x``:
-    ``y[k] = a·y[k − 1] + (1 − a)·x[k − 1] + (1 − tau(1 − a)/h)·(x[k] − x[k − 1])``,
-    ``a = exp(−h/tau)``.
+    Parameters
+    ----------
+    x : ndarray
+        Channel samples, every ``h`` seconds.
+    h : float
+        Sampling step [s].
+    tau : float
+        Time constant [s]; 0 returns ``x``.
+
+    Returns
+    -------
+    ndarray
+        The exact solution of ``tau·y' + y = x`` for ``x`` linear between samples,
+        with ``y[0] = x[0]`` (steady state):
+        ``y[k] = a·y[k − 1] + (1 − a)·x[k − 1] + (1 − tau(1 − a)/h)·(x[k] − x[k − 1])``,
+        ``a = exp(−h/tau)``.
     """
     if tau == 0 or x.size == 0:
         return x

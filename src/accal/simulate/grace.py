@@ -14,13 +14,16 @@ instrument effects, ``a_raw = s·a_true + b + d·(t − t0) + noise + Σ effects
 * ``d``: a random drift of a few 1e-14 m/s³;
 * noise: one-sided ASD ``noise·sqrt(1 + f_c/f)·sqrt(1 + (f/f_r)⁴)`` (white in the
   measurement band, a 1/f rise below ``f_c`` = 1 mHz, a rise above ``f_r`` =
-  20 mHz), through a CRN-like low-pass (:data:`CRN_BOXCAR`, :data:`CRN_ORDER`) as the
-  Level-1B processing applies to the 10 Hz data before decimating to 1 Hz;
+  20 mHz), through a CRN-like low-pass (:data:`CRN_BOXCAR`, :data:`CRN_ORDER`), a
+  stand-in for the CRN filter the Level-1B processing applies to the 10 Hz data before
+  decimating to 1 Hz [2]_ (its parameters here are fitted to the samples' first and
+  second differences, not taken from the processing);
 * effects: ``--effect`` specifications (:mod:`accal.simulate.effects`).
 
 The other nine ACC1B columns are filled as in the real files: ``ang_accl_x/y/z`` are
 the offset of the sample files plus an orbit-periodic signal of ~2e-7 rad/s² plus
-white noise of the samples' level (GRACE A/B); GRACE-FO C/D are written as ACT1B,
+white noise and a 60 s Gauss-Markov wander at the samples' levels (GRACE A/B,
+:data:`ANGULAR_NOISE`, :data:`ANGULAR_WANDER`); GRACE-FO C/D are written as ACT1B,
 whose angular columns are 0 in the real files, and keep that.  ``acl_x/y/z_res`` are
 Gaussian with the samples' robust spread plus rarer spikes (heavy tails, as in the samples).
 

@@ -138,9 +138,20 @@ def smooth_ramp(x: NDArray[np.float64]) -> NDArray[np.float64]:
 def shadow(tau: NDArray[np.float64], orbit: Orbit, penumbra: float = PENUMBRA) -> NDArray:
     """Fraction of the Sun hidden at ``tau`` [s]: 1 in the umbra, 0 in sunlight.
 
-    The time inside the shadow arc, ``(h − |u − π|)/ω``, goes through a
-    :func:`smooth_ramp` of width ``penumbra`` [s], centred on the geometric
-    shadow edge (the eclipse epochs of :func:`eclipse_epochs`).
+    Parameters
+    ----------
+    tau : ndarray
+        Elapsed time since the start of the record [s].
+    orbit : Orbit
+    penumbra : float
+        Width of the entry and exit ramps [s].
+
+    Returns
+    -------
+    ndarray
+        The time inside the shadow arc, ``(h − |u − π|)/ω``, through a
+        :func:`smooth_ramp` of width ``penumbra``, centred on the geometric shadow
+        edge (the eclipse epochs of :func:`eclipse_epochs`); 0 without eclipses.
     """
     h = orbit.half_eclipse()
     if h is None:
@@ -195,8 +206,21 @@ def draw_storm(rng: np.random.Generator, duration: float) -> dict[str, float]:
 
 
 def storm_factor(tau: NDArray[np.float64], storm: dict[str, float] | None) -> NDArray:
-    """Density multiplier of a storm: 1 before the onset, a smooth rise to ``factor``
-    over ``rise_s``, then ``1 + (factor − 1)·exp(−(tau − peak)/decay_s)``."""
+    """Density multiplier of a storm.
+
+    Parameters
+    ----------
+    tau : ndarray
+        Elapsed time [s].
+    storm : dict or None
+        :func:`draw_storm`'s parameters; None: no storm.
+
+    Returns
+    -------
+    ndarray
+        1 before ``onset_s``, a smooth (raised-sine) rise to ``factor`` over
+        ``rise_s``, then ``1 + (factor − 1)·exp(−(tau − peak)/decay_s)``.
+    """
     if storm is None:
         return np.ones_like(tau)
     x = (tau - storm["onset_s"]) / storm["rise_s"]
@@ -239,10 +263,20 @@ def draw_thrusters(
 
 
 def thruster_series(tau: NDArray[np.float64], pulses: list[dict[str, Any]]) -> NDArray:
-    """Acceleration of the pulses [m/s²], shape (n, 3).
+    """Acceleration of thruster pulses on the SRF axes.
 
-    Each pulse is a half sine, ``amplitude·sin(π (tau − epoch_s)/length)`` for
-    ``epoch_s <= tau <= epoch_s + length`` (zero at both ends).
+    Parameters
+    ----------
+    tau : ndarray, shape (n,)
+        Elapsed time [s], increasing.
+    pulses : list of dict
+        As :func:`draw_thrusters` returns them.
+
+    Returns
+    -------
+    ndarray, shape (n, 3)
+        [m/s²]; each pulse is a half sine, ``amplitude·sin(π (tau − epoch_s)/length)``
+        for ``epoch_s <= tau <= epoch_s + length`` (zero at both ends).
     """
     out = np.zeros((tau.size, 3))
     for p in pulses:
@@ -282,9 +316,23 @@ def drag_density(
 ) -> NDArray[np.float64]:
     """Relative density along the orbit (1 on average on a quiet day without trend).
 
-    ``exp(k·(tau/day − 1/2))·(1 + A_d sin(2π tau/day + φ_d))`` times
-    ``1 + A1 cos β cos(u − u_b) + A2 cos 2(u − u_b)``: the day/night contrast
-    fades as the orbit turns to the terminator (``β → 90°``).
+    Parameters
+    ----------
+    tau : ndarray
+        Elapsed time [s].
+    u : ndarray
+        Argument of latitude from the Sun's projection [rad].
+    drag : dict
+        ``draw_forces()["drag"]``.
+    beta : float
+        Sun elevation above the orbit plane [rad].
+
+    Returns
+    -------
+    ndarray
+        ``exp(k·(tau/day − 1/2))·(1 + A_d sin(2π tau/day + φ_d))`` times
+        ``1 + A1 cos β cos(u − u_b) + A2 cos 2(u − u_b)``: the day/night contrast
+        fades as the orbit turns to the terminator (``β → 90°``).
     """
     day = 86400.0
     slow = np.exp(drag["trend_per_day"] * (tau / day - 0.5)) * (
