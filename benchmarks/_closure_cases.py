@@ -779,10 +779,16 @@ def run_case(case: Case) -> dict[str, Any]:
 
 
 def git_state() -> dict[str, str]:
-    """Commit and dirty files of the working tree (the engine is being tuned)."""
+    """Commit, modified files of ``src/`` and a hash of its contents (the engine is being
+    tuned in the working tree: the hash tells whether it changed during a run)."""
+    import hashlib
 
     def git(*a: str) -> str:
         r = subprocess.run(["git", *a], cwd=ROOT, capture_output=True, text=True, check=False)
         return r.stdout.strip()
 
-    return {"commit": git("rev-parse", "HEAD"), "dirty": git("status", "--short", "src")}
+    h = hashlib.sha256()
+    for f in sorted((ROOT / "src").rglob("*.py")):
+        h.update(f.read_bytes())
+    return {"commit": git("rev-parse", "HEAD"), "dirty": git("status", "--short", "src"),
+            "src_sha256": h.hexdigest()[:16]}  # fmt: skip

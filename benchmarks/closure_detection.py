@@ -43,6 +43,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import argparse  # noqa: E402
 import json  # noqa: E402
+import signal  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -173,14 +174,27 @@ def cases(quick: bool) -> list[Case]:
 
 
 def run_all(cases: list[Case], workers: int = 2, progress: bool = True) -> list[dict]:
-    """Run ``cases`` on ``workers`` processes (slowest first); results in case order."""
+    """Run ``cases`` on ``workers`` processes (slowest first); results in case order.
+
+    The library is imported here, before the workers are forked, so that every library
+    run of one benchmark uses the same code even if ``src/`` changes meanwhile (the
+    CLI runs import it afresh).
+    """
+    import importlib
     import multiprocessing as mp
+    import pkgutil
+
+    import accal
+
+    for m in pkgutil.walk_packages(accal.__path__, "accal."):
+        importlib.import_module(m.name)
+    importlib.import_module("tests.indep")
 
     order = sorted(range(len(cases)), key=lambda i: -cases[i].cost)
     results: list[dict | None] = [None] * len(cases)
     ctx = mp.get_context("fork")
     t_start = time.perf_counter()
-    with ctx.Pool(workers, maxtasksperchild=20) as pool:
+    with ctx.Pool(workers) as pool:
         it = pool.imap_unordered(_indexed, [(i, cases[i]) for i in order], chunksize=1)
         for n, (i, res) in enumerate(it, 1):
             results[i] = res
@@ -621,7 +635,12 @@ def report(results: list[dict], meta: dict) -> str:
         f"{meta['wall_s'] / 60:.1f} min on {meta['workers']} workers)",
         "",
         f"accal commit {meta['git']['commit'][:10]}; src/ modified in the working tree: "
-        f"{len(meta['git']['dirty'].splitlines())} files.",
+        f"{len(meta['git']['dirty'].splitlines())} files; src hash {meta['git']['src_sha256']}"
+        + (
+            f" at the start, {meta['git_end']['src_sha256']} at the end (changed during the run)."
+            if meta["git_end"]["src_sha256"] != meta["git"]["src_sha256"]
+            else " (unchanged during the run)."
+        ),
         "",
     ]
     for title, table in sec:
@@ -640,16 +659,19 @@ def main(argv: list[str] | None = None) -> int:
                     "platform accsim inject cli swarm)")  # fmt: skip
     ap.add_argument("--no-figures", action="store_true")
     args = ap.parse_args(argv)
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))  # the pool's workers end too
     todo = [c for c in cases(args.quick) if not args.only or c.group in args.only]
     args.out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
+    git0 = git_state()
     results = run_all(todo, workers=args.workers)
     meta = {
         "mode": "quick" if args.quick else "full",
         "n_cases": len(todo),
         "workers": args.workers,
         "wall_s": time.perf_counter() - t0,
-        "git": git_state(),
+        "git": git0,
+        "git_end": git_state(),
         "date": time.strftime("%Y-%m-%d %H:%M:%S"),
     }
     (args.out / "results.json").write_text(json.dumps({"meta": meta, "results": results}))
