@@ -9,21 +9,11 @@ into it and how the closure runs: through the library (``"api"``, the arguments 
 per analysed axis, with what was removed, rejected and reported, the coefficient
 z-scores and the table's bias/drift before and after.
 
-Conventions of the scores
--------------------------
-* ``removed``: instrument effects the closure accepted (``grace-bias`` subtracts them
-  from the calibrated series; on the platform every accepted effect enters the
-  extended model).  ``reported``: any accepted effect (periodic terms included) or
-  unexplained structure.  ``rejected``: significant candidates not accepted, with
-  ``details.reason``.
-* ``bias``/``drift``: the table's values (wavelet, the ``grace-bias`` default)
-  before/after, the closure's σ (``sigma_after`` with the removed effects'
-  uncertainty, as the pipeline adds it), ``change_sigmas = |after − before| / σ_after``,
-  ``true_err_*`` against ``b + signal trend`` (without a reference: the LS line of
-  ``s·a_true``, as ``accal grace-bias --truth``) and ``twin_err_*`` against the plain
-  fit of the same day without the injected effect (the error the effect causes;
-  API path only).
-* ``z``: ``(coefficient − truth) / σ`` of the effect matched to the injected one.
+Scores: ``removed`` (instrument effects accepted: subtracted by ``grace-bias``; on the
+platform every accepted effect), ``reported`` (anything accepted, or unexplained),
+``rejected``; ``bias``/``drift`` before/after (wavelet) with ``change_sigmas``,
+``true_err_*`` and ``twin_err_*`` (see ``closure_detection.py``); ``z`` of the matched
+effect.
 """
 
 from __future__ import annotations
@@ -239,12 +229,23 @@ def match(kind: str, p: dict[str, Any], effects: list[dict], span: float) -> dic
             continue
         if names == ("auxiliary",) and str(e["channel"]).removesuffix("^2") != "temperature":
             continue
+        if names == ("periodic",) and not _at_harmonic(e["frequency"], p.get("period"), span):
+            continue
         return e
     return None
 
 
+def _at_harmonic(f: float | None, period: float | None, span: float) -> bool:
+    """Whether ``f`` is within two DFT bins of one of the first five harmonics of ``1/period``."""
+    if f is None or not period:
+        return period is None
+    return bool(np.min(np.abs(f - np.arange(1, 6) / period)) < 2.0 / span)
+
+
 def score(rec: dict[str, Any], kind: str, p: dict[str, Any], span: float) -> None:
-    """Add ``hit``, ``z``, ``right_rejected`` and ``wrong_removed`` to an axis record."""
+    """Add ``hit``, ``z``, ``right_rejected`` and ``wrong_removed`` to an axis record
+    (a periodic term is the injected one at a harmonic of its period)."""
+    rec["span"] = span
     hit = match(kind, p, rec["effects"], span)
     rec["hit"] = hit
     rec["right_rejected"] = match(kind, p, rec["rejected"], span) is not None
@@ -339,6 +340,8 @@ def indep_day(case: Case) -> tuple[Any, dict[str, Any] | None, np.ndarray | None
             day = replace(day, lin_accl=lin)
         else:
             c = np.asarray(day.truth["effects"][0]["contribution"])
+        if case.kind == "growing":
+            p["period"] = float(day.truth["orbit_period"])
         inj = {"params": p, "contribution": c}
     else:
         day = grace_day(case.seed, case.satellite, **kw)
@@ -419,7 +422,9 @@ def run_grace_api(case: Case) -> list[dict[str, Any]]:
             alpha=case.alpha,
             orbit_period=period,
             candidates=cands,
-            resolution=float(np.finfo(float).eps * max(np.abs(raw[:, k]).max(), 1e-300)),
+            resolution=float(
+                np.finfo(float).eps * max(np.abs(raw[:, k]).max(), np.abs(y_all[:, k]).max())
+            ),
             reference=ref[:, k] if ref is not None else None,
             channel_units=units,
             screened=screened,
