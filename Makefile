@@ -1,6 +1,11 @@
 # accal developer tasks.  Every target installs what it needs into .venv first.
 PYTHON ?= python3
 VENV   := .venv
+# one BLAS thread per process, as the accal CLI sets for itself (accal._runtime): the
+# test and benchmark processes call the library directly, and on 2 cores shared with
+# forked workers a threaded BLAS spends its time waiting (measured: 30-100x slower)
+export OPENBLAS_NUM_THREADS ?= 1
+export OMP_NUM_THREADS ?= 1
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 OUT    ?= out

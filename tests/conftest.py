@@ -1,8 +1,15 @@
 """Shared fixtures: the real sample files in data/samples/ (see PROVENANCE.md)."""
 
-from pathlib import Path
+import os
 
-import pytest
+# one BLAS thread, as the accal CLI sets for itself (accal._runtime.single_threaded_blas);
+# only effective if numpy is not loaded yet (the Makefile exports it too)
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+from pathlib import Path  # noqa: E402
+
+import pytest  # noqa: E402
 
 SAMPLES_DIR = Path(__file__).resolve().parents[1] / "data" / "samples"
 

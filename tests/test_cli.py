@@ -538,15 +538,15 @@ def test_a_missing_or_empty_input_claims_no_outputs(tmp_path):
 
 
 def test_diagnose_with_unwritable_outputs_is_one_clear_line(tmp_path, monkeypatch):
-    import accal.pipeline as pipeline
+    import accal.pipeline_closure as pipeline_closure
 
     assert invoke("grace-bias", GRACE_A, "--out", tmp_path / "g", "-q")[0] == 0
 
     def refuse(*args, **kwargs):
         raise PermissionError(1, "Operation not permitted", str(tmp_path / "imm" / "x.png"))
 
-    monkeypatch.setattr(pipeline, "_plot_closure", refuse)
-    code, _, err = invoke("diagnose", tmp_path / "g", "--out", tmp_path / "imm")
+    monkeypatch.setattr(pipeline_closure, "_plot_closure", refuse)
+    code, _, err = invoke("diagnose", tmp_path / "g", "--out", tmp_path / "imm", "--plots")
     assert code == 1 and "internal error" not in err
     assert "cannot write outputs" in err and "Operation not permitted" in err
 

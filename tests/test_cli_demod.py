@@ -509,7 +509,7 @@ def test_demod_close_loop_finds_undeclared_effects_and_refits(undeclared_run, tm
     run, truth, step_at = undeclared_run
     out = tmp_path / "out"
     code, _, err = invoke(
-        "demod", run, "--tau", 600, "--mask", 200, "--close-loop", "--out", out
+        "demod", run, "--tau", 600, "--mask", 200, "--close-loop", "--plots", "--out", out
     )  # fmt: skip
     assert code == 0, err
     assert "closure:" in err

@@ -314,3 +314,13 @@ def aux_option(f: Any) -> Any:
         "channels for --close-loop (implied in grace-bias). A coupling c·x enters as given, "
         "so the bias is the one at channel value 0.",
     )(f)
+
+
+def plots_option(f: Any) -> Any:
+    """``--plots``: write the closure's PNG plots (off by default: cost on an archive)."""
+    return click.option(
+        "--plots",
+        is_flag=True,
+        help="With --close-loop: PNG plots of each residual before/after, its spectrum and "
+        "the effects found (off by default: on an archive they cost more than the closure).",
+    )(f)

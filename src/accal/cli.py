@@ -22,6 +22,7 @@ from accal._cliutil import (
     check_seed,
     config_option,
     fmt_number,
+    plots_option,
     usage_fail,
 )
 from accal._cliutil import err as _err
@@ -157,6 +158,7 @@ def main(debug: bool) -> None:
     help="Analyse the residual, add the effects the model lacks, refit (closure.json/md).",
 )
 @aux_option
+@plots_option
 @click.option(
     "--truth",
     type=click.Path(dir_okay=False, path_type=Path),
@@ -198,6 +200,7 @@ def grace_bias(
     checksum: bool,
     close_loop: bool,
     aux: Path | None,
+    plots: bool,
     truth: Path | None,
     alpha: float,
     degraded_days: Path | None,
@@ -210,12 +213,13 @@ def grace_bias(
     OUT/bias_drift.<fmt> (cumulative: one row per input, axis and method ever
     processed there), OUT/<stem>.calibrated.<fmt> and OUT/<stem>.report.json per
     input, OUT/manifest.json (re-runs skip inputs whose outputs are current) and
-    OUT/accal.log.  With --close-loop also OUT/closure.json, OUT/closure.md and
-    plots.
+    OUT/accal.log.  With --close-loop also OUT/closure.json and OUT/closure.md (and
+    PNG plots with --plots).
     """
     from accal.batch import DEFAULT_INCLUDE, Interrupted, LockedError, default_workers, discover
     from accal.errors import AccalError
-    from accal.pipeline import KEPT_EARLIER, GraceBiasOptions, run, write_closure_reports
+    from accal.pipeline import KEPT_EARLIER, GraceBiasOptions, run
+    from accal.pipeline_closure import write_closure_reports
 
     colmap = {}
     for item in columns:
@@ -239,6 +243,7 @@ def grace_bias(
             aux=aux,
             truth=truth,
             alpha=alpha,
+            plots=plots,
             degraded_days=degraded_days,
         )
     except AccalError as exc:
@@ -464,9 +469,10 @@ def _is_date(s: str) -> bool:
 )
 @aux_option
 @alpha_option
+@plots_option
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar or summary.")
 def diagnose(
-    directory: Path, out: Path | None, aux: Path | None, alpha: float, quiet: bool
+    directory: Path, out: Path | None, aux: Path | None, alpha: float, plots: bool, quiet: bool
 ) -> None:
     """Close the loop on the outputs of an earlier grace-bias or demod run.
 
@@ -494,22 +500,22 @@ def diagnose(
     except OSError:  # a read-only results directory (--out elsewhere): nothing to guard
         pass
     try:
-        _diagnose(directory, out, aux, alpha, quiet)
+        _diagnose(directory, out, aux, alpha, quiet, plots)
     finally:
         lock.release()
 
 
 def _diagnose(
-    directory: Path, out: Path | None, aux: Path | None, alpha: float, quiet: bool
+    directory: Path, out: Path | None, aux: Path | None, alpha: float, quiet: bool, plots: bool
 ) -> None:
-    from accal.pipeline import diagnose_dir, write_closure_reports
+    from accal.pipeline_closure import diagnose_dir, write_closure_reports
 
     out = out or directory / "diagnose"
     if any(directory.glob("periods.*")):  # an accal demod output directory
         from accal.pipeline_demod import diagnose_demod_dir
 
         stale: list[str] = []
-        results = diagnose_demod_dir(directory, out, alpha=alpha, warnings=stale)
+        results = diagnose_demod_dir(directory, out, alpha=alpha, warnings=stale, plots=plots)
         for w in stale:
             _err(f"{directory}: warning: {w}")
         if not results:
@@ -532,7 +538,7 @@ def _diagnose(
             click.echo(f"reports: {out / 'closure.json'}, {out / 'closure.md'}", err=True)
         sys.exit(1 if any(e is None for _, e, _ in results) else 0)
     outcomes = diagnose_dir(
-        directory, out, aux=aux, alpha=alpha, progress=_progress(quiet, "diagnose")
+        directory, out, aux=aux, alpha=alpha, plots=plots, progress=_progress(quiet, "diagnose")
     )
     if not outcomes:
         _err(

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import click
 
-from accal._cliutil import alpha_option, check_number, check_seed, config_option
+from accal._cliutil import alpha_option, check_number, check_seed, config_option, plots_option
 from accal._cliutil import err as _err
 from accal._cliutil import fail as _fail
 from accal._cliutil import fmt_number as _g
@@ -136,10 +136,11 @@ PSD_HELP = "Noise PSD: 'microstar' (eq. 1 of Lenoir et al. 2013) or a CSV/Parque
     "--close-loop",
     is_flag=True,
     help="Trace the residual to effects the model lacks (steps, auxiliary channels, angle "
-    "offset, intra-period shape, ...), add them, refit: OUT/closure.json/.md and plots; "
+    "offset, intra-period shape, ...), add them, refit: OUT/closure.json/.md; "
     "periods then hold the extended model (reads each run whole).",
 )
 @alpha_option
+@plots_option
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar or summary lines.")
 @config_option
 def demod(
@@ -161,6 +162,7 @@ def demod(
     chunk_rows: int,
     close_loop: bool,
     alpha: float,
+    plots: bool,
     quiet: bool,
 ) -> None:
     """Demodulate rotating-platform runs: unbiased a_Y, a_Z per modulation period.
@@ -197,6 +199,7 @@ def demod(
             chunk_rows=chunk_rows,
             close_loop=close_loop,
             alpha=alpha,
+            plots=plots,
         )
     except AccalError as exc:
         raise click.UsageError(str(exc)) from None

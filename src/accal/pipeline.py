@@ -9,7 +9,6 @@ reported as a :class:`FileOutcome` with a one-line message.
 from __future__ import annotations
 
 import collections
-import contextlib
 import dataclasses
 import json
 import os
@@ -114,7 +113,10 @@ class GraceBiasOptions:
     alpha : float
         Family-wise false-detection probability of the closure per step.
     orbit_period : float or None
-        Nominal orbit period [s] for the once/twice-per-revolution candidates.
+        Nominal orbit period [s] of the closure's orbit-signal model (refined on the
+        data) and orbit harmonics.
+    plots : bool
+        With ``close_loop``: write the closure's PNG plots.
     degraded_days : Path or None
         TOML/YAML table of degraded/transplant/off periods ahead of the built-in
         one (:func:`accal.degraded.load_periods`).
@@ -133,6 +135,7 @@ class GraceBiasOptions:
     truth: Path | None = None
     alpha: float = 0.01
     orbit_period: float | None = 5600.0
+    plots: bool = False
     degraded_days: Path | None = None
 
     def __post_init__(self) -> None:
@@ -523,6 +526,15 @@ def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutco
                 f"needs {MIN_SAMPLES}): fitted with poly{opts.order} only",
             )
     if close_loop:
+        # imported here: the closure modules cost ~0.4 s of start-up (scipy.signal)
+        from accal.pipeline_closure import (
+            before_after,
+            close_the_loop,
+            load_truth,
+            with_effect_uncertainty,
+            with_effects_removed,
+        )
+
         fits_before = estimate(fit_series, opts)
         fit_series, closure, extra_outputs, notes = close_the_loop(
             path, series, fit_series, use, opts, out_dir / stem
@@ -533,10 +545,10 @@ def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutco
         use = use & ~np.logical_or.reduce(list(exclude.values()))
     fits = estimate(fit_series, opts, exclude)
     if close_loop:
-        fits = _with_effect_uncertainty(fits, closure)
+        fits = with_effect_uncertainty(fits, closure)
         truth = load_truth(opts.truth, series, opts.reference is not None) if opts.truth else {}
         for ax, entry in closure.items():
-            entry["summary"]["estimates"] = _before_after(fits_before, fits, ax, truth.get(ax))
+            entry["summary"]["estimates"] = before_after(fits_before, fits, ax, truth.get(ax))
     rows = table_rows(path, series, fits, scale, opts)
     for r in rows:
         r["model"] = closure.get(r["axis"], {}).get("model", f"poly{opts.order}")
@@ -546,7 +558,7 @@ def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutco
             series, f"instrument off on this day ({'; '.join(off)}): fitted, flagged 'off'"
         )
     cal = calibrate(
-        series if not close_loop else _with_effects_removed(series, closure),
+        series if not close_loop else with_effects_removed(series, closure),
         fits,
         opts.methods[0],
         scale,
@@ -630,403 +642,6 @@ def _size(path: Path) -> int:
         return path.stat().st_size
     except OSError:
         return 0
-
-
-#: Effects removed from the calibrated series (instrument effects).  Periodic
-#: terms and unexplained structure are reported but kept: at orbit frequencies
-#: they are as likely to be real non-gravitational signal as instrument error.
-INSTRUMENT_EFFECTS = (
-    "quadratic_drift",
-    "cubic_drift",
-    "exponential_drift",
-    "bias_step",
-    "auxiliary",
-)
-
-
-def effect_models(result: Any) -> list[tuple[Any, np.ndarray]]:
-    """Each effect of a :class:`~accal.closure.ClosureResult` and its model on all samples."""
-    return list(result.effect_models())
-
-
-def _effect_label(e: Any) -> str:
-    from accal.timescale import gps_to_gps_calendar
-
-    if e.name == "bias_step" and e.epoch is not None:
-        # the GPS calendar, like the table's `date` (GRACE days are GPS days)
-        gps = np.datetime_as_string(gps_to_gps_calendar(e.epoch).astype("datetime64[s]"))
-        return f"bias_step@{gps}GPS"
-    if e.name == "auxiliary":
-        return f"auxiliary({e.channel})"
-    if e.name == "exponential_drift" and e.tau is not None:
-        return f"exponential_drift(tau={e.tau:.0f} s)"
-    if e.name == "periodic" and e.frequency is not None:
-        return f"periodic({e.frequency:.4g} Hz)"
-    return e.name
-
-
-#: Longest hole inside an ``--aux`` channel that is bridged linearly [s].  A longer
-#: one stays uncovered: a temperature interpolated over 1000–4000 s (most of an
-#: orbit) had hidden a coupling and put false steps at the hole's edges.
-AUX_MAX_BRIDGE = 600.0
-
-
-def load_aux(
-    path: Path, t: np.ndarray, satellite: str = ""
-) -> tuple[dict[str, np.ndarray], list[str]]:
-    """Housekeeping channels of ``path`` interpolated onto ``t``, and what was left out.
-
-    Holes inside a channel's span of up to :data:`AUX_MAX_BRIDGE` are bridged
-    linearly; longer holes, and the time before its first and after its last value,
-    are NaN (not covered: the closure leaves those samples out).  Channels covering
-    under 90 % of ``t``, or constant, are left out (named in the returned notes).
-    A file that covers none of the data (another day's housekeeping) is an error;
-    one that covers part of it but no channel 90 % gives a note and no channel.
-    Housekeeping of another satellite than ``satellite`` (the data's) is used, with
-    a note (QA: GRACE-A temperatures were applied to GRACE-B data without a word).
-    """
-    from accal.io.housekeeping import read_housekeeping
-
-    hk = read_housekeeping(path)
-    notes = []
-    if hk.satellite and satellite and hk.satellite != satellite:
-        notes.append(
-            f"--aux {path.name} is housekeeping of {hk.satellite}, the data are {satellite}: "
-            "its channels are tested all the same"
-        )
-    out = {}
-    coverage = 0.0
-    constant, short = [], []
-    for k, v in hk.on(t).items():
-        v = np.asarray(v, dtype=np.float64)
-        ok = np.isfinite(v)
-        if ok.any():
-            _bridge_short_holes(t, v, ok)
-            ok = np.isfinite(v)
-        coverage = max(coverage, float(ok.mean()))
-        # a channel must cover the day and vary to be a candidate regressor
-        if ok.mean() < 0.9:
-            short.append(f"{k} ({ok.mean():.0%})")
-            continue
-        if np.ptp(v[ok]) == 0:
-            constant.append(k)
-            continue
-        out[k] = v
-    if coverage == 0.0:
-        from accal.timescale import gps_to_date
-
-        raise ValidationError(
-            f"{path}: --aux covers none of the data "
-            f"({gps_to_date(float(t[0]))} ... {gps_to_date(float(t[-1]))}, GPS days); "
-            "give the housekeeping of the same day(s)"
-        )
-    if not out and short:
-        notes.append(
-            f"--aux covers at most {coverage:.0%} of the data (holes over "
-            f"{AUX_MAX_BRIDGE:g} s are not bridged): no coupling is tested"
-        )
-        short = []
-    if constant:
-        notes.append(f"--aux channel(s) constant over the data, not tested: {', '.join(constant)}")
-    if short:
-        notes.append(f"--aux channel(s) covering under 90 %, not tested: {', '.join(short)}")
-    return out, notes
-
-
-def _bridge_short_holes(t: np.ndarray, v: np.ndarray, ok: np.ndarray) -> None:
-    """Fill, in place, the NaN runs of ``v`` inside its span that last <= AUX_MAX_BRIDGE."""
-    idx = np.flatnonzero(ok)
-    for g in np.flatnonzero(np.diff(idx) > 1):  # holes: not-ok runs between ok samples
-        a, b = idx[g], idx[g + 1]  # the ok samples around the hole
-        if t[b] - t[a] <= AUX_MAX_BRIDGE:
-            v[a + 1 : b] = np.interp(t[a + 1 : b], (t[a], t[b]), (v[a], v[b]))
-
-
-def load_truth(path: Path, series: AccSeries, reference: bool) -> dict[str, dict[str, float]]:
-    """Per-axis true bias and drift of the fitted series from a simulation truth file.
-
-    The trend a perfect estimator returns is the instrument's (``bias``,
-    ``drift``) plus, without a reference, the trend of the true signal.
-    """
-    try:
-        truth = json.loads(Path(path).read_text())
-        sat = str(truth.get("satellite", ""))
-        if sat and series.satellite and series.satellite[-1:] != sat[-1:]:
-            raise ValidationError(
-                f"{path}: truth of satellite {sat}, the data are {series.satellite}"
-            )
-        t0 = float(truth["t0"])
-        if len(series) and not series.time[0] - 86400 <= t0 <= series.time[-1]:
-            raise ValidationError(
-                f"{path}: truth of {truth.get('date', t0)} does not describe data starting "
-                f"at {series.time[0]:.9g} s"
-            )
-        out = {}
-        for i, ax in enumerate("xyz"):
-            if ax not in series.axes:
-                continue
-            b = float(truth["bias"][i])
-            d = float(truth["drift"][i])
-            if not reference and "signal_trend" in truth:
-                b += float(truth["signal_trend"]["bias"][i])
-                d += float(truth["signal_trend"]["drift"][i])
-            # the truth refers to its own t0; move the bias to the series' first used sample
-            out[ax] = {"bias": b, "drift": d, "t0": float(truth["t0"])}
-        return out
-    except ValidationError:
-        raise
-    except (OSError, ValueError, KeyError, IndexError, TypeError) as exc:
-        raise ValidationError(f"{path}: not a readable truth file ({exc})") from None
-
-
-def closure_candidates(
-    opts: GraceBiasOptions, span: float | None = None
-) -> tuple[tuple[str, ...], str]:
-    """Candidate effects for a ``grace-bias`` closure, and a note on what is left out.
-
-    Without ``--reference`` the fitted series is the raw acceleration, whose
-    non-gravitational signal (drag, radiation pressure) varies slowly over the
-    day: a polynomial drift beyond the declared order cannot be told from that
-    signal, so the polynomial candidates are only tried on ``raw − reference``.
-    Steps, auxiliary couplings and periodic terms have signatures of their own,
-    except on a record shorter than two revolutions (``span`` [s] below twice
-    ``orbit_period``): there a step cannot be told from the signal's own jumps
-    (radiation pressure switching at eclipse entry and exit), which only the
-    next revolution would show to repeat, so steps are left out too.
-    """
-    from accal.closure import DEFAULT_CANDIDATES
-
-    if opts.reference is not None:
-        return tuple(DEFAULT_CANDIDATES), ""
-    drop = {"quadratic_drift", "cubic_drift", "exponential_drift"}
-    note = (
-        "no --reference: quadratic/cubic/exponential drift not tested (not separable from the slow "
-        "variation of the non-gravitational signal); periodic and unexplained structure "
-        "include the real signal"
-    )
-    if span is not None and opts.orbit_period and span < 2 * opts.orbit_period:
-        drop.add("bias_step")
-        note += (
-            f"; record shorter than two revolutions ({span:.0f} s): bias steps not tested "
-            "either (eclipse transitions of the radiation pressure look like steps)"
-        )
-    return tuple(c for c in DEFAULT_CANDIDATES if c not in drop), note
-
-
-def close_the_loop(
-    path: Path,
-    series: AccSeries,
-    fit_series: AccSeries,
-    use: np.ndarray,
-    opts: GraceBiasOptions,
-    prefix: Path,
-) -> tuple[AccSeries, dict[str, Any], list[Path], list[str]]:
-    """Close the loop on every axis and return the series to refit.
-
-    For each axis, :func:`accal.closure.close_loop` analyses the residual of the
-    declared ``poly<order>`` trend, adds the significant effects and reports
-    unexplained structure.  The instrument effects (:data:`INSTRUMENT_EFFECTS`)
-    are subtracted from the fitted series, so the estimators then fit bias and
-    drift with the extended model.  Writes ``<prefix>.closure.<axis>.png``,
-    ``<prefix>.closure-psd.<axis>.png`` and ``<prefix>.closure-effects.<axis>.png``
-    when matplotlib is installed.
-
-    Returns
-    -------
-    fit_series : AccSeries
-        The series minus the instrument effects (to refit).
-    closure : dict
-        ``{axis: {"summary": closure.json entry, "instrument": model array,
-        "model": model label}}``.
-    outputs : list of Path
-        Plots written.
-    warnings : list of str
-        What the user should know (e.g. ``--aux`` not covering every used sample:
-        the closure then uses the samples it covers).
-    """
-    from accal.closure import close_loop
-    from accal.closure.report import to_markdown
-
-    aux = {
-        k: np.asarray(v, dtype=np.float64)
-        for k, v in series.aux.items()
-        if k.startswith("ang_accl")  # angular accelerations; not the L1B fit residuals
-    }
-    warnings: list[str] = []
-    if opts.aux is not None:
-        channels, warnings = load_aux(opts.aux, series.time, series.satellite)
-        aux.update(channels)
-    # a coupling is only known where its channel is: the closure uses those samples
-    covered = np.ones(len(series), bool)
-    for v in aux.values():
-        covered &= np.isfinite(v)
-    n_out = int(np.count_nonzero(use & ~covered))
-    covered_note = (
-        f"--aux covers {1 - n_out / max(int(use.sum()), 1):.1%} of the used samples: the "
-        "closure analyses those only"
-    )
-    use_cl = use & covered
-    t_used = fit_series.time[use_cl]
-    span = float(t_used[-1] - t_used[0]) if t_used.size else 0.0
-    candidates, note = closure_candidates(opts, span)
-    out: dict[str, Any] = {}
-    plots: list[Path] = []
-    cols = []
-    for ax in series.axes:
-        y = fit_series.axis(ax)
-        res = close_loop(
-            fit_series.time,
-            y,
-            valid=use_cl,
-            base=f"poly{opts.order}",
-            aux=aux or None,
-            alpha=opts.alpha,
-            orbit_period=opts.orbit_period,
-            candidates=candidates,
-            resolution=_resolution(series, fit_series, ax),
-        )
-        inst = np.zeros(len(series))
-        labels = [f"poly{opts.order}"]
-        for e, m in effect_models(res):
-            if e.name in INSTRUMENT_EFFECTS:
-                inst += m if e.name != "auxiliary" else np.where(covered, m, 0.0)
-                labels.append(_effect_label(e))
-        # the true errors are those of the refitted estimators (see _before_after): the
-        # closure's own base coefficients share their design with periodic terms
-        summary = res.to_dict()
-        summary["model"] = "+".join(labels)
-        summary["candidates"] = list(candidates)
-        if note:
-            summary["note"] = note
-        summary["removed_from_calibrated"] = labels[1:]
-        summary["markdown"] = to_markdown(res, title=f"{path.name} axis {ax}")
-        out[ax] = {"summary": summary, "instrument": inst, "model": "+".join(labels)}
-        cols.append(y - inst)
-        plots += _plot_closure(res, prefix, ax)
-    fit_series = fit_series.replace(acc=np.column_stack(cols)).with_history(
-        f"accal {__version__}: close_loop(alpha={opts.alpha}) removed "
-        + "; ".join(f"{ax}: {out[ax]['model']}" for ax in series.axes)
-    )
-    coupled = [ax for ax in series.axes if "auxiliary(" in out[ax]["model"]]
-    if coupled and n_out:
-        # a removed coupling is not removed where its channel is missing: those samples
-        # would bias the refit (QA: a channel starting 3000 s late left c × 293 K there,
-        # a 5.9e-7 m/s² jump in the calibrated series and a 6e-8 bias error).  They leave
-        # the refit of the coupled axes only (QA: with z coupled, x and y lost them too and
-        # x's bias moved by 2e-11 m/s²); the calibrated file's valid column, shared by
-        # the axes, marks them invalid
-        for ax in coupled:
-            out[ax]["exclude"] = ~covered
-        warnings.append(
-            f"{covered_note}; a coupling was removed on axis {', '.join(coupled)}, which "
-            f"cannot be removed at the {n_out} samples outside --aux: they are left out of "
-            f"the refit of axis {', '.join(coupled)} (the other axes keep them) and marked "
-            "invalid in the calibrated file (its valid column is shared by the axes)"
-        )
-    elif n_out:
-        warnings.append(
-            f"{covered_note} (the {n_out} samples outside it keep the plain fit's treatment: "
-            "no coupling was removed)"
-        )
-    return fit_series, out, plots, warnings
-
-
-def _plot_closure(res: Any, prefix: Path, ax: str) -> list[Path]:
-    try:
-        import matplotlib  # noqa: F401
-    except ImportError:
-        return []
-    from accal.closure.report import plot_closure
-    from accal.io.writers import atomic_path
-
-    names = [
-        prefix.with_name(f"{prefix.name}.closure{k}.{ax}.png") for k in ("", "-psd", "-effects")
-    ]
-    with contextlib.ExitStack() as stack:
-        tmps = [stack.enter_context(atomic_path(p, sync=False)) for p in names]
-        pngs = [t.with_name(t.name + ".png") for t in tmps]  # matplotlib wants the suffix
-        plot_closure(res, *pngs)
-        for png, t in zip(pngs, tmps, strict=True):
-            png.replace(t)
-    return names
-
-
-def _before_after(
-    before: dict[tuple[str, str], Any],
-    after: dict[tuple[str, str], Any],
-    ax: str,
-    truth: dict[str, float] | None,
-) -> dict[str, Any]:
-    """Bias and drift of each method before/after closing the loop (and their true errors).
-
-    ``change_sigmas`` is ``|after − before| / σ_after``: how many of the final
-    uncertainties the extended model moved the estimate.
-    """
-    out: dict[str, Any] = {}
-    for (a, m), fb in before.items():
-        if a != ax:
-            continue
-        fa = after[(a, m)]
-        entry: dict[str, Any] = {}
-        for k, name in enumerate(("bias", "drift")):
-            b, s_b = float(fb.coef[k]), float(fb.sigma[k])
-            v, s_v = float(fa.coef[k]), float(fa.sigma[k])
-            e = {
-                "before": b,
-                "sigma_before": s_b,
-                "after": v,
-                "sigma_after": s_v,
-                "change_sigmas": abs(v - b) / s_v if s_v > 0 else float("inf"),
-            }
-            if truth is not None:
-                tb = truth["bias"] + truth["drift"] * (fb.t0 - truth["t0"])
-                tv = tb if name == "bias" else truth["drift"]
-                e["true_error_before"] = b - tv
-                e["true_error_after"] = v - tv
-            entry[name] = e
-        out[m] = entry
-    return out
-
-
-def _with_effect_uncertainty(
-    fits: dict[tuple[str, str], Any], closure: dict[str, Any]
-) -> dict[tuple[str, str], Any]:
-    """The refitted trends with the uncertainty of the removed effects added.
-
-    The refit subtracts the effects the closure estimated as if they were known,
-    so its σ leaves out their uncertainty (QA: a quadratic drift found on raw −
-    reference left a drift σ of 9.0e-17 m/s³ in the table for a true error of
-    6.2e-16).  The closure measures what estimating them adds to each base
-    coefficient's variance under the final noise (``sigma_after² −
-    sigma_plain²``); that is added to the refit's variance of the same
-    coefficient, for every method.
-    """
-    out = dict(fits)
-    for (ax, m), fit in fits.items():
-        entry = closure.get(ax)
-        if not entry or not entry["summary"].get("removed_from_calibrated"):
-            continue  # nothing subtracted before the refit
-        base = entry["summary"].get("base") or []
-        cov = np.array(fit.cov, dtype=np.float64, copy=True)
-        for k in range(min(cov.shape[0], len(base))):
-            after, plain = base[k].get("sigma_after"), base[k].get("sigma_plain")
-            if after is None or plain is None or not np.isfinite(after * plain):
-                continue
-            cov[k, k] += max(0.0, after**2 - plain**2)
-        out[(ax, m)] = dataclasses.replace(fit, cov=cov)
-    return out
-
-
-def _with_effects_removed(series: AccSeries, closure: dict[str, Any]) -> AccSeries:
-    cols = [series.axis(ax) - closure[ax]["instrument"] for ax in series.axes]
-    removed = "; ".join(
-        f"{ax}: {', '.join(closure[ax]['summary'].get('removed_from_calibrated') or []) or 'nothing'}"
-        for ax in series.axes
-        if ax in closure
-    )
-    return series.replace(acc=np.column_stack(cols)).with_history(
-        f"accal {__version__}: instrument effects found by close_loop removed ({removed})"
-    )
 
 
 def _write_json(path: Path, obj: Any, *, sync: bool = True) -> None:
@@ -1243,7 +858,7 @@ def options_key(opts: GraceBiasOptions) -> dict[str, Any]:
 
     Files named in the options (reference, aux, truth) enter with their size and
     mtime, so changing them makes the inputs out of date.  Without ``close_loop``
-    its settings (``alpha``, ``orbit_period``) are left out: they change nothing.
+    its settings (``alpha``, ``orbit_period``, ``plots``) are left out: they change nothing.
     """
     from dataclasses import asdict
 
@@ -1251,7 +866,7 @@ def options_key(opts: GraceBiasOptions) -> dict[str, Any]:
 
     d = asdict(opts)
     if not opts.close_loop:  # settings of the closure alone change nothing without it
-        for k in ("alpha", "orbit_period"):
+        for k in ("alpha", "orbit_period", "plots"):
             d.pop(k)
     for k, v in list(d.items()):
         if isinstance(v, Path):
@@ -1555,134 +1170,6 @@ def _commit(
     return table
 
 
-def _resolution(series: AccSeries, fit_series: AccSeries, ax: str) -> float:
-    """Numerical resolution of the closure's data on axis ``ax`` [m/s²].
-
-    float64 epsilon times the largest magnitude of the raw axis (and of raw −
-    reference): a text file's 16-17 significant digits resolve no better.
-    """
-    big = 0.0
-    for s in (series, fit_series):
-        a = np.abs(s.axis(ax))
-        a = a[np.isfinite(a)]
-        if a.size:
-            big = max(big, float(a.max()))
-    return float(np.finfo(np.float64).eps * big)
-
-
-def _as_diagnosis(summary: dict[str, Any]) -> dict[str, Any]:
-    """A closure entry of ``accal diagnose``: nothing was removed, ``would_remove`` says what."""
-    out = dict(summary)
-    out["would_remove"] = out.pop("removed_from_calibrated", [])
-    return out
-
-
-def write_closure_reports(
-    out_dir: Path, outcomes: Sequence[FileOutcome], *, diagnose: bool = False
-) -> tuple[Path, Path]:
-    """Merge this run's closure results into ``OUT/closure.json`` and ``OUT/closure.md``.
-
-    With ``diagnose`` (``accal diagnose``: the calibrated files are only read) the
-    report says which instrument effects a ``grace-bias --close-loop`` re-run would
-    remove, instead of claiming they were removed.
-
-    Layout of ``closure.json``: ``{"accal_version": ..., "sources": {SOURCE: {AXIS:
-    entry}}}`` where ``entry`` is :meth:`accal.closure.ClosureResult.to_dict` plus
-    ``model`` (the fitted model, e.g. ``poly1+bias_step@2005-01-01T10:00:00GPS``, GPS calendar) and
-    ``removed_from_calibrated`` (the effects subtracted from the calibrated series).
-    Sources of earlier runs in the same directory are kept; a re-run replaces its
-    own entries, and a re-run without ``--close-loop`` removes them.  With no source
-    left the two files are removed.
-    """
-    out_dir = Path(out_dir)
-    jpath = out_dir / "closure.json"
-    try:
-        old = json.loads(jpath.read_text())
-        sources = old.get("sources", {}) if isinstance(old, dict) else {}
-    except (OSError, ValueError):
-        sources = {}
-    for o in outcomes:
-        if o.ok and o.closure:
-            sources[o.path.name] = o.closure
-        elif (
-            o.ok
-            and not diagnose
-            and not getattr(o, "skipped", False)
-            and sources.pop(o.path.name, None) is not None
-        ):
-            # redone without --close-loop: its table rows and calibrated file are the
-            # plain fit's now, so its old closure (report and plots) no longer applies
-            stem = output_stem(o.path)
-            for kind in ("closure", "closure-psd", "closure-effects"):
-                for ax in "xyz":
-                    (out_dir / f"{stem}.{kind}.{ax}.png").unlink(missing_ok=True)
-    sources = dict(sorted(sources.items()))
-    mpath = out_dir / "closure.md"
-    if not sources:
-        for f in (jpath, mpath):
-            f.unlink(missing_ok=True)
-        return jpath, mpath
-    _write_json(jpath, {"accal_version": __version__, "sources": sources})
-    lines = [
-        "# accal closure report",
-        "",
-        f"{len(sources)} input(s); per input and axis: the effects the bias + drift model "
-        "lacked, their significance, and the coefficients before/after.  "
-        + (
-            "accal diagnose read the calibrated files and changed nothing: the effects under "
-            "'would remove' are those `accal grace-bias --close-loop` would subtract"
-            if diagnose
-            else "Effects listed under 'removed from calibrated' were subtracted from the "
-            "calibrated series"
-        )
-        + "; periodic terms and unexplained structure are reported only.",
-        "",
-    ]
-    for src, axes in sources.items():
-        for ax, entry in axes.items():
-            md = entry.get("markdown") or f"## {src} axis {ax}\n"
-            lines.append(md.rstrip())
-            lines += _estimates_markdown(entry.get("estimates") or {})
-            if "would_remove" in entry:  # from accal diagnose
-                would = entry.get("would_remove") or []
-                lines += [
-                    "",
-                    "Would remove (re-run grace-bias --close-loop; the calibrated file is "
-                    f"unchanged): {', '.join(would) or 'nothing'}.",
-                    "",
-                ]
-                continue
-            removed = entry.get("removed_from_calibrated") or []
-            lines += ["", f"Removed from calibrated: {', '.join(removed) or 'nothing'}.", ""]
-    from accal.io.writers import atomic_path
-
-    with atomic_path(mpath) as tmp:
-        tmp.write_text("\n".join(lines) + "\n")
-    return jpath, mpath
-
-
-def _estimates_markdown(estimates: dict[str, Any]) -> list[str]:
-    if not estimates:
-        return []
-    has_truth = any("true_error_before" in e for m in estimates.values() for e in m.values())
-    head = "| method | quantity | before ± σ | after ± σ | change / σ_after |"
-    sep = "|---|---|---|---|---|"
-    if has_truth:
-        head += " true error before | true error after |"
-        sep += "---|---|"
-    lines = ["", "Refitted estimates (the table's values):", "", head, sep]
-    for m, ent in estimates.items():
-        for q, e in ent.items():
-            row = (
-                f"| {m} | {q} | {e['before']:.4g} ± {e['sigma_before']:.2g} "
-                f"| {e['after']:.4g} ± {e['sigma_after']:.2g} | {e['change_sigmas']:.2f} |"
-            )
-            if has_truth:
-                row += f" {e['true_error_before']:.3g} | {e['true_error_after']:.3g} |"
-            lines.append(row)
-    return lines
-
-
 def find_bias_drift(directory: Path) -> Path:
     """The ``bias_drift.<fmt>`` table of an output directory.
 
@@ -1698,113 +1185,3 @@ def find_bias_drift(directory: Path) -> Path:
     if not found:
         raise ValidationError(f"{directory}: no bias_drift.parquet or bias_drift.csv here")
     return max(found, key=lambda p: p.stat().st_mtime_ns)
-
-
-def _diagnosis_input(
-    series: AccSeries, run: dict[str, Any]
-) -> tuple[AccSeries, Path | None, list[str]]:
-    """The series ``accal diagnose`` analyses: calibrated / scale (− reference).
-
-    The calibrated series is ``scale · (raw − trend)``: divided by the run's scale
-    it is the residual ``--close-loop`` analyses, so both report effects in the
-    raw data's units (QA: after ``--scale tn02`` diagnose gave a 3e-9 m/s² step as
-    2.84e-9, the z scale 0.9485 times it, 4.5σ off).  A run with ``--reference``
-    fitted ``raw − reference``, so its residual is ``calibrated / scale −
-    reference`` (the reference named in the manifest, read again).  Returns the
-    series, the reference path (None without one) and warnings.
-    """
-    from accal.calibration import parse_scale
-
-    scale = parse_scale(run.get("scale"), series.satellite)
-    raw = series
-    if scale is not None:
-        s = np.asarray(scale, dtype=np.float64)[: len(series.axes)]
-        raw = series.replace(acc=series.acc / s[None, :])
-    ref = run.get("reference")
-    path = ref.get("path") if isinstance(ref, dict) else ref
-    if not path:
-        return raw, None, []
-    ref_path = Path(str(path))
-    if not ref_path.is_file():
-        return (
-            raw,
-            None,
-            [
-                f"the run used --reference {ref_path}, which is gone: analysed without it "
-                "(polynomial drifts not tested)"
-            ],
-        )
-    ref_series = read_input(ref_path, GraceBiasOptions(columns=run.get("columns") or {}))
-    out = subtract_reference(raw, ref_series, ref_path)
-    return out, ref_path, list(out.report.warnings[len(raw.report.warnings) :])
-
-
-def diagnose_dir(
-    directory: Path,
-    out_dir: Path,
-    *,
-    aux: Path | None = None,
-    alpha: float = 0.01,
-    progress: Callable[..., Iterable[Any]] | None = None,
-) -> list[FileOutcome]:
-    """Close the loop on every ``*.calibrated.<fmt>`` of an earlier ``grace-bias`` run.
-
-    The calibrated series is ``scale · (raw − trend)``: its used samples are the
-    residual of the declared model (times the scale), so the closure runs on it
-    with the same polynomial base (order from the file's metadata).  Plots go to
-    ``out_dir``; the caller writes ``closure.json``/``closure.md``
-    (:func:`write_closure_reports`).
-    """
-    from accal.batch import Manifest
-    from accal.io.tables import read_table_series
-    from accal.io.writers import read_table_metadata
-
-    directory, out_dir = Path(directory), Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    files = sorted(
-        p
-        for p in directory.iterdir()
-        if p.name.endswith((".calibrated.parquet", ".calibrated.csv"))
-    )
-    runs = {  # the options each calibrated file was made with (grace-bias's manifest)
-        out: e.get("options") or {}
-        for e in Manifest.load(directory).entries.values()
-        for out in e.get("outputs", ())
-    }
-    outcomes = []
-    for p in progress(files, total=len(files)) if progress else files:
-        try:
-            _, meta = read_table_metadata(p)
-            series = read_table_series(p)
-            order = int(meta.get("order", 1))
-            name = str(meta.get("source") or p.name.split(".calibrated.")[0])
-            fit_series, ref_path, extra = _diagnosis_input(series, runs.get(p.name) or {})
-            opts = GraceBiasOptions(
-                order=order, close_loop=True, aux=aux, alpha=alpha, reference=ref_path
-            )
-            _, closure, plots, notes = close_the_loop(
-                Path(name),
-                series,
-                fit_series,
-                fit_series.valid,
-                opts,
-                out_dir / output_stem(Path(name)),
-            )
-            notes = [*extra, *notes]
-            outcomes.append(
-                FileOutcome(
-                    Path(name),
-                    True,
-                    n_samples=len(series),
-                    outputs=tuple(plots),
-                    closure={ax: _as_diagnosis(c["summary"]) for ax, c in closure.items()},
-                    warnings=tuple(notes),
-                )
-            )
-        except AccalError as exc:
-            outcomes.append(FileOutcome(p, False, failure_message(p, exc)))
-        except OSError as exc:  # writing the plots (read-only or full output directory)
-            outcomes.append(FileOutcome(p, False, write_error_message(p, exc)))
-        except Exception as exc:
-            outcomes.append(_internal_error(p, exc))
-    return outcomes

@@ -120,6 +120,8 @@ class DemodOptions:
         model's as ``*_before``).  Reads the run whole.
     alpha : float
         False-detection probability per selection step of the closure.
+    plots : bool
+        With ``close_loop``: write the closure's PNG plots.
     chunk_rows : int
         Rows read at a time (memory knob; results do not depend on it).
     rest_tol : float
@@ -144,6 +146,7 @@ class DemodOptions:
     close_loop: bool = False
     alpha: float = 0.01
     rest_tol: float = 1e-9
+    plots: bool = False
 
     def __post_init__(self) -> None:
         check_option("method", self.method, ("ls", "gls"))
@@ -1244,7 +1247,7 @@ def close_run(
     entry["periods"] = change_statistics(periods.to_table())
     entry["markdown"] = to_markdown(res, title=f"{path.name}: closing the loop")
     stem = path.name.split(".")[0]
-    plots = _closure_plots(res, out_dir, stem)
+    plots = _closure_plots(res, out_dir, stem) if opts.plots else []
     return entry, periods, plots
 
 
@@ -1872,6 +1875,7 @@ def diagnose_demod_dir(
     *,
     alpha: float = 0.01,
     warnings: list[str] | None = None,
+    plots: bool = False,
 ) -> list[tuple[Path, dict[str, Any] | None, str]]:
     """Close the loop on the runs of an earlier ``accal demod`` output directory.
 
@@ -1920,6 +1924,7 @@ def diagnose_demod_dir(
                 close_loop=True,
                 alpha=alpha,
                 rest_tol=float(o.get("rest_tol", 1e-9)),
+                plots=plots,
             )
             step = float(rs["step"]) if rs and "step" in rs else None
             out_dir.mkdir(parents=True, exist_ok=True)  # not before a run is found

@@ -41,7 +41,7 @@ def test_demod_report_has_axes_notes_and_a_psd(platform, tmp_path):
     e = out["effects"][0]
     assert e["name"] == "intra_period_shape" and e["axis"] in ("y", "z")
     assert set(e["details"]["axes"]) == {"y", "z"}
-    assert {n["channel"] for n in out["notes"]} == {"common", "rest@3.142"}
+    assert {"common", "rest@3.142"} <= {n["channel"] for n in out["notes"]}
     assert len(out["base"]) == 36 * 6  # a_Y, a_Z, bias and drift of both axes per period
     md = to_markdown(res)
     assert "not identifiable" in md and "more (closure.json)" in md

@@ -2,12 +2,11 @@
 
 The real along-track signal (σ ≈ 3.6e-7 m/s², strong orbital and storm-time
 structure) is the "noise" here, so injected effects are sized against it: the
-measured detection limits on this day are ~1-3e-6 m/s² for a step, ~3e-16 m/s⁴
-for a quadratic and ~3e-7-1e-6 m/s²/K for a coupling (docs/closure.md,
-benchmarks/closure_detection.py).  On one axis nothing can separate an injected
-effect from the day's own content along the same regressor, so coefficients are
-checked against "injected + the day's own part" (the same design fitted to the
-uninjected day).
+measured detection limit on this day is ~1-3e-6 m/s² for a step (not reached
+inside the storm's main phase).  Without a reference the orbit-phase signal model
+is in the null, so a coupling to a channel whose only non-orbital content is a
+random walk (``temp`` below) is not identifiable; the quadratic needs a reference
+(tests/closure/test_close_loop.py).  docs/closure.md has the numbers.
 """
 
 from __future__ import annotations
@@ -34,18 +33,22 @@ def swarm(samples):
 
 
 def test_real_day_runs_and_reports_sensibly(swarm):
+    """The null: nothing injected into the ESA-calibrated series, nothing removed.
+
+    The day's orbit-periodic and storm-time structure is real signal: with the
+    orbit-phase signal model in the null (no reference) no candidate, the coupling to
+    ``temp`` included, may be removed (measured: no effect at all, no rejection).
+    """
     t, y, valid, temp, res = swarm
     assert res.rms_after <= res.rms_before
     for e in res.effects + res.unexplained:
         assert e.name in EFFECT_NAMES
         assert np.isfinite(e.coefficient)
-    # measured: the once/twice-per-orbit signal (1.1e-7 m/s²), nothing else; the
-    # storm's slow structure is within the extrapolated noise model
-    assert [e.name for e in res.effects] == ["periodic"]
-    assert res.effects[0].channel == "orbit"
-    assert res.effects[0].frequency == pytest.approx(1 / ORBIT, rel=0.03)
+    assert not [e.name for e in res.effects if e.instrument]
+    assert res.signal_model  # the signal model is named in the result
+    assert any(c["channel"] == "temp" and c["status"] == "considered" for c in res.considered)
     d = res.to_dict()
-    assert d["rms_before"] > d["rms_after"] > 0
+    assert d["rms_before"] >= d["rms_after"] > 0
 
 
 def test_injected_bias_and_drift_are_absorbed_by_the_base(swarm):
@@ -60,44 +63,20 @@ def test_injected_bias_and_drift_are_absorbed_by_the_base(swarm):
     assert d.after - d0.after == pytest.approx(5e-12, rel=1e-6)
 
 
-def test_injected_step_coupling_and_quadratic_found_together(swarm):
-    """The ``make demo`` case: three slow effects at once on the storm day.
-
-    Each masks the others (forward selection alone only reports ``unexplained``);
-    the backward stage finds all three.  Measured: step 3.07e-6 ± 1.0e-7 (injected
-    3e-6, epoch within 7 s), coupling 8.9e-7 ± 6e-8 (1e-6; the day's own part along
-    the regressor −1.1e-7), quadratic 5.7e-16 ± 9e-17 (3e-16; the day's own
-    curvature 2.6e-16); the true drift error 5.5e-11 -> −4e-13 m/s³.
-    """
+@pytest.mark.parametrize("frac", [0.3, 0.9])
+def test_injected_step_is_found_and_nothing_else_removed(swarm, frac):
+    """A 3e-6 m/s² bias step (the day's detection limit is ~1-3e-6) at 30 % or 90 % of
+    the storm day, with a bias and drift: the step at its epoch, its size within 3σ,
+    nothing else removed.  Measured: 2.86e-6 ± 2.7e-7 and 2.98e-6 ± 3.6e-7, epochs to
+    the sample.  (At 62 % of the day, inside the storm's main phase, the same step is
+    not detected: docs/closure.md.)"""
     t, y, valid, temp, ref = swarm
     tau = t - t[0]
-    epoch = t[0] + 0.62 * tau[-1]
-    inj = (
-        5e-7
-        + 5e-12 * tau
-        + 1e-6 * np.interp(tau - 900.0, tau, temp)
-        + 3e-6 * (t >= epoch)
-        + 3e-16 * tau**2
-    )
+    epoch = t[0] + frac * tau[-1]
+    inj = 5e-7 + 5e-12 * tau + 3e-6 * (t >= epoch)
     res = close_loop(t, y + inj, valid=valid, aux={"temp": temp}, orbit_period=ORBIT)
-    names = [e.name for e in res.effects]
-    assert {"bias_step", "auxiliary", "quadratic_drift"} <= set(names)
-    step = res.effects[names.index("bias_step")]
+    removed = [e for e in res.effects if e.instrument]
+    assert [e.name for e in removed] == ["bias_step"]
+    step = removed[0]
     assert abs(step.epoch - epoch) <= 60.0
-    # found = injected + the day's own content along the final design (linearity)
-    use = res.use
-    own = np.linalg.lstsq(res.design[use], y[use], rcond=None)[0]
-    span = t[use][-1] - res.t0
-    j = res.n_base
-    for e in res.effects:
-        q = int(e.details["n_columns"])
-        if e.name in ("bias_step", "auxiliary", "quadratic_drift"):
-            injected = {"bias_step": 3e-6, "auxiliary": 1e-6, "quadratic_drift": 3e-16}[e.name]
-            own_e = own[j + q - 1] / span**2 if e.name == "quadratic_drift" else own[j]
-            assert abs(e.coefficient - injected - own_e) < 3 * e.sigma + 0.05 * injected
-        j += q
-    # the drift error the injected effects cause drops > 10x (measured 130x)
-    d = res.base_coefficient("drift")
-    err_before = d.before - ref.base_coefficient("drift").before - 5e-12
-    err_after = d.after - own[1] / span - 5e-12
-    assert abs(err_after) < 0.1 * abs(err_before)
+    assert abs(step.coefficient - 3e-6) < 3 * step.sigma

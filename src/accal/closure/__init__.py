@@ -9,18 +9,14 @@ Layer 2 (see ``shared/STYLE.md`` §4): arrays in, findings out; only
 """
 
 from accal.closure.basis import BlockBase
-from accal.closure.candidates import BUILDERS, EFFECT_NAMES, Context, PlatformInfo, Proposal
+from accal.closure.candidates import Context, Proposal
+from accal.closure.kinds import EFFECT_NAMES, Kind, effect_label, kind_of, kinds
+from accal.closure.platform import PlatformInfo
 from accal.closure.residual import ResidualStats, characterise
-from accal.closure.select import (
-    DEFAULT_CANDIDATES,
-    BaseCoefficient,
-    ClosureResult,
-    Effect,
-    close_loop,
-)
+from accal.closure.results import BaseCoefficient, ClosureResult, Effect
+from accal.closure.select import DEFAULT_CANDIDATES, close_loop
 
 __all__ = [
-    "BUILDERS",
     "DEFAULT_CANDIDATES",
     "EFFECT_NAMES",
     "BaseCoefficient",
@@ -28,9 +24,13 @@ __all__ = [
     "ClosureResult",
     "Context",
     "Effect",
+    "Kind",
     "PlatformInfo",
     "Proposal",
     "ResidualStats",
     "characterise",
     "close_loop",
+    "effect_label",
+    "kind_of",
+    "kinds",
 ]

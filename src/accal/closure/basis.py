@@ -70,6 +70,16 @@ class BlockBase:
         Factor turning each coefficient into SI units (default 1).
     block_labels : tuple, optional
         Label of each block (default its index), e.g. the period number.
+    signal : tuple of int, optional
+        Indices of the column kinds that model the *signal* (the demodulated
+        acceleration of the rotating platform) rather than the bias: closure tells a
+        candidate from the signal by how much of it lies outside their span
+        (:func:`accal.closure.validation.identifiability`).
+    signal_extension : ndarray, shape (N, k), optional
+        Per-sample values of further signal column kinds (same blocks) that the
+        declared model leaves out but the signal may have, e.g. the signal's slope
+        within a period under the per-period mean model: what a candidate shares with
+        them is also the signal (a sideband of a signal that varies within a period).
     """
 
     block: NDArray[np.int64]
@@ -78,6 +88,8 @@ class BlockBase:
     labels: tuple[str, ...] | None = None
     scale: NDArray[np.float64] | None = None
     block_labels: tuple[Any, ...] | None = None
+    signal: tuple[int, ...] = ()
+    signal_extension: NDArray[np.float64] | None = None
     _n_blocks: int = field(default=0, repr=False)
 
     def __post_init__(self) -> None:
@@ -115,6 +127,8 @@ class BlockBase:
         scale = np.ones(p) if self.scale is None else np.asarray(self.scale, dtype=np.float64)
         if scale.shape != (p,):
             raise ValidationError(f"scale must have shape ({p},), got {scale.shape}")
+        if any(not 0 <= j < p for j in self.signal):
+            raise ValidationError(f"signal column indices must be in 0 .. {p - 1}")
         if self.block_labels is not None and len(self.block_labels) != nb:
             raise ValidationError(
                 f"block_labels must have {nb} entries (one per block), got {len(self.block_labels)}"
@@ -301,6 +315,11 @@ class Basis:
         Extra dense columns (raw, not orthonormal).
     n_blocks : int, optional
         Number of blocks of the base (default ``block.max() + 1``).
+    nuisance : OrbitTemplate, optional
+        A projection that is part of the model but never formed as columns (the
+        orbit-phase signal template, :class:`accal.closure.nuisance.OrbitTemplate`):
+        every other column is taken with it projected out (Frisch-Waugh-Lovell), and
+        projections, norms and leverage include it.  Only with a base of one block.
     """
 
     def __init__(
@@ -309,9 +328,15 @@ class Basis:
         columns: NDArray[np.float64],
         extra: NDArray[np.float64] | None = None,
         n_blocks: int | None = None,
+        nuisance: Any = None,
     ) -> None:
         self.block = np.asarray(block, dtype=np.int64)
+        self.nuisance = nuisance
         self.columns = np.asarray(columns, dtype=np.float64)
+        if nuisance is not None:
+            if np.unique(self.block[self.block >= 0]).size > 1:
+                raise ValidationError("a nuisance projection needs a base of one block")
+            self.columns = nuisance.residualize(self.columns)
         n, p = self.columns.shape
         self.n = n
         self.p = p
@@ -387,7 +412,8 @@ class Basis:
             self.qe = np.zeros((self.n, 0))
             self.re = np.zeros((0, 0))
             return
-        et = e - self.block_project(e)
+        ez = e if self.nuisance is None else self.nuisance.residualize(e)
+        et = ez - self.block_project(ez)
         norms = np.linalg.norm(e, axis=0)
         qe, re = np.linalg.qr(et)
         d = np.abs(np.diag(re))
@@ -414,10 +440,6 @@ class Basis:
         new._build_extra()
         return new
 
-    def restrict(self, mask: NDArray[np.bool_]) -> Basis:
-        """The basis of the same design on the samples ``mask`` (rebuilt)."""
-        return Basis(self.block[mask], self.columns[mask], self.extra[mask], self.n_blocks)
-
     # ----------------------------------------------------------------- projections
     @property
     def n_extra(self) -> int:
@@ -427,7 +449,8 @@ class Basis:
     @property
     def rank_total(self) -> int:
         """Dimension of the spanned space."""
-        return int(self.rank.sum()) + int(self.keep.size)
+        extra = 0 if self.nuisance is None else int(self.nuisance.rank)
+        return int(self.rank.sum()) + int(self.keep.size) + extra
 
     def block_coef(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
         """``Q_bᵀ z`` for every block: shape (n_seg, p, m)."""
@@ -473,6 +496,8 @@ class Basis:
         out = self.block_expand(self.block_coef(z2))
         if self.qe.shape[1]:
             out = out + self.qe @ (self.qe.T @ z2)
+        if self.nuisance is not None:
+            out = out + self.nuisance.project(z2)
         return out[:, 0] if one else out
 
     def captured(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -483,6 +508,8 @@ class Basis:
         out = np.sum(self.block_coef(z) ** 2, axis=(0, 1))
         if self.qe.shape[1]:
             out = out + np.sum((self.qe.T @ z) ** 2, axis=0)
+        if self.nuisance is not None:
+            out = out + self.nuisance.captured(z)
         return out
 
     def complement(self, z: NDArray[np.float64], tol: float = 1e-8) -> NDArray[np.float64]:
@@ -540,6 +567,8 @@ class Basis:
             em = self.qe * m[:, None]
             s_e = np.cumsum(em[::-1], axis=0)[::-1]
             out = out + np.sum(s_e**2, axis=1)
+        if self.nuisance is not None:
+            out = out + self.nuisance.step_norms(mask)
         return out
 
     # ----------------------------------------------------------------- spectra
@@ -586,6 +615,8 @@ class Basis:
         lev = np.fft.rfft(circ, axis=-1).real
         if self.qe.shape[1]:
             lev = lev + np.sum(np.abs(grid.fft(self.qe)) ** 2, axis=0)
+        if self.nuisance is not None:
+            lev = lev + self.nuisance.leverage(grid.size, grid.step, grid.counts)
         return lev
 
     def block_cov(

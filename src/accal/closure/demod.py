@@ -39,14 +39,24 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from accal.closure.basis import Basis, BlockBase
-from accal.closure.candidates import PlatformInfo
-from accal.closure.select import DEFAULT_CANDIDATES, ClosureResult, close_loop
+from accal.closure.platform import PlatformInfo
+from accal.closure.results import ClosureResult
+from accal.closure.select import close_loop
 from accal.errors import ValidationError, check_option
 
 __all__ = ["DEMOD_CANDIDATES", "DemodClosure", "DemodPeriods", "close_loop_demod"]
 
 #: Candidates tried by default on rotating-platform data.
-DEMOD_CANDIDATES = (*DEFAULT_CANDIDATES, "angle_offset", "intra_period_shape")
+DEMOD_CANDIDATES = (
+    "quadratic_drift",
+    "cubic_drift",
+    "exponential_drift",
+    "bias_step",
+    "periodic",
+    "auxiliary",
+    "angle_offset",
+    "intra_period_shape",
+)
 
 _F64 = NDArray[np.float64]
 
@@ -370,6 +380,8 @@ def close_loop_demod(
         tuple(names),
         scale=np.asarray(scale),
         block_labels=tuple(range(n_per)),
+        signal=tuple(range(len(sig_y))),  # a_Y, a_Z (and slopes): the modulated signal
+        signal_extension=_signal_extension(c, s, u, len(va)),
     )
 
     # the fitted demodulated signal (base alone) for the platform candidates
@@ -420,6 +432,20 @@ def close_loop_demod(
         resolution=float(np.finfo(np.float64).eps * np.nanmax(np.abs(y_s[use_s]))),
     )
     return DemodClosure(res, _periods(res, names, n_per, q, fs, float(t[0]), counts))
+
+
+def _signal_extension(c, s, u, n_va: int) -> NDArray[np.float64]:
+    """Signal columns one degree beyond the declared signal model, interleaved (y, z).
+
+    The mean model's signal may still change within a period (its slope), the affine
+    model's its curvature: a candidate inside their span is that change, modulated
+    by θ (QA: lines at the modulation's sidebands 585 and 615 s on a τ = 600 s run).
+    """
+    w = u**n_va
+    cols = np.empty((2 * u.size, 2))
+    cols[0::2] = np.column_stack([c * w, s * w])
+    cols[1::2] = np.column_stack([-s * w, c * w])
+    return cols
 
 
 def _periods(res: ClosureResult, names, n_per, q, fs, t0, counts) -> DemodPeriods:

@@ -9,6 +9,10 @@ its caller gives.  ``result_to_dict`` is the ``closure.json`` layout::
      "notes": [{"name", "channel", "note"}, ...],   # candidates not testable here
      "removed": [{"name", "channel", "p_accept", "epoch"/"frequency"/"lag"/"tau"}, ...],
                                                     # added, then eliminated
+     "rejected": [{...effect keys...; details.reason}, ...],  # significant, not added:
+                        # not identifiable, not confirmed on held-out stretches, implausible
+     "considered": [{"channel", "status", "reason"}, ...],  # channels offered / left out
+     "signal_model": {...},                         # the orbit template (no reference)
      "base": [{"name", "before", "sigma_before", "after", "sigma_after", "sigma_plain",
                "change", "sigma_change", "change_significant"}, ...],
      "channels": [...] (several data channels, e.g. ["y", "z"]),
@@ -60,6 +64,8 @@ def _effect_dict(e: Effect) -> dict[str, Any]:
         "channel": e.channel,
         "axis": e.axis,
         "coefficient": e.coefficient,
+        "unit": e.unit,
+        "instrument": e.instrument,
         "sigma": e.sigma,
         "significance": e.significance,
         "epoch": e.epoch,
@@ -116,6 +122,9 @@ def result_to_dict(result: ClosureResult, truth: dict[str, float] | None = None)
             }
             for e in result.removed
         ],
+        "rejected": [_effect_dict(e) for e in result.rejected],
+        "considered": list(result.considered),
+        "signal_model": dict(result.signal_model),
         "base": [
             {
                 "name": b.name,
@@ -240,7 +249,30 @@ def to_markdown(
     if result.removed:
         names = ", ".join(f"{e.name} ({e.channel})" for e in result.removed)
         lines.append(f"- added and later eliminated (stood in for another effect): {names}")
-    if result.unexplained or result.notes or result.removed:
+    for e in result.rejected:
+        ch = f" ({e.channel})" if e.channel is not None else ""
+        lines.append(
+            f"- significant but **not removed**: {e.name}{ch}, coefficient "
+            f"{_fmt(e.coefficient)} {e.unit}, p {_fmt(e.significance)}: {e.details.get('reason', '')}"
+        )
+    if result.signal_model:
+        sm = result.signal_model
+        lines.append(
+            f"- signal model (no reference): orbit-phase template, period {sm['period']:.6g} s, "
+            f"{sm['bins']} bins × degree-{sm['amplitude_degree']} amplitude, a smooth curve "
+            f"(knots {sm.get('knot_spacing', 0):.0f} s) and {sm.get('modulated_harmonics', 0)} "
+            "orbit harmonics with slowly changing amplitude"
+        )
+    considered = [c["channel"] for c in result.considered if c["status"] == "considered"]
+    left = [
+        f"{c['channel']} ({c['reason']})" for c in result.considered if c["status"] != "considered"
+    ]
+    if considered or left:
+        lines.append(
+            f"- channels tested for couplings: {', '.join(considered) or 'none'}"
+            + (f"; left out: {'; '.join(left)}" if left else "")
+        )
+    if result.unexplained or result.notes or result.removed or result.rejected:
         lines.append("")
     lines += [
         "| base | before ± σ | after ± σ | change ± σ | significant |",

@@ -1,0 +1,391 @@
+"""Candidates tied to other channels: couplings (with lag and response) and the scale error.
+
+``auxiliary``: a linear coupling ``c · (h_τ * x)(t − lag)`` to a channel ``x`` of the
+data (a temperature, a voltage, an angular acceleration), ``h_τ`` a first-order
+low-pass of time constant ``τ`` (``τ = 0``: none).  Every channel the caller offers
+is searched together, one family: the best (channel, τ, lag) is proposed and its
+multiplicity is the number of independent members searched over all channels
+(:func:`lag_multiplicity`), so offering more channels costs sensitivity, never
+false detections.
+
+``scale``: with a reference acceleration, ``raw − reference`` holds ``δs ·
+reference`` when the scale factor is off by ``δs`` (the wavelet paper's eq. 9,
+``a_raw = s·a + b + d·t``); one regressor, the reference itself.
+
+The lag scan is fast: with one data channel, the numerator of the explained power
+of every lag of the grid comes from one FFT cross-correlation
+(:func:`scipy.signal.correlate`) of the residual with the channel, and the
+channel-only denominator (its norm with the null model projected out, at every
+lag) is computed once per channel and reused at every selection step.  The
+effects already in the model are left out of the scan's ranking (second order);
+the proposal's own test uses the exact projection.  Several data channels (the
+rotating platform) evaluate the lag grid directly.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import minimize, minimize_scalar
+from scipy.signal import correlate, lfilter
+
+from accal.closure.candidates import Context, Proposal, channel_power
+from accal.closure.kinds import unit_class
+
+__all__ = [
+    "AUX_TAUS",
+    "SQUARED",
+    "auxiliary",
+    "first_order",
+    "lag_multiplicity",
+    "max_lag",
+    "scale",
+    "square_about_mean",
+]
+
+#: Suffix of a channel's square (about its mean) among the couplings.
+SQUARED = "^2"
+#: Time constants of the first-order response searched [s] (0: none).
+AUX_TAUS = (0.0, 300.0, 1000.0, 3000.0)
+#: Lags on the search grid.
+N_LAGS = 31
+#: Longest lag searched for a coupling to an angular acceleration [s]: a lever-arm
+#: coupling is instantaneous (the linear and angular channels share their filters).
+ANGULAR_MAX_LAG = 10.0
+#: A refined low-pass time constant below this many sample steps is a pure lag.
+TAU_MIN_STEPS = 5.0
+#: How far beyond the largest grid time constant the refinement looks.
+TAU_BEYOND = 2.0
+
+
+def first_order(x: NDArray[np.float64], dt: float, tau: float) -> NDArray[np.float64]:
+    """First-order low-pass ``τ ẏ + y = x`` on a uniform grid (exact for piecewise-constant x).
+
+    The filter starts settled on ``x[0]`` (its state before the record is unknown;
+    the first few ``τ`` of the response carry that assumption).
+    """
+    if tau <= 0:
+        return np.asarray(x, dtype=np.float64)
+    a = np.exp(-dt / tau)
+    x = np.asarray(x, dtype=np.float64)
+    return lfilter([1 - a], [1, -a], x - x[0]) + x[0]
+
+
+def square_about_mean(x: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``(x − mean x)²``, the mean over the finite values (channel ``NAME^2``)."""
+    x = np.asarray(x, dtype=np.float64)
+    return (x - np.nanmean(x)) ** 2
+
+
+def max_lag(options: dict[str, Any], span: float) -> float:
+    """Longest lag searched [s]: ``options["max_lag"]`` or min(span/20, 1 h)."""
+    return float(options.get("max_lag", min(span / 20.0, 3600.0)))
+
+
+def lag_multiplicity(h: NDArray[np.float64], step: float, top_lag: float) -> float:
+    """Independent lags in ``[0, top_lag]`` for a response ``h`` on a grid of ``step`` [s].
+
+    A continuous lag search over a channel that decorrelates after ``τ_c`` (the lag
+    where its autocorrelation, mean removed, first falls below 1/2) tests about
+    ``top_lag/τ_c + 1`` independent members; at least the :data:`N_LAGS` of the grid
+    (a white channel is independent at every lag), at most one per sample.
+    """
+    if top_lag <= 0:
+        return 1.0
+    x = h - np.mean(h)
+    n = x.size
+    nfft = 1 << int(np.ceil(np.log2(2 * n)))
+    spec = np.abs(np.fft.rfft(x, nfft)) ** 2
+    acf = np.fft.irfft(spec, nfft)[:n]
+    if not acf[0] > 0:
+        return 1.0
+    below = np.flatnonzero(acf / acf[0] < 0.5)
+    tau_c = (below[0] if below.size else n) * step
+    m = top_lag / max(tau_c, step) + 1.0
+    return float(min(max(m, min(N_LAGS, top_lag / step + 1.0)), top_lag / step + 1.0))
+
+
+def _unit_class(ctx: Context, name: str) -> str:
+    units = dict(ctx.options.get("channel_units", {}))
+    return unit_class(units.get(name.removesuffix(SQUARED), ""))
+
+
+def _response(
+    ctx: Context, name: str, x: NDArray[np.float64], lead: int, tc: float, cache: bool = True
+) -> NDArray[np.float64]:
+    """The channel's first-order response on the used samples' grid, from ``lead`` steps early.
+
+    The channel is put on the nominal grid from its own first value on (holes
+    interpolated; before its first and after its last value held constant) and
+    filtered from there, so the filter's state at the record's start carries the
+    channel's history (a filter started on the record's first value left a decay of
+    its time constant, which an exponential drift then "explained").  Returns the
+    response at grid points ``−lead .. N−1``.  Cached per selection (with ``cache``: the
+    grid's time constants; a refinement's trial values are not kept).
+    """
+    key = ("response", name, lead, tc)
+    if key not in ctx.cache or not cache:
+        step = ctx.grid.step
+        ok = np.isfinite(x) & np.isfinite(ctx.t_all)
+        tu, first = np.unique(ctx.t_all[ok], return_index=True)
+        xv = x[ok][first]
+        pre = max(lead, int(np.ceil((ctx.t0 - tu[0]) / step)))
+        tg = ctx.t0 + step * np.arange(-pre, ctx.grid.size)
+        h = first_order(np.interp(tg, tu, xv), step, tc)[pre - lead :]
+        if not cache:
+            return h
+        ctx.cache[key] = h
+    return ctx.cache[key]
+
+
+def _channels(ctx: Context) -> list[tuple[str, NDArray[np.float64]]]:
+    """The channels to scan: every offered one not yet coupled, and the square about its
+    mean (``NAME^2``: a quadratic dependence ``c1·x + c2·x²``) of one already coupled
+    (before that, the square is tested together with the channel: :func:`auxiliary`)."""
+    out = []
+    for name, x in ctx.aux.items():
+        if not ctx.has_label(f"aux:{name}"):
+            if not ctx.is_blocked("auxiliary", name):
+                out.append((name, x))
+            continue
+        sq = name + SQUARED
+        angular = _unit_class(ctx, name) == "angular"
+        if not angular and not ctx.has_label(f"aux:{sq}") and not ctx.is_blocked("auxiliary", sq):
+            out.append((sq, square_about_mean(x)))
+    return out
+
+
+def _shortest_lag(ctx: Context, name: str, x, lag: float, tc: float, top: float) -> float:
+    """The shortest of ``lag − k·period`` explaining ≥ 98 % of ``lag``'s power.
+
+    With a per-period base (demodulation) a channel that repeats with the period (a
+    platform temperature kicked by every rotation) couples the same at lags a period
+    apart: a 120 s lag came out as 720 s, with a line and a step beside it.  A channel
+    that does not repeat keeps its lag.
+    """
+    period = float(ctx.options.get("lag_period") or 0.0)
+    if period <= 0 or lag < 0.5 * period:
+        return lag
+    here = _power_at(ctx, name, x, tc, lag)
+    for k in range(int(lag // period), 0, -1):  # shortest first
+        cand = lag - k * period
+        lo, hi = max(0.0, cand - 0.25 * period), min(top, cand + 0.25 * period)
+        res = minimize_scalar(
+            lambda lg: -_power_at(ctx, name, x, tc, lg),
+            bounds=(lo, hi),
+            method="bounded",
+            options={"xatol": 0.25 * ctx.grid.step, "maxiter": 25},
+        )
+        if -res.fun >= 0.98 * here:
+            return float(res.x)
+    return lag
+
+
+def _scan_fft(
+    ctx: Context, hp: NDArray[np.float64], lags: NDArray[np.int64], key: tuple
+) -> NDArray[np.float64]:
+    """Explained power of every lag (in samples) of ``hp`` (grid from ``L`` steps early).
+
+    ``hp[k + L]`` is the response at grid point ``k``; the column of lag ``l`` on
+    used sample ``i`` is ``hp[idx_i + L − l]``.  The numerator by FFT correlation with
+    the residual; the denominator (the column's norm with the null model projected
+    out) depends on the channel only and is computed once per channel and response,
+    exactly, for every lag of the grid.  The channel's mean is taken out first (the
+    base holds the constant; a 293 K channel otherwise loses its variation to
+    cancellation).
+    """
+    grid = ctx.grid
+    big = int(lags.max()) if lags.size else 0
+    hp = hp - float(np.mean(hp))
+    rg = np.zeros(grid.size)
+    rg[grid.idx] = ctx.residual
+    num = correlate(hp, rg, mode="valid", method="fft")[big - lags] ** 2
+    if key not in ctx.cache:
+        null = ctx.cache["null_basis"]
+        z = np.stack([hp[grid.idx + big - lag] for lag in lags], axis=1)
+        ctx.cache[key] = np.einsum("ij,ij->j", z, z) - null.captured(z)
+    den = ctx.cache[key]
+    z2 = np.maximum(den, 0.0)
+    return np.where(z2 > 1e-9 * np.max(z2, initial=0.0), num / np.maximum(z2, 1e-300), 0.0)
+
+
+def _scan_direct(ctx: Context, hp: NDArray[np.float64], lags: NDArray[np.int64]):
+    """The same as :func:`_scan_fft`, exactly, lag by lag (block bases, several channels)."""
+    big = int(lags.max()) if lags.size else 0
+    idx = ctx.grid.idx
+    z = np.stack([hp[idx + big - lag] for lag in lags])
+    return channel_power(ctx, z)
+
+
+def _column(ctx: Context, name: str, x, tc: float, lag: float) -> NDArray[np.float64]:
+    """The coupling's regressor on *all* samples: ``(h_τ * x)(t − lag)``."""
+    step = ctx.grid.step
+    lead = int(np.ceil(max(lag, max_lag(ctx.options, ctx.span)) / step)) + 2
+    h = _response(ctx, name, x, lead, tc, cache=tc in AUX_TAUS)
+    tg = ctx.t0 + step * np.arange(-lead, ctx.grid.size)
+    return np.interp(ctx.t_all - lag, tg, h)
+
+
+def _power_at(ctx: Context, name: str, x, tc: float, lag: float) -> float:
+    col = _column(ctx, name, x, tc, lag)[ctx.use]
+    return float(channel_power(ctx, col[None, :])[0])
+
+
+def _refine(ctx: Context, name: str, x, lag: float, tc: float, lag_step: float, top: float):
+    """(lag, τ, power) refined: lag continuous near the grid's best, then lag and τ together."""
+    p0 = _power_at(ctx, name, x, tc, lag)
+    lo, hi = max(0.0, lag - lag_step), min(top, lag + lag_step)
+    if hi > lo:
+        res = minimize_scalar(
+            lambda lg: -_power_at(ctx, name, x, tc, lg),
+            bounds=(lo, hi),
+            method="bounded",
+            options={"xatol": 0.25 * ctx.grid.step, "maxiter": 25},
+        )
+        if -res.fun > p0:
+            lag, p0 = float(res.x), float(-res.fun)
+    grid = sorted(AUX_TAUS)
+    if tc not in grid or len(grid) < 2:
+        return lag, tc, p0
+    k = grid.index(tc)
+    lo_tau = grid[k - 1] if k > 0 else 0.0
+    hi_tau = grid[k + 1] if k + 1 < len(grid) else tc * TAU_BEYOND
+    start_tau = 0.5 * hi_tau if tc == 0 else tc
+    start_lag = max(lag - start_tau, 0.0) if tc == 0 else lag
+    d_lag = max(lag_step, 0.1 * start_tau, 10.0)
+    d_tau = 0.5 * start_tau if 1.5 * start_tau <= hi_tau else -0.5 * (start_tau - lo_tau)
+    start = np.array([min(start_lag, top), start_tau])
+    simplex = np.array([start, start + [d_lag, 0.0], start + [0.0, d_tau]])
+    simplex[:, 0] = np.clip(simplex[:, 0], 0.0, max(top, 0.0))
+    if simplex[1, 0] == start[0]:
+        simplex[1, 0] = max(start[0] - d_lag, 0.0)
+    res = minimize(
+        lambda v: -_power_at(ctx, name, x, float(v[1]), float(v[0])),
+        start,
+        method="Nelder-Mead",
+        bounds=[(0.0, max(top, 0.0)), (lo_tau, hi_tau)],
+        options={"initial_simplex": simplex, "xatol": 2.0, "fatol": 1e-6 * p0, "maxfev": 40},
+    )
+    lag2, tc2, p2 = float(res.x[0]), float(res.x[1]), float(-res.fun)
+    at_bound = k + 1 == len(grid) and tc2 > 0.98 * hi_tau
+    if p2 > p0 and not at_bound:
+        if tc2 >= TAU_MIN_STEPS * ctx.grid.step:
+            return lag2, tc2, p2
+        if tc > 0:  # a low-pass of a few samples is a lag
+            return min(lag2 + tc2, top), 0.0, p2
+    return lag, tc, p0
+
+
+def _jacobian(ctx: Context, name: str, x, lag: float, tc: float):
+    """Columns of d/dlnτ (central difference) and d/dlag of a coupling's regressor.
+
+    d/dlag = −h'(t − lag) only with a low-pass: a pure lag's derivative is the
+    channel's own, spikes for a kicked channel.
+    """
+
+    def jac() -> list[tuple[str, NDArray[np.float64]]]:
+        eps = 1e-3
+        up = _column(ctx, name, x, tc * np.exp(eps), lag)
+        down = _column(ctx, name, x, tc / np.exp(eps), lag)
+        dl = 0.5 * ctx.grid.step
+        dlag = _column(ctx, name, x, tc, lag + dl) - _column(ctx, name, x, tc, max(lag - dl, 0))
+        dlag /= lag + dl - max(lag - dl, 0.0)
+        parts = [("tau", (up - down) / (2 * eps)), ("lag", dlag)]
+        return [(k, ctx.split(d[:, None], (f"aux:{name}",))[0]) for k, d in parts]
+
+    return jac if tc > 0 else None
+
+
+def auxiliary(ctx: Context) -> list[Proposal]:
+    """The best coupling to any offered channel: channel, first-order τ and lag searched.
+
+    Grid: :data:`AUX_TAUS` × :data:`N_LAGS` lags in ``[0, max_lag]`` (angular
+    accelerations: τ = 0 and lags up to :data:`ANGULAR_MAX_LAG`); the best grid
+    point is refined (lag continuous, then lag and τ together).  Multiplicity: the
+    independent members searched, summed over the channels and time constants
+    (:func:`lag_multiplicity`).  The coefficient is in m/s² per channel unit, at channel value 0 (the regressor is
+    not de-meaned: the bias is the one at channel value 0, as ``b + c·x`` says).
+    """
+    step = ctx.grid.step
+    top_all = max_lag(ctx.options, ctx.span)
+    fft_path = ctx.n_chan == 1 and "null_basis" in ctx.cache
+    best = None  # (power, name, x, tc, lag, lag_step, top)
+    mult = 0.0
+    for name, x in _channels(ctx):
+        x = np.asarray(x, dtype=np.float64)
+        ok = np.isfinite(x)
+        if ok.sum() < 10 or np.ptp(x[ok]) == 0:
+            continue
+        angular = _unit_class(ctx, name) == "angular"
+        top = min(top_all, ANGULAR_MAX_LAG) if angular else top_all
+        taus = (0.0,) if angular else tuple(ctx.options.get("aux_taus", AUX_TAUS))
+        n_l = int(ctx.options.get("n_lags", N_LAGS))
+        lags = np.unique(np.rint(np.linspace(0.0, top, n_l) / step).astype(np.int64))
+        lag_step = float((lags[1] - lags[0]) * step) if lags.size > 1 else 0.0
+        big = int(lags.max())
+        for tc in taus:
+            hp = _response(ctx, name, x, big, tc)
+            if ("m", name, tc, big) not in ctx.cache:
+                ctx.cache[("m", name, tc, big)] = lag_multiplicity(hp[big:], step, top)
+            mult += ctx.cache[("m", name, tc, big)]
+            if fft_path:
+                pw = _scan_fft(ctx, hp, lags, ("den", name, tc, big))
+            else:
+                pw = _scan_direct(ctx, hp, lags)
+            j = int(np.argmax(pw))
+            if best is None or pw[j] > best[0]:
+                best = (float(pw[j]), name, x, tc, float(lags[j] * step), lag_step, top)
+    if best is None or not best[0] > 0:
+        return []
+    mult = max(mult, 1.0)
+    _, name, x, tc, lag, lag_step, top = best
+    lag, tc, _ = _refine(ctx, name, x, lag, tc, lag_step, top)
+    lag = _shortest_lag(ctx, name, x, lag, tc, top)
+    col = _column(ctx, name, x, tc, lag)
+    cols, labs, axes = ctx.split(col[:, None], (f"aux:{name}",))
+    out = [
+        Proposal(
+            "auxiliary",
+            name,
+            cols,
+            labs,
+            mult,
+            {"lag": lag, "tau": tc},
+            axes,
+            jacobian=_jacobian(ctx, name, x, lag, tc),
+        )
+    ]
+    if not name.endswith(SQUARED) and _unit_class(ctx, name) != "angular":
+        # the channel and its square together, at the same lag and response: a strong
+        # quadratic dependence masks the linear one (QA: c1·T + 2e-9·(T − 20 K)² gave
+        # "unexplained" structure only); the selection takes the pair only when no
+        # single coupling is significant, and at twice the multiplicity
+        sq = _column(ctx, name + SQUARED, square_about_mean(x), tc, lag)
+        c2, l2, a2 = ctx.split(np.column_stack([col, sq]), (f"aux:{name}", f"aux:{name}{SQUARED}"))
+        n_c = max(ctx.n_chan, 1)
+        parts = [
+            ([2 * c for c in range(n_c)], {"lag": lag, "tau": tc, "channel": name}),
+            ([2 * c + 1 for c in range(n_c)], {"lag": lag, "tau": tc, "channel": name + SQUARED}),
+        ]
+        params = {"lag": lag, "tau": tc, "pair": True, "parts": parts}
+        out.append(Proposal("auxiliary", name, c2, l2, 2.0 * mult, params, a2))
+    return out
+
+
+def scale(ctx: Context) -> list[Proposal]:
+    """A scale error: the residual proportional to the reference (one coefficient ``δs``).
+
+    With ``raw = s·a + b + d·t`` and the reference ``a_ref ≈ a``, ``raw − a_ref =
+    (s − 1)·a_ref + b + d·t``: the coefficient of ``a_ref`` is ``δs = s − 1``
+    (dimensionless).  Only with a reference, one proposal, no search.
+    """
+    ref = ctx.reference
+    if ref is None or ctx.has_label("scale") or ctx.is_blocked("scale", None):
+        return []
+    col = np.asarray(ref, dtype=np.float64)
+    if not np.all(np.isfinite(col[ctx.use])) or np.ptp(col[ctx.use]) == 0:
+        return []
+    cols, labs, axes = ctx.split(np.nan_to_num(col)[:, None], ("scale",))
+    return [Proposal("scale", None, cols, labs, 1.0, {}, axes)]

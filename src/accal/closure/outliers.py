@@ -1,0 +1,168 @@
+"""Outliers: bursts and spikes no candidate models, left out of the closure's analysis.
+
+The tests assume Gaussian noise; a burst of 50 samples of 5e-8 m/s² in 1e-10 noise
+was fitted as two bias steps (their least-squares area), and thruster firings put
+spikes of 1e-8–1e-7 m/s² into a raw record, with pulses of the angular
+accelerations at the same samples: real acceleration, which a coupling to the
+angular channels then "explained" (a 0.5 mm lever arm removed from a simulated
+storm day) and a pair of steps boxed.  Samples far from the running median of the
+residual around them, or of any candidate channel, are left out of the analysis
+(and stay in the data).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.ndimage import median_filter
+
+__all__ = [
+    "EDGE_STEP_MAX_SIGMAS",
+    "OUTLIER_MAX_FRACTION",
+    "OUTLIER_PAD",
+    "OUTLIER_SIGMAS",
+    "OUTLIER_WINDOW",
+    "edge_runs",
+    "outliers",
+]
+
+#: Largest offset [robust σ of the first differences] of a run of flagged samples at the
+#: record's start or end that is kept as a possible bias step rather than left out: at
+#: the record's end a step and a burst fit alike (the burst's other edge is outside the
+#: record); instrument bias steps are tens of σ, bursts and spikes hundreds to thousands.
+EDGE_STEP_MAX_SIGMAS = 200.0
+#: Fewest samples of such a run.
+EDGE_STEP_MIN = 10
+
+#: Outliers: samples this many robust σ (1.4826 MAD) from the residual's running median.
+OUTLIER_SIGMAS = 10.0
+#: Running-median window [samples].
+OUTLIER_WINDOW = 241
+#: Largest fraction of a channel's samples that may be outliers (more is structure,
+#: e.g. a strong high-frequency line).  Attitude-thruster firings take up to ~1 % of a
+#: GRACE day (2-6 an hour, 1-5 s each).
+OUTLIER_MAX_FRACTION = 0.02
+#: Samples on either side of a flagged one also left out (a firing's ramp and tail).
+OUTLIER_PAD = 2
+#: Samples on either side of a flagged run whose level tells a burst from a step.
+LEVEL_SAMPLES = 60
+
+
+def outliers(
+    r: NDArray[np.float64], chan: NDArray[np.int64] | None, t: NDArray[np.float64]
+) -> NDArray[np.bool_]:
+    """Samples of the base residual ``r`` far from the residual around them (each channel).
+
+    A burst of 50 samples of 5e-8 m/s² in 1e-10 noise was fitted as two bias steps
+    of ±2.9e-9 m/s² (the steps' least-squares area); the Wald tests assume Gaussian
+    noise.  The level around a sample is the running median of the
+    :data:`OUTLIER_WINDOW` samples before it and of those after it; the deviation
+    is the smaller of the two (only the one that fits inside the segment at its
+    ends), so a step's edge is never an outlier, a burst shorter than the window
+    is one anywhere (also at the record's ends, where a centred median followed
+    it), and the running medians never reach across a data gap.  Flagged samples
+    are left out of the analysis (the caller keeps them in the data).  Nothing is
+    flagged when more than :data:`OUTLIER_MAX_FRACTION` of a channel would be.
+    """
+    w = OUTLIER_WINDOW
+    bad = np.zeros(r.size, dtype=bool)
+    groups = (
+        [np.arange(r.size)]
+        if chan is None
+        else [np.flatnonzero(chan == c) for c in np.unique(chan)]
+    )
+    for idx in groups:
+        if idx.size < 4 * w:
+            continue
+        x, tt = r[idx], t[idx]
+        steps = np.diff(tt)
+        cut = np.flatnonzero(steps > 5.0 * np.median(steps)) + 1  # data gaps
+        dev = np.full(x.size, np.inf)
+        for seg in np.split(np.arange(x.size), cut):
+            if seg.size < 2 * w:
+                continue  # too short to tell an outlier from structure: none flagged
+            xs = x[seg]
+            # windows ending at (left) and starting at (right) each sample
+            left = xs - median_filter(xs, size=w, origin=w // 2, mode="nearest")
+            right = xs - median_filter(xs, size=w, origin=-(w // 2), mode="nearest")
+            d = np.minimum(np.abs(left), np.abs(right))
+            d[: w - 1] = np.abs(right[: w - 1])  # left window not inside the segment
+            d[-(w - 1) :] = np.abs(left[-(w - 1) :])
+            dev[seg] = d
+        finite = np.isfinite(dev)
+        if finite.sum() < 2 * w:
+            continue
+        sig = 1.4826 * float(np.median(dev[finite]))  # dev >= 0: MAD about 0
+        if not sig > 0:
+            continue
+        hit = _bursts_only(finite & (dev > OUTLIER_SIGMAS * sig), x)
+        if 0 < hit.sum() <= OUTLIER_MAX_FRACTION * idx.size:
+            pad = np.convolve(hit, np.ones(2 * OUTLIER_PAD + 1), mode="same") > 0
+            bad[idx[pad]] = True
+    return bad
+
+
+def _bursts_only(hit: NDArray[np.bool_], x: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """``hit`` without the runs that are a change of level rather than a burst.
+
+    A burst returns to the level before it; around a step the flagged run sits at the
+    level of one side and the two sides differ (QA: a step 300 s before the record's
+    end, seen from the one running median that fits there, was left out as 124
+    outliers and found 244 s late).  A run whose sides (:data:`LEVEL_SAMPLES` unflagged
+    samples each) differ by more than half the run's offset from either side is kept.
+    """
+    edges = np.flatnonzero(np.diff(np.r_[0, hit.astype(np.int8), 0]))
+    out = hit.copy()
+    for a, b in zip(edges[::2], edges[1::2], strict=True):
+        before = x[max(0, a - LEVEL_SAMPLES) : a][~hit[max(0, a - LEVEL_SAMPLES) : a]]
+        after = x[b : b + LEVEL_SAMPLES][~hit[b : b + LEVEL_SAMPLES]]
+        if before.size < 5 or after.size < 5:
+            continue  # at a segment's end: edge_runs decides
+        mb, ma, mr = np.median(before), np.median(after), np.median(x[a:b])
+        if abs(ma - mb) > 0.5 * max(abs(mr - ma), abs(mr - mb)):
+            out[a:b] = False
+    return out
+
+
+def edge_runs(bad: NDArray[np.bool_], r: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """``bad`` without its runs at the record's start or end that look like a bias step.
+
+    A step a few minutes from either end makes the running medians see the samples
+    before (after) it as a burst (QA: a 3e-9 m/s² step 60 s into a day was left out
+    as 60 outliers, and the table's bias kept it).  A leading or trailing run of at
+    least :data:`EDGE_STEP_MIN` flagged samples that is smooth (its second differences
+    within :data:`OUTLIER_SIGMAS` times the noise's: a constant offset, or a fast
+    settling) and at most :data:`EDGE_STEP_MAX_SIGMAS` from the samples next to
+    it is kept for the analysis (a 1e-8 m/s² decay of T = 120 s had its start screened
+    and its amplitude came out 20x low).
+    σ is that of the first differences of the unflagged samples (slow structure and
+    steps elsewhere do not inflate it).
+    """
+    n = r.size
+    if not bad.any() or bad.all():
+        return bad
+    k0 = int(np.argmax(~bad))
+    k1 = int(np.argmax(~bad[::-1]))
+    d = np.diff(r[~bad])
+    sig = 1.4826 * float(np.median(np.abs(d - np.median(d)))) / np.sqrt(2.0)
+    if not sig > 0:
+        return bad
+    out = bad.copy()
+    for k, at_start in ((k0, True), (k1, False)):
+        if k < EDGE_STEP_MIN:
+            continue
+        core = max(k - OUTLIER_PAD, 1)  # the padding may reach past the step
+        run = r[:core] if at_start else r[n - core :]
+        near = r[k : k + OUTLIER_WINDOW] if at_start else r[max(0, n - k - OUTLIER_WINDOW) : n - k]
+        # smooth: a constant offset (a step) or a decay (a settling), not spikes: no second
+        # difference beyond what the noise gives (σ·√6 for white noise)
+        d2 = np.diff(run, 2) if run.size > 2 else np.zeros(0)
+        if near.size == 0 or np.max(np.abs(d2), initial=0.0) > OUTLIER_SIGMAS * np.sqrt(6) * sig:
+            continue
+        if abs(float(np.median(run) - np.median(near))) > EDGE_STEP_MAX_SIGMAS * sig:
+            continue
+        if at_start:
+            out[:k] = False
+        else:
+            out[n - k :] = False
+    return out
