@@ -199,6 +199,13 @@ def closure_candidates(
 FLAG_LEVELS = 8
 
 
+def _axis_stem(name: str) -> str | None:
+    """``"a_cal_"`` for ``"a_cal_x"`` (a name ending in an axis letter after ``_``), else None."""
+    if len(name) > 2 and name[-1].lower() in "xyz" and name[-2] == "_":
+        return name[:-1].lower()
+    return None
+
+
 def candidate_channels(
     series: AccSeries, opts: GraceBiasOptions
 ) -> tuple[dict[str, np.ndarray], dict[str, str], list[dict[str, Any]], list[str]]:
@@ -219,11 +226,21 @@ def candidate_channels(
     aux: dict[str, np.ndarray] = {}
     units: dict[str, str] = {}
     report: list[dict[str, Any]] = []
+    # stems of the axis-like names (a_cal_x, a_cal_y -> "a_cal_") that occur for more
+    # than one axis letter: without units, those columns are one vector quantity
+    letters: dict[str, set[str]] = {}
+    for name in series.aux:
+        if _axis_stem(name) is not None:
+            letters.setdefault(_axis_stem(name), set()).add(name[-1].lower())
+    stems = {k for k, v in letters.items() if len(v) > 1}
     for name, v in series.aux.items():
         unit = str(series.units.get(name, "") or "")
         x = np.asarray(v)
-        if si_factor(unit, "acceleration") is not None:
+        declared = unit.strip().lower() not in ("", "unknown")
+        if declared and si_factor(unit, "acceleration") is not None:
             why = f"an acceleration ({unit}): the target's own quantity, derived from it"
+        elif not declared and _axis_stem(name) in stems:
+            why = "no unit, named like another axis of the same quantity (the target's own)"
         elif np.unique(x[np.isfinite(x)]).size <= 1:
             why = "constant"
         elif np.issubdtype(x.dtype, np.integer) or np.all(np.mod(x[np.isfinite(x)], 1) == 0):

@@ -118,11 +118,14 @@ def test_scale_error_with_a_reference_is_found(tmp_path):
 
 def test_swarm_table_columns_are_candidates_and_never_the_target(tmp_path):
     """The real Swarm-A day as a table with a temperature column: without --aux the
-    column is considered; the table as its own --aux never regresses a_cal_x on itself."""
+    column is considered (also from a CSV without units); the table as its own --aux
+    never regresses a_cal_x on itself."""
     day = swarm_day_with_channels(Path(__file__).resolve().parents[2] / "data" / "samples", 3)
-    path = write_swarm_table(day, tmp_path / "swarm.parquet")
-    for extra in ([], ["--aux", path]):
-        out = tmp_path / f"o{len(extra)}"
+    parquet = write_swarm_table(day, tmp_path / "swarm.parquet")
+    plain = tmp_path / "swarm.csv"  # a plain CSV: no unit of any column
+    day.table.to_csv(plain, index=False)
+    for k, (path, extra) in enumerate(((parquet, []), (parquet, ["--aux", parquet]), (plain, []))):
+        out = tmp_path / f"o{k}"
         code, _, err = invoke(
             "grace-bias", path, "--column", "x=a_cal_x", "--close-loop", "--out", out, "-q",
             "--force", *extra,
