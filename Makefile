@@ -36,10 +36,10 @@ run: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/python benchmarks/closure_demo.py --out $(OUT)/demo
 	$(BIN)/accal grace-bias data/samples/SW_A_ACCACAL_20240511_a_cal_x.csv.gz --column x=a_cal_x \
-	    --close-loop --force --format csv --out $(OUT)/demo/swarm-cli
+	    --close-loop --plots --force --format csv --out $(OUT)/demo/swarm-cli
 	$(BIN)/accal simulate gap --days 0.5 --tau 600 --mask 200 --temperature-coupling 1e-9 \
 	    --out $(OUT)/demo/gap/run.parquet
-	$(BIN)/accal demod $(OUT)/demo/gap/run.parquet --tau 600 --mask 200 --close-loop \
+	$(BIN)/accal demod $(OUT)/demo/gap/run.parquet --tau 600 --mask 200 --close-loop --plots \
 	    --out $(OUT)/demo/gap/res
 	@echo "--- reports: $(OUT)/demo/closure.md, $(OUT)/demo/swarm-cli/closure.md, $(OUT)/demo/gap/res/closure.md"
 	@echo "--- plots:   $(OUT)/demo/*.png, $(OUT)/demo/swarm-cli/*.png, $(OUT)/demo/gap/res/*.png"
