@@ -205,6 +205,69 @@ def _families(builders, orbit_period, template: bool) -> int:
     return max(n, 1)
 
 
+def _check_inputs(t, y, valid, reference, aux, channel, channel_names):
+    """``close_loop``'s arrays checked: (t, y, channel, names, use, reference, aux)."""
+    t_all = np.asarray(t, dtype=np.float64)
+    y_all = np.asarray(y, dtype=np.float64)
+    if t_all.ndim != 1 or y_all.shape != t_all.shape:
+        raise ValidationError(
+            f"t and y must be 1-D of equal length, got {t_all.shape}, {y_all.shape}"
+        )
+    chan_all, names = _check_channels(t_all, channel, channel_names)
+    use = np.isfinite(y_all) & np.isfinite(t_all)
+    if valid is not None:
+        v = np.asarray(valid, dtype=bool)
+        if v.shape != t_all.shape:
+            raise ValidationError(f"valid must have shape {t_all.shape}, got {v.shape}")
+        use &= v
+    if use.sum() < MIN_SAMPLES:
+        raise ValidationError(f"need at least {MIN_SAMPLES} usable samples, got {int(use.sum())}")
+    ref_all = None
+    if reference is not None:
+        ref_all = np.asarray(reference, dtype=np.float64)
+        if ref_all.shape != t_all.shape:
+            raise ValidationError(f"reference must have shape {t_all.shape}, got {ref_all.shape}")
+        use &= np.isfinite(ref_all)
+    aux_all = {}
+    for k, v in (aux or {}).items():
+        a = np.asarray(v, dtype=np.float64)
+        if a.shape != t_all.shape:
+            raise ValidationError(
+                f"auxiliary channel {k!r} must have shape {t_all.shape}, got {a.shape}"
+            )
+        aux_all[k] = a
+    return t_all, y_all, chan_all, names, use, ref_all, aux_all
+
+
+def _leave_out_outliers(setup, st, use, aux_all):
+    """Outliers of the base fit's residual and of the channels left out: (st, use, notes)."""
+    notes: dict[tuple, dict[str, Any]] = {}
+    bad = outliers(st["fit0"].resid, st["chan_u"], st["t_u"])
+    if st["chan_u"] is None:
+        bad = edge_runs(bad, st["fit0"].resid)
+    n_data = int(bad.sum())
+    for x in aux_all.values():  # a firing shows in the angular channels too
+        xu = x[use]
+        ok = np.isfinite(xu)
+        if ok.all():
+            bad |= outliers(xu - np.median(xu), st["chan_u"], st["t_u"])
+    if bad.any():
+        use = use.copy()
+        use[np.flatnonzero(use)[bad]] = False
+        first = float(st["t_u"][bad][0])
+        st = setup.build(use)
+        notes[("outliers",)] = {
+            "name": "outliers",
+            "channel": None,
+            "note": f"{int(bad.sum())} samples left out of the analysis: more than "
+            f"{OUTLIER_SIGMAS:g} robust σ from the running median of the residual ({n_data}) or "
+            "of a candidate channel, and their neighbours (bursts, spikes, thruster firings: "
+            "no candidate models them; they stay in the data)",
+            "details": {"n": int(bad.sum()), "first": first},
+        }
+    return st, use, notes
+
+
 def close_loop(
     t: ArrayLike,
     y: ArrayLike,
@@ -299,37 +362,11 @@ def close_loop(
         candidate, base or signal model.
     """
     check_option("signal_model", signal_model, ("auto", "orbit", "none"))
-    t_all = np.asarray(t, dtype=np.float64)
-    y_all = np.asarray(y, dtype=np.float64)
-    if t_all.ndim != 1 or y_all.shape != t_all.shape:
-        raise ValidationError(
-            f"t and y must be 1-D of equal length, got {t_all.shape}, {y_all.shape}"
-        )
-    chan_all, names = _check_channels(t_all, channel, channel_names)
-    use = np.isfinite(y_all) & np.isfinite(t_all)
-    if valid is not None:
-        v = np.asarray(valid, dtype=bool)
-        if v.shape != t_all.shape:
-            raise ValidationError(f"valid must have shape {t_all.shape}, got {v.shape}")
-        use &= v
-    if use.sum() < MIN_SAMPLES:
-        raise ValidationError(f"need at least {MIN_SAMPLES} usable samples, got {int(use.sum())}")
     if not 0 < alpha < 1:
         raise ValidationError(f"alpha must be in (0, 1), got {alpha}")
-    ref_all = None
-    if reference is not None:
-        ref_all = np.asarray(reference, dtype=np.float64)
-        if ref_all.shape != t_all.shape:
-            raise ValidationError(f"reference must have shape {t_all.shape}, got {ref_all.shape}")
-        use &= np.isfinite(ref_all)
-    aux_all = {}
-    for k, v in (aux or {}).items():
-        a = np.asarray(v, dtype=np.float64)
-        if a.shape != t_all.shape:
-            raise ValidationError(
-                f"auxiliary channel {k!r} must have shape {t_all.shape}, got {a.shape}"
-            )
-        aux_all[k] = a
+    t_all, y_all, chan_all, names, use, ref_all, aux_all = _check_inputs(
+        t, y, valid, reference, aux, channel, channel_names
+    )
     aux_all, considered = screen_channels(aux_all, y_all, use, ref_all)
     considered = [*screened, *considered]
     if signal_model == "auto":
@@ -347,30 +384,7 @@ def close_loop(
         opts.get("orbit_period_fixed", False),
     )
     st = setup.build(use)
-    notes: dict[tuple, dict[str, Any]] = {}
-    bad = outliers(st["fit0"].resid, st["chan_u"], st["t_u"])
-    if st["chan_u"] is None:
-        bad = edge_runs(bad, st["fit0"].resid)
-    n_data = int(bad.sum())
-    for x in aux_all.values():  # a firing shows in the angular channels too
-        xu = x[use]
-        ok = np.isfinite(xu)
-        if ok.all():
-            bad |= outliers(xu - np.median(xu), st["chan_u"], st["t_u"])
-    if bad.any():
-        use = use.copy()
-        use[np.flatnonzero(use)[bad]] = False
-        first = float(st["t_u"][bad][0])
-        st = setup.build(use)
-        notes[("outliers",)] = {
-            "name": "outliers",
-            "channel": None,
-            "note": f"{int(bad.sum())} samples left out of the analysis: more than "
-            f"{OUTLIER_SIGMAS:g} robust σ from the running median of the residual ({n_data}) or "
-            "of a candidate channel, and their neighbours (bursts, spikes, thruster firings: "
-            "no candidate models them; they stay in the data)",
-            "details": {"n": int(bad.sum()), "first": first},
-        }
+    st, use, notes = _leave_out_outliers(setup, st, use, aux_all)
     fit0 = st["fit0"]
     opts.update(
         families=_families(builders, orbit_period, st["template"] is not None),
