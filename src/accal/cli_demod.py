@@ -53,6 +53,13 @@ def _check_period_samples(tau: float, fs: float, option: str = "--tau") -> None:
 
 
 PSD_HELP = "Noise PSD: 'microstar' (eq. 1 of Lenoir et al. 2013) or a CSV/Parquet table with columns f [Hz], S [m^2 s^-4 Hz^-1] (two-sided)."
+DEMOD_PSD_HELP = (
+    "Noise PSD behind sigma, Rd[k] and GLS: 'auto' estimates it from the run's own residual "
+    "(runs of at least 24 usable periods; shorter ones use eq. 1, with a warning); "
+    "'microstar' (eq. 1 of Lenoir et al. 2013) or a CSV/Parquet table with columns f [Hz], "
+    "S [m^2 s^-4 Hz^-1] (two-sided) give the a-priori budget.  Both levels are reported; "
+    "a factor > 2 between them is a warning."
+)
 
 
 @click.command("demod", context_settings=CONTEXT_SETTINGS)
@@ -67,7 +74,7 @@ PSD_HELP = "Noise PSD: 'microstar' (eq. 1 of Lenoir et al. 2013) or a CSV/Parque
 )
 @click.option("--method", type=click.Choice(["ls", "gls"]), default="ls", show_default=True)
 @click.option(
-    "--psd", default="microstar", show_default=True, metavar="microstar|FILE", help=PSD_HELP
+    "--psd", default="auto", show_default=True, metavar="auto|microstar|FILE", help=DEMOD_PSD_HELP
 )
 @click.option(
     "--signal-model", type=click.Choice(["mean", "affine"]), default="mean", show_default=True
@@ -228,6 +235,21 @@ def demod(
                 f"{o.outputs[0]}",
                 err=True,
             )
+            nz = s.get("noise") or {}
+            if nz.get("level_apriori") is not None:
+                src = "the run's residual" if nz["psd_used"] == "data" else nz["apriori"]
+                ratio = nz.get("sigma_ratio")
+                click.echo(
+                    f"{o.path}: sigma from the PSD of {src}; noise at 2/tau "
+                    f"{nz['level_apriori']:.3g} a-priori ({nz['apriori']}), "
+                    + (
+                        f"{nz['level_data']:.3g} data m/s^2/sqrt(Hz); sigma a-priori/data "
+                        f"= {ratio:.3g}"
+                        if ratio is not None
+                        else "data: not estimated"
+                    ),
+                    err=True,
+                )
             if "closure" in s:
                 c = s["closure"]
                 found = [

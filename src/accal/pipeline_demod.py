@@ -94,7 +94,11 @@ class DemodOptions:
     method : str
         ``"ls"`` or ``"gls"``.
     psd : str
-        ``"microstar"`` (eq. 1) or a path to a CSV/Parquet table with ``f``, ``S``.
+        ``"auto"`` (σ, Rd[k] and GLS from the noise PSD estimated from the run's own
+        residual when the run has at least
+        :data:`accal.estimators.demod.MIN_PERIODS_DATA_PSD` usable periods, else
+        eq. 1), ``"microstar"`` (eq. 1, the a-priori budget) or a path to a
+        CSV/Parquet table with ``f``, ``S`` (a-priori).
     signal_model : str
         ``"mean"`` or ``"affine"``.
     bias_model : str
@@ -133,7 +137,7 @@ class DemodOptions:
     tau: float
     mask: float
     method: str = "ls"
-    psd: str = "microstar"
+    psd: str = "auto"
     signal_model: str = "mean"
     bias_model: str = "affine"
     fmt: str = "parquet"
@@ -265,8 +269,17 @@ class RunInfo:
 # steps
 
 
+#: A-priori and empirical σ differing by more than this factor (either way) is a warning.
+NOISE_RATIO_WARN = 2.0
+#: Signal leakage (RMS over periods, in σ) above which ``summary_warnings`` tells.
+LEAKAGE_WARN = 0.3
+
+
 def load_psd(spec: str | None):
-    """``"microstar"``/None → eq. 1; anything else is a PSD table file (``f``, ``S``).
+    """The a-priori PSD: ``"microstar"``/``"auto"``/None → eq. 1; else a table file (``f``, ``S``).
+
+    With ``"auto"`` eq. 1 is the fall-back of a run too short for the PSD from the
+    data, and the reference the data's noise is compared with.
 
     Raises
     ------
@@ -276,7 +289,7 @@ def load_psd(spec: str | None):
     from accal.estimators.noise import as_psd
     from accal.io.rawlog import read_psd
 
-    if spec is None or str(spec).lower() == "microstar":
+    if spec is None or str(spec).lower() in ("microstar", "auto"):
         return as_psd(None)
     path = Path(spec)
     f, s = read_psd(path)
@@ -469,6 +482,7 @@ def estimate(path: Path, opts: DemodOptions, psd: Any) -> tuple[Any, RunInfo]:
             rest_tol=opts.rest_tol,
             bias_aux=opts.aux_channels,
             psd=psd,
+            noise="data" if str(opts.psd).lower() == "auto" else "report",
         )
     except ValidationError as exc:
         # a θ the file declared in another unit and accal converted: the declaration may
@@ -566,10 +580,6 @@ def summarise(
     mt = res.masked_time
     measured = float(np.median(mt))
     mismatch = abs(measured - opts.mask) > MASK_RTOL * max(opts.mask, 1.0 / res.fs)
-    scatter = {
-        ax: _scatter(np.asarray(getattr(res, f"a_{ax}")), np.asarray(getattr(res, f"sigma_{ax}")))
-        for ax in ("Y", "Z")
-    }
     out: dict[str, Any] = {
         "source": str(path),
         "source_path": str(Path(path).resolve()),
@@ -639,7 +649,9 @@ def summarise(
             "sigma": sigma_run,
             "units": "m/s^2 (plain mean of the kept periods; sigma at their own lags)",
         },
-        "scatter": scatter,
+        "noise": noise_summary(res, opts),
+        "consistency": consistency_summary(res),
+        "signal_leakage": leakage_summary(res),
     }
     if opts.sinusoid_period is not None:
         fits = {}
@@ -674,31 +686,90 @@ def summarise(
     return out
 
 
-def _scatter(a: np.ndarray, s: np.ndarray) -> dict[str, float]:
-    """Period-to-period scatter of ``a`` (``std(diff)/√2``), median σ and their ratio."""
-    n = a.size
-    sc = float(np.std(np.diff(a)) / np.sqrt(2.0)) if n > 2 else float("nan")
-    med = float(np.median(s)) if n else float("nan")
-    return {"scatter": sc, "median_sigma": med, "ratio": sc / med if n > 2 else float("nan")}
+def noise_summary(res: Any, opts: DemodOptions) -> dict[str, Any]:
+    """The a-priori and the empirical noise of a run (JSON-ready; issue 20).
+
+    Levels are ``sqrt(S(2/τ))`` [m s⁻² Hz⁻¹ᐟ²], where the per-period estimate takes
+    its noise (eq. 26, Fig. 3); ``sigma_ratio`` is the σ the a-priori PSD gives over
+    the σ the data's PSD gives, for the same estimator.
+    """
+    rep = getattr(res, "noise", None)
+    if rep is None:
+        return {"psd_used": "apriori", "apriori": opts.psd}
+    f2 = 2.0 / res.tau
+    fit = rep.fit
+    apriori = "microstar" if str(opts.psd).lower() == "auto" else opts.psd
+    return {
+        "psd_used": rep.source,
+        "apriori": apriori,
+        "reason": rep.reason or None,
+        "n_periods": rep.n_periods,
+        "f_level": f2,
+        "level_apriori": float(np.sqrt(rep.apriori(f2))),
+        "level_data": float(np.sqrt(fit.psd(f2))) if fit is not None else None,
+        "sigma_ratio": rep.sigma_ratio if fit is not None else None,
+        "psd_data": (
+            {"f": fit.nodes.tolist(), "S": fit.values.tolist()} if fit is not None else None
+        ),
+        "units": "levels m/s^2/sqrt(Hz) at f_level [Hz] = 2/tau (two-sided PSD); sigma_ratio: "
+        "sigma from the a-priori PSD / sigma from the data's PSD, same estimator; psd_data: "
+        "the PSD estimated from the residual, f [Hz], S [m^2/s^4/Hz] (usable as --psd FILE)",
+    }
+
+
+def consistency_summary(res: Any) -> dict[str, Any]:
+    """χ² of the run's residual against the PSD behind σ (replaces the old scatter/σ).
+
+    ``ratio`` = observed / expected periodogram of the per-period residual over
+    ``1/τ … 4/τ`` (the band that sets σ), expected under the PSD used: 1 within
+    ``scatter`` when that PSD describes the noise of the run.
+    """
+    rep = getattr(res, "noise", None)
+    if rep is None or not np.isfinite(rep.check_ratio):
+        return {"ratio": None}
+    return {
+        "test": "residual periodogram / its expectation under the PSD used (chi2/dof), "
+        "band 1/tau-4/tau",
+        "ratio": rep.check_ratio,
+        "scatter": rep.check_scatter,
+        "band": list(rep.band),
+    }
+
+
+def leakage_summary(res: Any) -> dict[str, Any]:
+    """Signal leakage (:func:`accal.estimators.demod.signal_leakage`) as a JSON-ready dict."""
+    from accal.estimators.demod import signal_leakage
+
+    lk = signal_leakage(res)
+    out: dict[str, Any] = {"n_periods": lk.n, "signal_model": res.signal_model}
+    for j, ax in enumerate(("Y", "Z")):
+        out[ax] = {
+            "rms": float(lk.rms[j]),
+            "ratio": float(lk.ratio[j]),
+            "max": float(lk.max[j]),
+        }
+    out["units"] = (
+        "m/s^2 (rms: RMS over periods of the estimated leakage of the signal's in-period "
+        "slope and curvature into a_Y, a_Z, noise removed; ratio: rms / RMS sigma; max: "
+        "largest |estimate|, noise included)"
+    )
+    return out
 
 
 def _summary_of_extended(summary: dict[str, Any], rows: Mapping[str, Any], model: str) -> None:
-    """Point the summary's mean and scatter at the extended model's per-period values.
+    """Point the summary's mean at the extended model's per-period values.
 
     The declared model's go to ``summary["declared"]`` (QA: after a closure the
-    summary's mean a_Y was still the declared model's, 23σ off, with scatter/σ 31.7,
-    while the periods held the corrected values, scatter/σ 1.05).  ``Rd`` and the
-    σ over T stay those of the declared demodulation.
+    summary's mean a_Y was still the declared model's, 23σ off, while the periods
+    held the corrected values).  ``Rd``, the σ over T and the noise report stay
+    those of the declared demodulation.
     """
-    summary["declared"] = {"mean": dict(summary["mean"]), "scatter": summary["scatter"]}
-    scatter = {}
+    summary["declared"] = {"mean": dict(summary["mean"])}
     for ax in ("Y", "Z"):
         a = np.asarray(rows[f"a_{ax}"], dtype=np.float64)
         s = np.asarray(rows[f"sigma_{ax}"], dtype=np.float64)
         ok = np.isfinite(a) & np.isfinite(s)
         summary["mean"][f"a_{ax}"] = float(np.mean(a[ok])) if ok.any() else float("nan")
-        scatter[ax] = _scatter(a[ok], s[ok])
-    summary["scatter"] = scatter
     summary["mean"]["model"] = model
 
 
@@ -838,6 +909,7 @@ def summary_warnings(summary: dict[str, Any]) -> tuple[str, ...]:
             f"the rotations move by {shift:+.9g} s from one period to the next: {what} "
             f"(or fix the time column){leak_text}"
         )
+    w += _noise_warnings(summary)
     rs = summary["input"].get("resample")
     if rs:
         held = rs.get("n_end_held", 0)
@@ -848,6 +920,45 @@ def summary_warnings(summary: dict[str, Any]) -> tuple[str, ...]:
             + (f", {held} grid point after the last sample took its value" if held else "")
         )
     return tuple(w)
+
+
+def _noise_warnings(summary: dict[str, Any]) -> list[str]:
+    """Warnings on the noise (a-priori vs data, fall-back) and on the signal leakage."""
+    w: list[str] = []
+    nz = summary.get("noise") or {}
+    auto = str(summary["options"].get("psd")).lower() == "auto"
+    ratio = nz.get("sigma_ratio")
+    if auto and nz.get("psd_used") == "apriori" and nz.get("reason"):
+        w.append(
+            f"sigma from the a-priori PSD ({nz['apriori']}), not from the data: "
+            f"{nz['reason']}; check it against the instrument's noise"
+        )
+    if ratio is not None and not 1 / NOISE_RATIO_WARN <= ratio <= NOISE_RATIO_WARN:
+        what = (
+            "sigma, Rd and GLS use the PSD from the data"
+            if nz.get("psd_used") == "data"
+            else f"sigma uses --psd {nz['apriori']} as asked: it is {ratio:.3g} x what the "
+            "run's noise gives (drop --psd to use the data's)"
+        )
+        w.append(
+            f"the noise of this run differs from the a-priori PSD ({nz['apriori']}) by more "
+            f"than a factor {NOISE_RATIO_WARN:g}: sigma a-priori / sigma data = {ratio:.3g} "
+            f"(noise at 2/tau: {nz['level_apriori']:.3g} a-priori, {nz['level_data']:.3g} "
+            f"data, m/s^2/sqrt(Hz)); {what}"
+        )
+    lk = summary.get("signal_leakage") or {}
+    worst = max((lk[ax]["ratio"] for ax in ("Y", "Z") if ax in lk), default=float("nan"))
+    if np.isfinite(worst) and worst > LEAKAGE_WARN:
+        hint = (
+            "use --signal-model affine"
+            if lk.get("signal_model") == "mean"
+            else "a shorter --tau would reduce it"
+        )
+        w.append(
+            f"the signal's variation within a period leaks into a_Y/a_Z at {worst:.2g} sigma "
+            f"(RMS over periods, --signal-model {lk.get('signal_model')}), not in sigma; {hint}"
+        )
+    return w
 
 
 def summary_markdown(s: dict[str, Any]) -> str:
@@ -891,16 +1002,13 @@ def summary_markdown(s: dict[str, Any]) -> str:
             else f"{e(s['sigma_T']['standard']['sigma'])} m/s² |"
         ),
         f"| mean a_Y, a_Z{_of_model(s)} | {e(s['mean']['a_Y'])}, {e(s['mean']['a_Z'])} m/s² |",
-        f"| scatter/σ (Y, Z){_of_model(s)} | {e(s['scatter']['Y']['ratio'])}, "
-        f"{e(s['scatter']['Z']['ratio'])} |",
+        *_noise_markdown(s, e),
     ]
     if "declared" in s:
         d = s["declared"]
         lines += [
             f"| mean a_Y, a_Z (declared model) | {e(d['mean']['a_Y'])}, {e(d['mean']['a_Z'])} "
             "m/s² |",
-            f"| scatter/σ (Y, Z) (declared model) | {e(d['scatter']['Y']['ratio'])}, "
-            f"{e(d['scatter']['Z']['ratio'])} |",
         ]
     if "sinusoid" in s:
         sn = s["sinusoid"]
@@ -913,6 +1021,34 @@ def summary_markdown(s: dict[str, Any]) -> str:
                 f" m/s², cov(α,β) = {e(f['cov'][0][1])}{off} |"
             )
     return "\n".join(lines) + "\n"
+
+
+def _noise_markdown(s: dict[str, Any], e: Callable[[Any], str]) -> list[str]:
+    """Rows of the summary table on the noise, the consistency check and the leakage."""
+    nz = s.get("noise") or {}
+    rows = []
+    if "level_apriori" in nz:
+        used = "the run's residual (data)" if nz["psd_used"] == "data" else nz["apriori"]
+        why = f" ({nz['reason']})" if nz.get("reason") and nz["psd_used"] != "data" else ""
+        rows += [
+            f"| σ, Rd, GLS from the PSD of | {used}{why} |",
+            f"| noise at 2/τ: a-priori ({nz['apriori']}), data [m/s²/√Hz] | "
+            f"{e(nz['level_apriori'])}, {e(nz['level_data'])} |",
+            f"| σ a-priori / σ data (same estimator) | {e(nz['sigma_ratio'])} |",
+        ]
+    c = s.get("consistency") or {}
+    if c.get("ratio") is not None:
+        rows.append(
+            f"| residual power / expected under the PSD used, {e(c['band'][0])}–"
+            f"{e(c['band'][1])} Hz (χ²/dof; 1 ± {e(c['scatter'])}) | {e(c['ratio'])} |"
+        )
+    lk = s.get("signal_leakage") or {}
+    if "Y" in lk:
+        rows.append(
+            f"| in-period signal leakage, RMS/σ (Y, Z; `{lk['signal_model']}` model) | "
+            f"{e(lk['Y']['ratio'])}, {e(lk['Z']['ratio'])} |"
+        )
+    return rows
 
 
 def _of_model(s: dict[str, Any]) -> str:
@@ -1093,7 +1229,8 @@ def process_run(
     plots: list[Path] = []
     if opts.close_loop:
         step = info.step if info.resample is not None else None
-        closure, extended, plots = close_run(path, opts, targets[0].parent, step=step, psd=psd)
+        used = res.noise.used if getattr(res, "noise", None) is not None else psd
+        closure, extended, plots = close_run(path, opts, targets[0].parent, step=step, psd=used)
         rows, units = apply_closure(rows, units, extended)
         summary["closure"] = {
             k: closure[k] for k in ("effects", "unexplained", "rms_before", "rms_after", "model")
@@ -1183,8 +1320,9 @@ def close_run(
         With ``opts.resample``: the grid step the demodulation used [s]; default
         :func:`accal.estimators.resample.nominal_step` of the run.
     psd : PSD, optional
-        The noise model already loaded from ``opts.psd`` (:func:`load_psd`), for the
-        per-period sigmas; loaded here when not given.
+        The noise model of the demodulation (with ``--psd auto`` the PSD estimated
+        from the run), for the per-period sigmas; made here when not given
+        (``--psd auto``: by demodulating the run once).
 
     Returns
     -------
@@ -1199,6 +1337,11 @@ def close_run(
     from accal.closure.report import to_markdown
     from accal.io.rawlog import read_rawlog
 
+    if psd is None and str(opts.psd).lower() == "auto":  # the PSD from the data, as demod
+        res0, _ = estimate(path, opts, load_psd(opts.psd))
+        psd = res0.noise.used if res0.noise is not None else load_psd(opts.psd)
+    elif psd is None:
+        psd = load_psd(opts.psd)
     series = read_rawlog(path)
     time, valid = series.time, series.valid
     cols = {
@@ -1223,24 +1366,38 @@ def close_run(
     # lagged coupling to one is not (QA: with temp2 declared, a 120 s coupling to it
     # went unreported and a_Y was off by up to 76σ)
     aux = {k: v for k, v in chans.items() if np.isfinite(v).any() and np.ptp(v[np.isfinite(v)]) > 0}
-    dc = close_loop_demod(
-        time,
-        (cols["m_y"], cols["m_z"]),
-        theta,
-        valid,
-        tau=opts.tau,
-        signal_model=opts.signal_model,
-        bias_model="affine",
-        bias_aux=bias_aux or None,
-        aux=aux or None,
-        alpha=opts.alpha,
-        rest_tol=opts.rest_tol,
-        # sigmas before/after with the demodulation's own noise model (--psd)
-        noise_psd=psd if psd is not None else load_psd(opts.psd),
-    )
-    res, periods = dc
+
+    def closure(noise_psd: Any) -> Any:
+        return close_loop_demod(
+            time,
+            (cols["m_y"], cols["m_z"]),
+            theta,
+            valid,
+            tau=opts.tau,
+            signal_model=opts.signal_model,
+            bias_model="affine",
+            bias_aux=bias_aux or None,
+            aux=aux or None,
+            alpha=opts.alpha,
+            rest_tol=opts.rest_tol,
+            # sigmas before/after with the demodulation's own noise model (--psd)
+            noise_psd=noise_psd,
+        )
+
+    res, periods = closure(psd)
+    psd_after = psd
+    if str(opts.psd).lower() == "auto" and res.effect_columns.shape[1]:
+        # the PSD from the data was estimated on the declared model's residual, which
+        # holds the effects found: estimate it again without them and redo the closure
+        # with it (issue 20; QA: an undeclared 2e-8 temperature coupling made sigma 16x
+        # the error)
+        psd_after = _psd_without_effects(res, time, cols, theta, valid, bias_aux, opts, psd)
+        if psd_after is not psd:
+            res, periods = closure(psd_after)
     if opts.method == "gls":  # also with no effect: "before" and "after" are GLS values
-        periods = _gls_after(res, periods, time, cols, theta, valid, bias_aux, opts, psd)
+        periods = _gls_after(
+            res, periods, time, cols, theta, valid, bias_aux, opts, psd, psd_after=psd_after
+        )
     entry = res.to_dict()
     entry["method"] = opts.method
     entry["model"] = "+".join(["declared", *periods.effects])
@@ -1276,6 +1433,48 @@ def change_statistics(table: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
+def _effects_model(res: Any) -> tuple[np.ndarray, np.ndarray]:
+    """The closure's fitted effects on ``(m_y, m_z)`` [m s⁻²] (0 when none was found)."""
+    k = res.effect_columns.shape[1]  # an effect may have a column per axis
+    gamma = np.asarray(res.coef[res.coef.size - k :], dtype=np.float64)
+    model = np.nan_to_num(res.effect_columns) @ gamma
+    return model[0::2], model[1::2]
+
+
+def _psd_without_effects(
+    res: Any,
+    time: np.ndarray,
+    cols: dict[str, np.ndarray],
+    theta: np.ndarray,
+    valid: Any,
+    bias_aux: dict[str, np.ndarray],
+    opts: DemodOptions,
+    psd: Any,
+) -> Any:
+    """The PSD from the data (``--psd auto``) of the run with the closure's effects removed.
+
+    ``psd`` itself when the run is too short for it.
+    """
+    from accal.estimators.demod import demodulate
+
+    my, mz = _effects_model(res)
+    r = demodulate(
+        time,
+        cols["m_y"] - my,
+        cols["m_z"] - mz,
+        theta,
+        tau=opts.tau,
+        mask=opts.mask,
+        signal_model=opts.signal_model,
+        bias_aux=bias_aux or None,
+        psd=load_psd(opts.psd),
+        valid=valid,
+        rest_tol=opts.rest_tol,
+        noise="data",
+    )
+    return r.noise.used if r.noise is not None and r.noise.source == "data" else psd
+
+
 def _gls_after(
     res: Any,
     periods: Any,
@@ -1286,6 +1485,8 @@ def _gls_after(
     bias_aux: dict[str, np.ndarray],
     opts: DemodOptions,
     psd: Any,
+    *,
+    psd_after: Any = None,
 ) -> Any:
     """The extended model's per-period values with the declared ``--method gls``.
 
@@ -1305,10 +1506,9 @@ def _gls_after(
     from accal.estimators.demod import demodulate
 
     k = res.effect_columns.shape[1]  # an effect may have a column per axis
-    gamma = np.asarray(res.coef[res.coef.size - k :], dtype=np.float64)
-    model = np.nan_to_num(res.effect_columns) @ gamma
+    model_y, model_z = _effects_model(res)
 
-    def gls(m_y: np.ndarray, m_z: np.ndarray) -> Any:
+    def gls(m_y: np.ndarray, m_z: np.ndarray, noise_psd: Any = psd) -> Any:
         return demodulate(
             time,
             m_y,
@@ -1319,16 +1519,21 @@ def _gls_after(
             method="gls",
             signal_model=opts.signal_model,
             bias_aux=bias_aux or None,
-            psd=psd if psd is not None else load_psd(opts.psd),
+            psd=noise_psd if noise_psd is not None else load_psd(opts.psd),
             valid=valid,
             rest_tol=opts.rest_tol,
         )
 
-    # declared (as the periods rows have it) and with the effects subtracted
+    # declared (as the periods rows have it) and with the effects subtracted (with
+    # --psd auto: under the PSD of the run without the effects)
     before = gls(cols["m_y"], cols["m_z"])
     # nothing found: the declared GLS values (QA: the closure's LS values were written
     # as "after", 0.6σ from "before", with a change of σ 0)
-    after = gls(cols["m_y"] - model[0::2], cols["m_z"] - model[1::2]) if k else before
+    after = (
+        gls(cols["m_y"] - model_y, cols["m_z"] - model_z, psd_after if psd_after else psd)
+        if k
+        else before
+    )
     new: dict[str, np.ndarray] = {}
     for kind, r in (("before", before), ("after", after)):
         where = {int(p): i for i, p in enumerate(r.period_index)}

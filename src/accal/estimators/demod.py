@@ -52,16 +52,22 @@ from ..errors import ValidationError, check_option
 from .design import CalibrationPattern, design_pattern, rest_mask
 from .noise import (
     PSD,
+    PSDFit,
+    ResidualSpectrum,
     as_psd,
     cov_linear,
+    fit_residual_psd,
     precision_linear_freq,
+    psd_nodes,
     regularised_autocov,
+    residual_kernel,
     structure_function,
 )
 
 __all__ = [
     "DemodChunk",
     "DemodResult",
+    "NoiseReport",
     "BudgetResult",
     "SinusoidFit",
     "demodulate",
@@ -71,13 +77,71 @@ __all__ = [
     "tau_scan",
     "sigma_mean",
     "fit_sinusoid",
+    "signal_leakage",
+    "SignalLeakage",
     "REQUIRED_COLUMNS",
+    "MIN_PERIODS_DATA_PSD",
 ]
 
 #: Columns :func:`demodulate_table` needs.
 REQUIRED_COLUMNS = ("time", "m_y", "m_z", "theta")
 
 _F64 = NDArray[np.float64]
+
+
+#: Fewest kept periods for σ from the data (``noise="data"``, ``accal demod --psd auto``):
+#: a shorter run keeps the a-priori PSD.  With 24 periods (4 h at τ = 600 s) the σ from
+#: the data scatters by ~6 % from run to run (docs/demod.md, "σ from the data").
+MIN_PERIODS_DATA_PSD = 24
+#: Distinct rest-mask layouts whose residual kernels are computed for the PSD estimate;
+#: the periods of further layouts (gaps, jitter) are left out of it.
+MAX_PSD_LAYOUTS = 24
+
+
+@dataclass(frozen=True)
+class NoiseReport:
+    """The a-priori and the empirical noise of a demodulation (issue 20).
+
+    Attributes
+    ----------
+    source : str
+        ``"data"`` when σ, Rd[k] and the GLS weights use the PSD estimated from the
+        run's residual, ``"apriori"`` when they use the given PSD.
+    reason : str
+        Why the a-priori PSD was used ('' when it was asked for, or for ``"data"``).
+    fit : PSDFit or None
+        The PSD estimated from the residual (None when it could not be).
+    apriori : PSD
+        The a-priori PSD (eq. 1 or a table) [m² s⁻⁴ Hz⁻¹].
+    used : PSD
+        The PSD behind σ, Rd[k] and GLS.
+    sigma_ratio : float
+        σ that the a-priori PSD gives / σ that the data PSD gives, for the same
+        estimator weights (mean over the kept periods of Rd[0], square-rooted);
+        NaN without a fit.
+    check_ratio : float
+        Consistency check: observed / expected (under ``used``) periodogram of the
+        residual in ``band``; 1 within ``check_scatter`` when the PSD used describes
+        the noise (a χ²/dof).
+    check_scatter : float
+        1-σ scatter of ``check_ratio`` for χ² bins (``sqrt(2/dof)``).
+    band : tuple of float
+        Frequencies of the check [Hz]: ``1/τ … 4/τ``, where the per-period σ is set
+        (eq. 26, Fig. 3).
+    n_periods : int
+        Periods the residual spectrum rests on.
+    """
+
+    source: str
+    reason: str
+    fit: PSDFit | None
+    apriori: Any
+    used: Any
+    sigma_ratio: float = float("nan")
+    check_ratio: float = float("nan")
+    check_scatter: float = float("nan")
+    band: tuple[float, float] = (float("nan"), float("nan"))
+    n_periods: int = 0
 
 
 @dataclass(frozen=True)
@@ -144,6 +208,13 @@ class DemodResult:
     rotation_shift_steady : bool
         True when (nearly) every period's layout is shifted by ``rotation_shift``
         from the one before: the pattern then repeats every ``τ + d/fs``.
+    noise : NoiseReport or None
+        The a-priori and the empirical noise (None with ``noise="apriori"``).
+    shape_gain : ndarray, shape (n, 2, 2)
+        Response of ``(a_Y, a_Z)`` to an in-period signal ``u`` and ``u² − ⟨u²⟩``
+        on the same axis, minus the shape's mean over the period (which the true
+        per-period mean holds), with ``u`` the time in periods from ``t_mid``: the
+        leakage of a signal's slope and curvature (:func:`signal_leakage`).
     """
 
     period_index: NDArray[np.int64]
@@ -177,6 +248,8 @@ class DemodResult:
     rotation_shift: float = float("nan")
     pattern_periods: int = 0
     rotation_shift_steady: bool = False
+    noise: NoiseReport | None = None
+    shape_gain: _F64 = field(default_factory=lambda: np.empty((0, 2, 2)))
 
     @property
     def max_leakage(self) -> float:
@@ -817,6 +890,7 @@ class _Setup:
     r_reg: NDArray | None
     n_lags: int
     kernels: list[NDArray] = field(default_factory=list)
+    kernel_other: NDArray | None = None  # lag-0 kernel of the other PSD (NoiseReport)
 
     @property
     def u(self) -> NDArray:
@@ -866,6 +940,79 @@ def _scan_block(st: _Setup, blk: _Block) -> tuple[NDArray, NDArray, NDArray]:
     hasp = np.any(atrest & (c < -0.999), axis=1)
     keep = (n_used >= st.need) & has0 & hasp
     return n_used, keep, _leakage(va, vb, c * m, s * m, m)
+
+
+class _ResidualSpectra:
+    """Periodogram of the per-period residual, grouped by rest-mask layout (pass 1).
+
+    The residual is that of a least-squares fit, per period and on the unmasked
+    samples, of eq. 17 with an affine signal (eq. 19) and the affine bias plus
+    the auxiliary channels (``Va = V̂b = [1, u]``): a signal that varies within
+    the period (a slope) does not enter the noise estimate, whatever
+    ``signal_model``.  A quadratic term in either would take what is left of the
+    noise around ``2/τ``, the band that sets σ (eq. 26): a period of ``q``
+    unmasked samples has ~6 degrees of freedom per axis below ``4/τ``.  What the fit removes from the noise is in
+    the kernel (:func:`accal.estimators.noise.residual_kernel`), computed once per
+    layout (the first period of the layout stands for its auxiliary channels).
+    """
+
+    def __init__(self, q: int, fs: float) -> None:
+        self.q, self.fs = q, fs
+        top = q // 2
+        low = np.arange(1, min(32, top) + 1)
+        high = np.round(np.geomspace(33, top, 96)).astype(np.int64) if top > 33 else low[:0]
+        self.bins = np.unique(np.concatenate([low, high]))
+        self.groups: dict[bytes, list[Any]] = {}
+        self.skipped = 0
+
+    def add(self, st: _Setup, blk: _Block, keep: NDArray) -> None:
+        m, c, s, _, vb, _ = _block_basis(st, blk)
+        ones = np.ones_like(m)
+        va = np.stack([ones, ones * st.u, ones * (st.u**2 - np.mean(st.u**2))], axis=2)
+        x = _design_joint(va, vb, c, s, m)
+        a = blk.arrs
+        ok = a["valid"].astype(bool)
+        data = np.concatenate([np.where(ok, a["m_y"], 0.0), np.where(ok, a["m_z"], 0.0)], axis=1)
+        mm = np.concatenate([m, m], axis=1)
+        data = data * mm
+        n = np.einsum("pqa,pqb->pab", x, x)
+        sol, good = _batched_solve(n, np.einsum("pqa,pq->pa", x, data)[..., None])
+        use = keep & good
+        if not use.any():
+            return
+        r = (data - np.einsum("pqa,pa->pq", x, np.nan_to_num(sol[..., 0]))) * mm
+        q = st.q
+        spec = np.fft.rfft(r[:, :q], axis=1)[:, self.bins]
+        power = np.abs(spec) ** 2
+        spec = np.fft.rfft(r[:, q:], axis=1)[:, self.bins]
+        power += np.abs(spec) ** 2
+        cm, sm = np.round(c * m, 6), np.round(s * m, 6)
+        for i in np.flatnonzero(use):
+            key = m[i].astype(bool).tobytes() + cm[i].tobytes() + sm[i].tobytes()
+            g = self.groups.get(key)
+            if g is None:
+                if len(self.groups) >= MAX_PSD_LAYOUTS:
+                    self.skipped += 1
+                    continue
+                g = self.groups[key] = [0, np.zeros(self.bins.size), x[i], m[i]]
+            g[0] += 1
+            g[1] += power[i]
+
+    @property
+    def n_periods(self) -> int:
+        return sum(g[0] for g in self.groups.values())
+
+    def spectrum(self) -> ResidualSpectrum | None:
+        if not self.groups:
+            return None
+        f_grid, kern, power = None, 0.0, 0.0
+        for count, pw, x, m in self.groups.values():
+            f_grid, k = residual_kernel(x, m, self.bins, self.fs)
+            kern = kern + count * k
+            power = power + pw
+        return ResidualSpectrum(
+            self.bins * self.fs / self.q, power, f_grid, kern, self.n_periods, n_axes=2
+        )
 
 
 #: Period lags at which rotation layouts are compared (a pattern of up to this many τ).
@@ -983,6 +1130,12 @@ def _estimate_block(st: _Setup, blk: _Block, solver: str, cache: dict) -> dict[s
     if pa == 2:
         unit[[1, 3]] = 1.0 / tau  # slope = coefficient/τ (normalised time)
     rd0 = cov0[:, 0, 0].copy()
+    rd0_other = (
+        _lag_cov(spec[:, :1], spec[:, :1], st.kernel_other)[:, 0, 0]
+        if st.kernel_other is not None
+        else None
+    )
+    gain = _shape_gain(st, w, c, s, pa)
     est = est * unit
     cov0 = cov0 * unit[None, :, None] * unit[None, None, :]
     sig = np.sqrt(np.maximum(np.einsum("paa->pa", cov0), 0.0))
@@ -992,6 +1145,7 @@ def _estimate_block(st: _Setup, blk: _Block, solver: str, cache: dict) -> dict[s
         "keep": keep,
         "spec1": spec[:, :1],
         "rd0": rd0,
+        "rd0_other": rd0_other,
         "n_masked": float(m.size - m.sum()),
         "n_samples": int(m.size),
         "rows": {
@@ -1005,8 +1159,25 @@ def _estimate_block(st: _Setup, blk: _Block, solver: str, cache: dict) -> dict[s
             "n_used": n_used[kk],
             "leakage": leak[kk],
             "cov": cov0[kk],
+            "gain": gain[kk],
         },
     }
+
+
+def _shape_gain(st: _Setup, w: NDArray, c: NDArray, s: NDArray, pa: int) -> NDArray:
+    """(P, 2, 2): response of (a_Y, a_Z) to ``u`` and ``u² − ⟨u²⟩`` minus their period means.
+
+    The signal of eq. 4 on its own axis, ``m_y = c·h, m_z = −s·h`` (Y) and
+    ``m_y = s·h, m_z = c·h`` (Z), through the estimator's weights; the true
+    per-period mean of ``h`` (0 for ``u``; ``⟨u²⟩`` removed) is subtracted.
+    """
+    u = st.u
+    out = np.empty((w.shape[0], 2, 2))
+    for j, h in enumerate((u, u**2 - np.mean(u**2))):
+        for ax, (top, bot) in enumerate(((c, -s), (s, c))):
+            x = np.concatenate([top * h, bot * h], axis=1)
+            out[:, ax, j] = np.einsum("pq,pq->p", w[:, :, ax * pa], x)
+    return out
 
 
 def _chunks_of(source: Callable[[], Iterable[DemodChunk]]) -> Iterator[DemodChunk]:
@@ -1073,6 +1244,8 @@ def demodulate_stream(
     min_fraction: float = 0.5,
     n_lags: int = 5,
     leak_tol: float = 1e-9,
+    noise: str = "apriori",
+    min_periods_data: int = MIN_PERIODS_DATA_PSD,
 ) -> DemodResult:
     """Demodulate a record delivered in chunks, in memory bounded by the chunk size.
 
@@ -1100,6 +1273,8 @@ def demodulate_stream(
         Sampling frequency [Hz]; by default ``1/median step`` of the first chunk.
     method, signal_model, psd, solver, rest_tol, settle, min_fraction, n_lags, leak_tol
         As :func:`demodulate`.
+    noise, min_periods_data
+        As :func:`demodulate`.
     bias_aux : sequence of str
         Names of the auxiliary channels (keys of :attr:`DemodChunk.aux`) added
         to the bias basis (eq. 18's temperature).
@@ -1123,9 +1298,11 @@ def demodulate_stream(
     check_option("method", method, ("ls", "gls"))
     check_option("signal_model", signal_model, ("mean", "affine"))
     check_option("solver", solver, ("auto", "eq14", "joint"))
+    check_option("noise", noise, ("apriori", "report", "data"))
     tau, mask = float(tau), float(mask)
     aux_names = tuple(bias_aux)
     psd = as_psd(psd)
+    spectra: _ResidualSpectra | None = None
     # pass 1: checks, rest masks, usable periods, eq. 16 leakage
     chk = _Checker(aux_names, tau, mask, fs)
     cutter = None
@@ -1139,6 +1316,8 @@ def demodulate_stream(
         if blk is None:
             return
         n_used, keep, leak = _scan_block(st, blk)
+        if spectra is not None:
+            spectra.add(st, blk, keep)
         sh, last_spec = _layout_shifts(blk.rest, last_spec)
         for lag, d in sh.items():
             shifts[lag].append(d)
@@ -1167,6 +1346,8 @@ def demodulate_stream(
                 r_reg=None,
                 n_lags=int(n_lags),
             )
+            if noise != "apriori":
+                spectra = _ResidualSpectra(q, chk.fs)
         scan(cutter.feed(arrs))
     if cutter is None:
         raise ValidationError("need at least 3 samples, got 0")
@@ -1188,8 +1369,13 @@ def demodulate_stream(
         used = "eq14" if (not aux_names and leak_max <= leak_tol) else "joint"
     else:
         used = solver
-    st.d = structure_function(psd, (st.n_lags + 2) * st.q, st.fs)
+    report = _noise_report(spectra, psd, noise, int(min_periods_data), tau, st.fs)
+    used_psd = psd if report is None else report.used
+    st.d = structure_function(used_psd, (st.n_lags + 2) * st.q, st.fs)
     st.kernels = [_lag_kernel(st.d, st.q, k) for k in range(st.n_lags + 1)]
+    if report is not None and report.fit is not None:
+        other = report.apriori if report.source == "data" else report.fit.psd
+        st.kernel_other = _lag_kernel(structure_function(other, st.q + 1, st.fs), st.q, 0)
     if used == "gls-eq17":
         st.r_reg, _ = regularised_autocov(st.d, st.q)
 
@@ -1197,6 +1383,7 @@ def demodulate_stream(
     rows: list[dict[str, NDArray]] = []
     rd_sum = np.zeros(st.n_lags + 1)
     rd_cnt = np.zeros(st.n_lags + 1, dtype=np.int64)
+    rd_other = [0.0]
     prev_w = np.zeros((0, 1, 2, _fft_length(st.q) // 2 + 1), complex)
     prev_keep = np.zeros(0, bool)
     n_masked, n_samples = 0.0, 0
@@ -1212,6 +1399,8 @@ def demodulate_stream(
         rows.append(r["rows"])
         keep = r["keep"]
         rd_sum[0] += float(np.sum(r["rd0"][keep]))
+        if r["rd0_other"] is not None:
+            rd_other[0] += float(np.sum(r["rd0_other"][keep]))
         rd_cnt[0] += int(keep.sum())
         n_masked += r["n_masked"]
         n_samples += r["n_samples"]
@@ -1279,7 +1468,69 @@ def demodulate_stream(
         rotation_shift=rotation_shift,
         pattern_periods=pattern_periods,
         rotation_shift_steady=steady,
+        noise=_with_sigma_ratio(report, rd_sum[0], rd_other[0]),
+        shape_gain=cat["gain"],
     )
+
+
+def _noise_report(
+    spectra: _ResidualSpectra | None,
+    apriori: PSD,
+    noise: str,
+    min_periods: int,
+    tau: float,
+    fs: float,
+) -> NoiseReport | None:
+    """Estimate the PSD from the residual spectrum and decide which PSD is used."""
+    if spectra is None:
+        return None
+    spec = spectra.spectrum()
+    n = 0 if spec is None else spec.n_segments
+    fit = None
+    reason = ""
+    if spec is None or n < min_periods or spectra.q < 8:
+        reason = f"{n} period(s) for the noise estimate, fewer than {min_periods}" + (
+            f" ({spectra.skipped} in rest-mask layouts beyond the first {MAX_PSD_LAYOUTS})"
+            if spectra.skipped
+            else ""
+        )
+        if spectra.q < 8:
+            reason = f"{spectra.q} samples per period are too few for a noise spectrum"
+    else:
+        fit = fit_residual_psd(spec, psd_nodes(tau, fs))
+    use_data = noise == "data" and fit is not None
+    used = fit.psd if use_data else apriori
+    band = (1.0 / tau, 4.0 / tau)
+    ratio = scatter = float("nan")
+    if spec is not None:
+        ratio = spec.power_ratio(used, band)
+        nb = int(np.count_nonzero((spec.f_bins >= band[0]) & (spec.f_bins <= band[1])))
+        scatter = float(np.sqrt(2.0 / max(spec.dof * nb, 1)))
+    if noise == "report":
+        reason = "a-priori PSD asked for"
+    return NoiseReport(
+        source="data" if use_data else "apriori",
+        reason=reason,
+        fit=fit,
+        apriori=apriori,
+        used=used,
+        check_ratio=ratio,
+        check_scatter=scatter,
+        band=band,
+        n_periods=n,
+    )
+
+
+def _with_sigma_ratio(
+    report: NoiseReport | None, rd_used: float, rd_other: float
+) -> NoiseReport | None:
+    """``report`` with ``sigma_ratio`` = σ(a-priori PSD)/σ(data PSD) for the same weights."""
+    if report is None or report.fit is None or not (rd_used > 0 and rd_other > 0):
+        return report
+    from dataclasses import replace
+
+    r = rd_other / rd_used if report.source == "data" else rd_used / rd_other
+    return replace(report, sigma_ratio=float(np.sqrt(r)))
 
 
 def demodulate(
@@ -1301,6 +1552,8 @@ def demodulate(
     n_lags: int = 5,
     leak_tol: float = 1e-9,
     valid: ArrayLike | None = None,
+    noise: str = "apriori",
+    min_periods_data: int = MIN_PERIODS_DATA_PSD,
 ) -> DemodResult:
     """Demodulate accelerometer data taken on a rotating platform, period by period.
 
@@ -1341,6 +1594,16 @@ def demodulate(
         False for missing samples (e.g. gaps left by resampling): masked like
         rotation samples; they may hold NaN (also in θ, which then masks their
         neighbours too, since θ̇ and θ̈ cannot be evaluated there).
+    noise : {"apriori", "report", "data"}
+        ``"apriori"``: σ, Rd[k] and GLS from ``psd`` (eq. 21, eq. 25), nothing else.
+        ``"report"``: the same, and the noise PSD is also estimated from the
+        run's residual (:class:`_ResidualSpectra`,
+        :func:`accal.estimators.noise.fit_residual_psd`) and compared
+        (``result.noise``).  ``"data"``: σ, Rd[k] and GLS from that estimate when
+        at least ``min_periods_data`` periods carry it, else from ``psd``
+        (``result.noise.reason`` says why).
+    min_periods_data : int
+        Fewest periods for the PSD from the data (:data:`MIN_PERIODS_DATA_PSD`).
 
     Returns
     -------
@@ -1375,6 +1638,8 @@ def demodulate(
         min_fraction=min_fraction,
         n_lags=n_lags,
         leak_tol=leak_tol,
+        noise=noise,
+        min_periods_data=min_periods_data,
     )
 
 
@@ -1454,6 +1719,83 @@ def sigma_mean(rd: ArrayLike, n: int, *, index: ArrayLike | None = None) -> floa
         return float("nan")
     var = (n * rd[0] + 2.0 * np.sum(counts * rd[k])) / n**2
     return float(np.sqrt(var))
+
+
+@dataclass(frozen=True)
+class SignalLeakage:
+    """How much a signal's variation within a period leaks into the per-period values.
+
+    Attributes
+    ----------
+    rms : ndarray, shape (2,)
+        RMS over the periods of the estimated leakage into ``(a_Y, a_Z)``, the noise of
+        the estimate removed (0 when it is all noise) [m s⁻²].
+    rms_sigma : ndarray, shape (2,)
+        RMS of the reported σ over the same periods [m s⁻²].
+    ratio : ndarray, shape (2,)
+        ``rms / rms_sigma``.
+    max : ndarray, shape (2,)
+        Largest ``|leakage|`` estimate of a period (noise included) [m s⁻²].
+    n : int
+        Periods with both neighbours kept (the estimate needs them).
+    """
+
+    rms: _F64
+    rms_sigma: _F64
+    ratio: _F64
+    max: _F64
+    n: int
+
+
+def signal_leakage(res: DemodResult) -> SignalLeakage:
+    """Leakage of the signal's in-period slope and curvature into each period's value.
+
+    Within period ``i`` the signal is ``a(u) ≈ ā + b u + c (u² − ⟨u²⟩)`` (``u`` in
+    periods from ``t_mid``); the estimator returns ``ā + g_b b + g_c c``
+    (``res.shape_gain``; 0 for a layout symmetric about ``t_mid`` and an exact
+    model, eqs. 18–19).  ``b`` and ``c`` are estimated from the neighbouring
+    periods' values, ``b = (a_{i+1} − a_{i−1})/2``, ``c = (a_{i+1} − 2a_i + a_{i−1})/2``
+    (central differences: exact for a quadratic signal), so the leakage estimate
+    ``L_i = g_b b + g_c c`` carries noise of variance ``Σ_j w_j² σ_j²``
+    (``w`` its weights on the three values, independent periods, eq. 23 with
+    Rd[1] ≈ 0), which is removed from the mean square.
+
+    Parameters
+    ----------
+    res : DemodResult
+        A demodulation (needs ``shape_gain``).
+
+    Returns
+    -------
+    SignalLeakage
+    """
+    idx = np.asarray(res.period_index)
+    gain = np.asarray(res.shape_gain)
+    n = idx.size
+    out = {k: np.full(2, np.nan) for k in ("rms", "rms_sigma", "ratio", "max")}
+    if n < 3 or gain.shape != (n, 2, 2):
+        return SignalLeakage(n=0, **out)
+    mid = np.flatnonzero(idx[2:] - idx[:-2] == 2)  # i-1, i, i+1 all kept
+    i = mid + 1
+    for ax, (a, sg) in enumerate(((res.a_Y, res.sigma_Y), (res.a_Z, res.sigma_Z))):
+        a, sg = np.asarray(a, float), np.asarray(sg, float)
+        if not i.size:
+            continue
+        gb, gc = gain[i, ax, 0], gain[i, ax, 1]
+        b = 0.5 * (a[i + 1] - a[i - 1])
+        c = 0.5 * (a[i + 1] - 2.0 * a[i] + a[i - 1])
+        leak = gb * b + gc * c
+        var = (
+            (0.5 * (gc - gb) * sg[i - 1]) ** 2
+            + (gc * sg[i]) ** 2
+            + (0.5 * (gc + gb) * sg[i + 1]) ** 2
+        )
+        ms = float(np.mean(leak**2) - np.mean(var))
+        out["rms"][ax] = np.sqrt(max(ms, 0.0))
+        out["rms_sigma"][ax] = float(np.sqrt(np.mean(sg[i] ** 2)))
+        out["ratio"][ax] = out["rms"][ax] / out["rms_sigma"][ax]
+        out["max"][ax] = float(np.max(np.abs(leak)))
+    return SignalLeakage(n=int(i.size), **out)
 
 
 def fit_sinusoid(

@@ -369,3 +369,278 @@ def regularised_autocov(d: NDArray[np.float64], n: int) -> tuple[NDArray[np.floa
     """
     c = 2.0 * float(np.max(d[:n])) + float(d[1]) if n > 1 else 1.0
     return c - d[:n], c
+
+
+# ---------------------------------------------------------------------------
+# the noise PSD from a model residual (issue 20: σ from the data)
+
+
+def psd_nodes(tau: float, fs: float) -> NDArray[np.float64]:
+    """Frequencies at which a PSD is estimated from per-period residuals [Hz].
+
+    ``2^j/τ`` (``j = 0, 1, ...``: the resolution ``1/τ`` of a period at the bottom,
+    octaves above) below ``fs/2``, which is always a node.
+
+    Parameters
+    ----------
+    tau : float
+        Segment (modulation period) length [s]: the frequency resolution is ``1/τ``.
+    fs : float
+        Sampling frequency [Hz].
+
+    Returns
+    -------
+    ndarray
+        Increasing frequencies [Hz].
+    """
+    top = 0.5 * fs * tau  # fs/2 in units of 1/τ
+    js = 2.0 ** np.arange(int(np.floor(np.log2(max(top, 1.0)))) + 1)
+    js = np.append(js[js < top * (1 - 1e-9)], top)
+    return js / tau
+
+
+def log_hat_basis(f: ArrayLike, nodes: ArrayLike) -> NDArray[np.float64]:
+    """Piecewise-linear interpolation in ``log f`` between nodes, as a basis.
+
+    ``S(f) = Σ_j θ_j B_j(f)`` is the PSD whose value at node ``j`` is ``θ_j``,
+    linear in ``log f`` between nodes and constant below the first and above the
+    last node.
+
+    Parameters
+    ----------
+    f : array_like
+        Frequencies [Hz], > 0.
+    nodes : array_like, shape (J,)
+        Increasing node frequencies [Hz].
+
+    Returns
+    -------
+    ndarray, shape (len(f), J)
+        ``B_j(f)``.
+    """
+    lf = np.log(np.abs(np.asarray(f, float)))
+    ln = np.log(np.asarray(nodes, float))
+    eye = np.eye(ln.size)
+    return np.stack([np.interp(lf, ln, eye[j]) for j in range(ln.size)], axis=1)
+
+
+def residual_kernel(
+    x: NDArray[np.float64],
+    m: NDArray[np.float64],
+    bins: NDArray[np.int64],
+    fs: float,
+    *,
+    n_axes: int = 2,
+    oversample: int = 8,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """How the noise PSD maps to the periodogram of a least-squares residual.
+
+    The residual of a least-squares fit of the columns of ``x`` to the unmasked
+    samples is ``r = P n`` with the projector ``P = M − Z Z'`` (``Z`` an orthonormal
+    basis of the masked columns).  Its periodogram at bin ``k`` of a segment of
+    ``q`` samples, summed over the axes, ``O_k = Σ_axes |Σ_a r[a] e^{-2πi k a/q}|²``,
+    has the expectation
+
+    ``E[O_k] = Σ_v ∫ S(f) |F_δt{P v}(f)|² df``, over ``v`` = the masked cos and sin
+    of bin ``k`` on each axis (eq. 21 with the weights ``P v``; the axes'
+    noises independent, with the same PSD).  The integral is a midpoint sum over
+    ``[0, fs/2]`` (real weights: twice the positive half), so ``E[O_k] =
+    Σ_l kernel[k, l] S(f_l)``.
+
+    Parameters
+    ----------
+    x : ndarray, shape (n_axes·q, p)
+        Design of one segment, the axes stacked, masked rows zero.
+    m : ndarray, shape (q,)
+        1 for the samples used, 0 for the masked ones.
+    bins : ndarray of int, shape (K,)
+        Periodogram bins ``k`` (frequencies ``k·fs/q``).
+    fs : float
+        Sampling frequency [Hz].
+    n_axes : int
+        Number of data axes stacked in ``x``.
+    oversample : int
+        The integration grid has ``oversample·q`` points over ``[0, fs)``.
+
+    Returns
+    -------
+    f : ndarray, shape (L,)
+        Midpoints of the integration grid on ``(0, fs/2)`` [Hz].
+    kernel : ndarray, shape (K, L)
+        ``E[O_k] = kernel[k] @ S(f)`` [Hz (times the squared weight units)].
+    """
+    q = m.size
+    mm = np.tile(np.asarray(m, float), n_axes)
+    xm = np.asarray(x, float) * mm[:, None]
+    u, sv, _ = np.linalg.svd(xm, full_matrices=False)
+    z = u[:, sv > sv.max() * 1e-10] if sv.size and sv.max() > 0 else u[:, :0]
+    nfft = int(oversample) * q
+    nf = nfft // 2
+    f = (np.arange(nf) + 0.5) * fs / nfft
+    ph = np.exp(-1j * np.pi * np.arange(q) / nfft)  # half-bin shift: midpoints
+    a = np.arange(q)
+    kernel = np.zeros((len(bins), nf))
+    for start in range(0, len(bins), 16):
+        ks = np.asarray(bins[start : start + 16])
+        arg = 2 * np.pi * np.outer(a, ks) / q
+        trig = np.concatenate([np.cos(arg), np.sin(arg)], axis=1) * np.asarray(m, float)[:, None]
+        nk = trig.shape[1]
+        for ax in range(n_axes):
+            e = np.zeros((n_axes * q, nk))
+            e[ax * q : (ax + 1) * q] = trig
+            v = e - z @ (z.T @ e)
+            p = np.zeros((nk, nf))
+            for bx in range(n_axes):
+                spec = np.fft.fft(v[bx * q : (bx + 1) * q].T * ph, nfft, axis=1)[:, :nf]
+                p += spec.real**2 + spec.imag**2
+            kernel[start : start + ks.size] += p[: ks.size] + p[ks.size :]
+    return f, kernel * (2.0 * fs / nfft)
+
+
+@dataclass(frozen=True)
+class ResidualSpectrum:
+    """Periodogram of a model residual and its expectation for any PSD.
+
+    Attributes
+    ----------
+    f_bins : ndarray, shape (K,)
+        Frequencies of the periodogram bins [Hz].
+    power : ndarray, shape (K,)
+        Observed periodogram summed over segments and axes [m² s⁻⁴].
+    f_grid : ndarray, shape (L,)
+        Integration grid [Hz].
+    kernel : ndarray, shape (K, L)
+        ``E[power] = kernel @ S(f_grid)`` (:func:`residual_kernel`, summed over
+        the segments).
+    n_segments : int
+        Segments (periods) in ``power``.
+    n_axes : int
+        Axes summed in ``power``.
+    """
+
+    f_bins: NDArray[np.float64]
+    power: NDArray[np.float64]
+    f_grid: NDArray[np.float64]
+    kernel: NDArray[np.float64]
+    n_segments: int
+    n_axes: int = 2
+
+    @property
+    def dof(self) -> int:
+        """χ² degrees of freedom of each bin (cos and sin per axis and segment)."""
+        return 2 * self.n_axes * self.n_segments
+
+    def expected(self, psd: PSD) -> NDArray[np.float64]:
+        """``E[power]`` under a two-sided ``psd`` [m² s⁻⁴]."""
+        return self.kernel @ psd(self.f_grid)
+
+    def power_ratio(self, psd: PSD, band: tuple[float, float]) -> float:
+        """Observed / expected residual power over the bins in ``band`` [Hz] (χ²/dof)."""
+        sel = (self.f_bins >= band[0]) & (self.f_bins <= band[1])
+        return float(self.power[sel].sum() / self.expected(psd)[sel].sum())
+
+
+@dataclass(frozen=True)
+class PSDFit:
+    """A noise PSD estimated from a residual (:func:`fit_residual_psd`).
+
+    Attributes
+    ----------
+    psd : TabulatedPSD
+        The estimate, two-sided [m² s⁻⁴ Hz⁻¹] (log-linear between nodes, flat outside).
+    nodes : ndarray
+        Node frequencies [Hz].
+    values : ndarray
+        PSD at the nodes [m² s⁻⁴ Hz⁻¹].
+    n_segments : int
+        Segments the estimate rests on.
+    """
+
+    psd: TabulatedPSD
+    nodes: NDArray[np.float64]
+    values: NDArray[np.float64]
+    n_segments: int
+
+
+def fit_residual_psd(
+    spec: ResidualSpectrum, nodes: ArrayLike, *, n_iter: int = 5, smooth: float = 10.0
+) -> PSDFit:
+    """Fit a PSD to a residual periodogram by the method of moments.
+
+    ``S(f) = Σ_j θ_j B_j(f)`` (:func:`log_hat_basis`), ``θ ≥ 0``, minimising
+
+    ``Σ_k (O_k − E_k(θ))² / Var(O_k) + smooth² Σ_j (Δ² log θ_j)²``
+
+    with ``Var(O_k) = 2 E_k² / dof`` (χ² of ``dof`` degrees of freedom), by
+    iteratively reweighted non-negative least squares (the log second difference
+    linearised about the previous iterate; the first iterate is tied to a flat
+    spectrum instead).  The expectation ``E_k`` includes what the fitted model
+    removed from the noise (:func:`residual_kernel`), so the estimate is not
+    biased low where the model absorbs noise (around ``1/τ``-``3/τ`` for a
+    per-period bias and signal).  The penalty favours a locally power-law
+    spectrum (white, 1/f, f⁴ ... cost nothing): the nodes near ``2/τ``, which set
+    σ but which the per-period model leaves few degrees of freedom to, then
+    borrow strength from their neighbours (with 24 periods, σ scatters by ~5 %
+    instead of ~15 % unpenalised).
+
+    Parameters
+    ----------
+    spec : ResidualSpectrum
+        Observed residual periodogram and its kernel.
+    nodes : array_like
+        Node frequencies [Hz] (:func:`psd_nodes`).
+    n_iter : int
+        Reweighting iterations.
+    smooth : float
+        Weight of the penalty (1: a change of slope of 1 in log-log between
+        adjacent nodes costs as much as one standard deviation of one bin).
+
+    Returns
+    -------
+    PSDFit
+
+    References
+    ----------
+    D. B. Percival, A. T. Walden, *Spectral Analysis for Physical Applications*,
+    Cambridge University Press (1993), ch. 6 (periodogram, χ² distribution).
+    """
+    from scipy.optimize import nnls
+
+    nodes = np.asarray(nodes, float)
+    g = spec.kernel @ log_hat_basis(spec.f_grid, nodes)  # (K, J)
+    o = np.asarray(spec.power, float)
+    w = np.sqrt(spec.dof / 2.0)
+    nj = nodes.size
+    colnorm = np.sqrt(np.sum(g**2, axis=0))
+    colnorm[colnorm == 0] = 1.0
+    est = np.maximum(o, np.max(o) * 1e-12 if np.max(o) > 0 else 1.0)
+    theta = None
+    for it in range(int(n_iter)):
+        a = g / est[:, None] * w
+        b = o / est * w
+        if theta is None:  # first iterate: tie adjacent nodes to each other (flat)
+            ref = np.full(nj, np.median(o) / np.median(g.sum(axis=1)))
+            pen = np.zeros((nj - 1, nj))
+            i = np.arange(nj - 1)
+            pen[i, i], pen[i, i + 1] = 1.0 / ref[:-1], -1.0 / ref[:-1]
+            rhs = np.zeros(nj - 1)
+        else:  # Δ² log θ ≈ Δ²(θ/θ̄) + Δ² log θ̄ (the Δ² coefficients sum to 0)
+            ref = np.maximum(theta, 1e-3 * np.max(theta))
+            pen = np.zeros((max(nj - 2, 0), nj))
+            i = np.arange(nj - 2)
+            pen[i, i], pen[i, i + 1], pen[i, i + 2] = 1.0, -2.0, 1.0
+            lr = np.log(ref)
+            rhs = -(lr[:-2] - 2.0 * lr[1:-1] + lr[2:])
+            pen = pen / ref
+        weight = 1.0 if it == 0 else smooth
+        sol, _ = nnls(
+            np.vstack([a, weight * pen]) / colnorm,
+            np.concatenate([b, weight * rhs]),
+            maxiter=50 * nj,
+        )
+        theta = sol / colnorm
+        est = np.maximum(g @ theta, 1e-300)
+    theta = np.maximum(theta, 1e-3 * float(np.max(theta)) if np.max(theta) > 0 else 1e-300)
+    grid = np.geomspace(nodes[0] / 1e3, nodes[-1], 400)
+    vals = log_hat_basis(grid, nodes) @ theta
+    return PSDFit(TabulatedPSD(grid, vals), nodes, theta, spec.n_segments)
