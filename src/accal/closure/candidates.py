@@ -27,8 +27,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from accal.closure.basis import Basis
+from accal.closure.distributions import chi2_sf
+
 if TYPE_CHECKING:
-    from accal.closure.basis import Basis
     from accal.closure.residual import Grid
 
 __all__ = [
@@ -548,7 +550,7 @@ def scan_multiplicity(fractions: NDArray[np.float64], k: int, level: float) -> f
     float
         The factor (at least 1).
     """
-    from scipy import optimize, special, stats
+    from scipy import optimize, special
 
     eps = np.clip(np.asarray(fractions, dtype=np.float64), 1e-12, 0.5)
     logs = float(np.sum(2.0 * np.log((1.0 - eps) / eps)))
@@ -563,7 +565,7 @@ def scan_multiplicity(fractions: NDArray[np.float64], k: int, level: float) -> f
     if excess(lo) <= 0.0:
         return 1.0
     x2 = optimize.brentq(excess, lo, 1e4)
-    return float(max(1.0, level / stats.chi2.sf(x2, k)))
+    return float(max(1.0, level / chi2_sf(x2, k)))
 
 
 def channel_power(ctx: Context, z: NDArray[np.float64]) -> NDArray[np.float64]:

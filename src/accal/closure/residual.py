@@ -33,6 +33,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from accal.closure.distributions import chi2_sf, excess_kurtosis, f_sf
+
 __all__ = [
     "Grid",
     "NoisePSD",
@@ -425,7 +427,6 @@ def wald_test(
         The PSD is estimated from the residual of the *augmented* model, so a real
         effect does not inflate its own uncertainty.
     """
-    from scipy import stats
 
     q = zt.shape[1]
     if q == 0:
@@ -446,8 +447,8 @@ def wald_test(
     stat = float(gamma @ cinv @ gamma) / q
     if psd is not None:
         if np.isfinite(psd_dof):
-            return WaldResult(gamma, cov, stat, psd_dof, float(stats.f.sf(stat, q, psd_dof)), r1)
-        return WaldResult(gamma, cov, stat, np.inf, float(stats.chi2.sf(stat * q, q)), r1)
+            return WaldResult(gamma, cov, stat, psd_dof, float(f_sf(stat, q, psd_dof)), r1)
+        return WaldResult(gamma, cov, stat, np.inf, float(chi2_sf(stat * q, q)), r1)
     # Satterthwaite: contribution of each PSD bin to tr(Σ⁻¹Σ) = q
     zf = z_fft.reshape(q, -1)
     zr, zi = zf.real, zf.imag
@@ -457,9 +458,7 @@ def wald_test(
     m = noise.counts.astype(float)
     denom = float(np.sum(c**2 / (2.0 * m)))
     dof = float(max(q**2 / denom, 2.0)) if denom > 0 else np.inf
-    pvalue = (
-        float(stats.f.sf(stat, q, dof)) if np.isfinite(dof) else float(stats.chi2.sf(stat * q, q))
-    )
+    pvalue = float(f_sf(stat, q, dof)) if np.isfinite(dof) else float(chi2_sf(stat * q, q))
     return WaldResult(gamma, cov, stat, dof, pvalue, r1)
 
 
@@ -772,7 +771,6 @@ def characterise(
         Channel of each sample: the Welch PSD is averaged over the channels;
         segment means, RMS and kurtosis pool them.
     """
-    from scipy.stats import kurtosis
 
     t = np.asarray(t, dtype=np.float64)
     r = np.asarray(r, dtype=np.float64)
@@ -823,7 +821,7 @@ def characterise(
     seg_var = float(np.nansum(counts * np.nan_to_num(means) ** 2) / max(r.size, 1))
     return ResidualStats(
         rms=float(np.sqrt(var)),
-        kurtosis=float(kurtosis(r)) if r.size > 3 else np.nan,
+        kurtosis=excess_kurtosis(r) if r.size > 3 else np.nan,
         freq=freq,
         psd=psd,
         segment_edges=edges,

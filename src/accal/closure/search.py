@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import special
 
 from accal.closure.basis import Basis, FitResult
 from accal.closure.candidates import Context, Proposal
@@ -283,8 +284,6 @@ def swap_smooth(s: Search) -> None:
     to the whole span, given the other effects, and replaces the polynomial terms
     when its score beats theirs by :data:`SWAP_MIN_GAIN`.
     """
-    from scipy.stats import chi2
-
     from accal.closure.candidates import EXP_LONG_FRACTION, exponential_drift
 
     enabled = s.options.get("enabled", ())
@@ -306,7 +305,7 @@ def swap_smooth(s: Search) -> None:
     t_poly = s.test(basis, fit, lev, poly)
     if t_exp is None or t_poly is None:
         return
-    pen = float(chi2.ppf(0.99, 1))
+    pen = float(special.chdtri(1, 0.01))  # χ²(1) 99 % quantile
 
     def score(t: Tested, k: int) -> float:
         return float(t.wald.stat * t.wald.q) - pen * k

@@ -26,10 +26,10 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
 
 from accal.closure.basis import Basis
 from accal.closure.candidates import Proposal
+from accal.closure.distributions import chi2_logsf, f_logsf, f_sf
 from accal.closure.residual import (
     Grid,
     WaldResult,
@@ -114,7 +114,7 @@ def _local_test(grid: Grid, residual, zt, freqs: list[float]) -> WaldResult:
     cinv = np.linalg.pinv(cov, rcond=1e-12)
     stat = float(gamma @ cinv @ gamma) / q
     dof = max(2.0 * n_ord, 2.0)
-    return WaldResult(gamma, cov, stat, dof, float(stats.f.sf(stat, q, dof)), r1)
+    return WaldResult(gamma, cov, stat, dof, float(f_sf(stat, q, dof)), r1)
 
 
 def sinusoid_freqs(prop: Proposal) -> list[float]:
@@ -144,9 +144,9 @@ def test_proposal(
     p_adj = float(min(1.0, w.pvalue * factor))
     q = max(w.q, 1)
     if np.isfinite(w.dof):
-        logsf = float(stats.f.logsf(w.stat, q, w.dof))
+        logsf = float(f_logsf(w.stat, q, w.dof))
     else:
-        logsf = float(stats.chi2.logsf(w.stat * q, q))
+        logsf = float(chi2_logsf(w.stat * q, q))
     return Tested(prop, w, p_adj, float(np.sum(w.gamma**2)), zt, logsf + float(np.log(factor)))
 
 
