@@ -35,8 +35,12 @@ from numpy.typing import ArrayLike, NDArray
 from accal.closure.basis import Basis, BlockBase
 from accal.closure.final import covariances, describe, refer_exponentials
 from accal.closure.kinds import EFFECT_NAMES, kind_of, unit_of
-from accal.closure.nuisance import OrbitTemplate, estimate_period, template_order
-from accal.closure.outliers import OUTLIER_SIGMAS, edge_runs, outliers
+from accal.closure.nuisance import (
+    OrbitTemplate,
+    estimate_period,
+    template_order,
+)
+from accal.closure.outliers import OUTLIER_SIGMAS, edge_runs, outliers, spikes
 from accal.closure.residual import characterise, make_grid, projection_bias
 from accal.closure.results import BaseCoefficient, ClosureResult, Effect
 from accal.closure.search import Found, Search, run, swap_smooth
@@ -239,31 +243,62 @@ def _check_inputs(t, y, valid, reference, aux, channel, channel_names):
     return t_all, y_all, chan_all, names, use, ref_all, aux_all
 
 
-def _leave_out_outliers(setup, st, use, aux_all):
+def _spikes_out(t_all, y_all, chan_all, use):
+    """``use`` without the data's short pulses (:func:`~accal.closure.outliers.spikes`),
+    before the null model is fitted: (use, number left out)."""
+    hit = spikes(y_all[use], None if chan_all is None else chan_all[use], t_all[use])
+    if not hit.any():
+        return use, 0
+    use = use.copy()
+    use[np.flatnonzero(use)[hit]] = False
+    return use, int(hit.sum())
+
+
+def _leave_out_outliers(setup, st, use, aux_all, n_spikes=0):
     """Outliers of the base fit's residual and of the channels left out: (st, use, notes)."""
     notes: dict[tuple, dict[str, Any]] = {}
-    bad = outliers(st["fit0"].resid, st["chan_u"], st["t_u"])
+    resid = st["fit0"].resid
+    bad = outliers(resid, st["chan_u"], st["t_u"])
     if st["chan_u"] is None:
-        bad = edge_runs(bad, st["fit0"].resid)
-    n_data = int(bad.sum())
+        bad = edge_runs(bad, resid)
+    n_data = int(bad.sum()) + n_spikes
+    n_steep, steep = 0, np.zeros_like(bad)
+    if st["template"] is not None:  # profile steeper than one-sample bins resolve
+        sigma = 1.4826 * float(np.median(np.abs(resid - np.median(resid))))
+        steep = st["template"].unresolved(setup.y_all[use], sigma) & ~bad
+        n_steep = int(steep.sum())
+        bad |= steep
     for x in aux_all.values():  # a firing shows in the angular channels too
         xu = x[use]
         ok = np.isfinite(xu)
         if ok.all():
             bad |= outliers(xu - np.median(xu), st["chan_u"], st["t_u"])
+    n_out = int(bad.sum()) - n_steep + n_spikes
+    first = None
     if bad.any():
+        if n_steep < int(bad.sum()):
+            first = float(st["t_u"][bad & ~steep][0])
         use = use.copy()
         use[np.flatnonzero(use)[bad]] = False
-        first = float(st["t_u"][bad][0])
         st = setup.build(use)
+    if n_out:
         notes[("outliers",)] = {
             "name": "outliers",
             "channel": None,
-            "note": f"{int(bad.sum())} samples left out of the analysis: more than "
+            "note": f"{n_out} samples left out of the analysis: more than "
             f"{OUTLIER_SIGMAS:g} robust σ from the running median of the residual ({n_data}) or "
             "of a candidate channel, and their neighbours (bursts, spikes, thruster firings: "
             "no candidate models them; they stay in the data)",
-            "details": {"n": int(bad.sum()), "first": first},
+            "details": {"n": n_out, "first": first},
+        }
+    if n_steep:
+        notes[("unresolved",)] = {
+            "name": "unresolved",
+            "channel": None,
+            "note": f"{n_steep} samples left out of the analysis where the orbit profile "
+            "changes faster than one-sample phase bins follow (eclipse edges; they stay "
+            "in the data)",
+            "details": {"n": n_steep},
         }
     return st, use, notes
 
@@ -383,8 +418,9 @@ def close_loop(
         orbit_period,
         opts.get("orbit_period_fixed", False),
     )
+    use, n_spikes = _spikes_out(t_all, y_all, chan_all, use)
     st = setup.build(use)
-    st, use, notes = _leave_out_outliers(setup, st, use, aux_all)
+    st, use, notes = _leave_out_outliers(setup, st, use, aux_all, n_spikes)
     fit0 = st["fit0"]
     opts.update(
         families=_families(builders, orbit_period, st["template"] is not None),
@@ -560,11 +596,7 @@ class _Setup:
             if bbase.signal_extension is not None:
                 ext = np.column_stack([bbase.columns, bbase.signal_extension])[use]
                 signal0 = Basis(bbase.block[use], ext, n_blocks=bbase.n_blocks)
-        fit0 = basis0.fit(y_u)
-        lev_white = basis0.leverage(grid)
-        beta = projection_bias(grid, basis0, fit0.resid, lev_white)
-        nc = np.maximum(grid.counts, 1.0)[:, None]
-        lev0 = nc - (nc - lev_white) * beta
+        fit0, lev0, beta = _null_fit(basis0, grid, y_u)
         return {
             "t_u": t_u,
             "chan_u": chan_u,
@@ -580,6 +612,15 @@ class _Setup:
             "lev0": lev0,
             "beta": beta,
         }
+
+
+def _null_fit(basis0: Basis, grid, y_u):
+    """The null model's fit, leverage spectrum and projection bias: (fit, lev, beta)."""
+    fit0 = basis0.fit(y_u)
+    lev_white = basis0.leverage(grid)
+    beta = projection_bias(grid, basis0, fit0.resid, lev_white)
+    nc = np.maximum(grid.counts, 1.0)[:, None]
+    return fit0, nc - (nc - lev_white) * beta, beta
 
 
 def _split(cols, chan_u, names):
