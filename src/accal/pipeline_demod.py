@@ -746,11 +746,13 @@ def leakage_summary(res: Any) -> dict[str, Any]:
         out[ax] = {
             "rms": float(lk.rms[j]),
             "ratio": float(lk.ratio[j]),
+            "ratio_slope": float(lk.ratio_slope[j]),
             "max": float(lk.max[j]),
         }
     out["units"] = (
         "m/s^2 (rms: RMS over periods of the estimated leakage of the signal's in-period "
-        "slope and curvature into a_Y, a_Z, noise removed; ratio: rms / RMS sigma; max: "
+        "slope and curvature into a_Y, a_Z, noise removed; ratio: rms / RMS sigma; "
+        "ratio_slope: the slope's part (removed by --signal-model affine); max: "
         "largest |estimate|, noise included)"
     )
     return out
@@ -949,10 +951,11 @@ def _noise_warnings(summary: dict[str, Any]) -> list[str]:
     lk = summary.get("signal_leakage") or {}
     worst = max((lk[ax]["ratio"] for ax in ("Y", "Z") if ax in lk), default=float("nan"))
     if np.isfinite(worst) and worst > LEAKAGE_WARN:
+        slope = max(lk[ax].get("ratio_slope", 0.0) for ax in ("Y", "Z") if ax in lk)
         hint = (
             "use --signal-model affine"
-            if lk.get("signal_model") == "mean"
-            else "a shorter --tau would reduce it"
+            if lk.get("signal_model") == "mean" and slope > 0.5 * worst
+            else "it is the signal's curvature: a shorter --tau reduces it"
         )
         w.append(
             f"the signal's variation within a period leaks into a_Y/a_Z at {worst:.2g} sigma "

@@ -1734,6 +1734,9 @@ class SignalLeakage:
         RMS of the reported σ over the same periods [m s⁻²].
     ratio : ndarray, shape (2,)
         ``rms / rms_sigma``.
+    ratio_slope : ndarray, shape (2,)
+        The same for the slope's leakage alone (what ``signal_model="affine"``
+        removes; the rest is the curvature's, which a shorter τ reduces).
     max : ndarray, shape (2,)
         Largest ``|leakage|`` estimate of a period (noise included) [m s⁻²].
     n : int
@@ -1743,6 +1746,7 @@ class SignalLeakage:
     rms: _F64
     rms_sigma: _F64
     ratio: _F64
+    ratio_slope: _F64
     max: _F64
     n: int
 
@@ -1772,7 +1776,7 @@ def signal_leakage(res: DemodResult) -> SignalLeakage:
     idx = np.asarray(res.period_index)
     gain = np.asarray(res.shape_gain)
     n = idx.size
-    out = {k: np.full(2, np.nan) for k in ("rms", "rms_sigma", "ratio", "max")}
+    out = {k: np.full(2, np.nan) for k in ("rms", "rms_sigma", "ratio", "ratio_slope", "max")}
     if n < 3 or gain.shape != (n, 2, 2):
         return SignalLeakage(n=0, **out)
     mid = np.flatnonzero(idx[2:] - idx[:-2] == 2)  # i-1, i, i+1 all kept
@@ -1795,6 +1799,10 @@ def signal_leakage(res: DemodResult) -> SignalLeakage:
         out["rms_sigma"][ax] = float(np.sqrt(np.mean(sg[i] ** 2)))
         out["ratio"][ax] = out["rms"][ax] / out["rms_sigma"][ax]
         out["max"][ax] = float(np.max(np.abs(leak)))
+        ms_b = float(
+            np.mean((gb * b) ** 2) - np.mean((0.5 * gb) ** 2 * (sg[i - 1] ** 2 + sg[i + 1] ** 2))
+        )
+        out["ratio_slope"][ax] = np.sqrt(max(ms_b, 0.0)) / out["rms_sigma"][ax]
     return SignalLeakage(n=int(i.size), **out)
 
 
