@@ -10,7 +10,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 OUT    ?= out
 
-.PHONY: install run demo test test-all lint bench bench-readers bench-archive bench-demod-year bench-closure closure-detection mc-sigma clean
+.PHONY: install run demo test test-all lint bench bench-readers bench-archive bench-demod-year bench-closure closure-detection mc-sigma mc-sigma-demod clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -63,6 +63,10 @@ bench: $(STAMP)
 ## mc-sigma: Monte-Carlo study of the bias/drift sigmas (a few minutes)
 mc-sigma: $(STAMP)
 	$(BIN)/python benchmarks/mc_sigma.py
+
+## mc-sigma-demod: Monte-Carlo check of demod's per-period sigma from the data (issue 20; ~3 min on one core)
+mc-sigma-demod: $(STAMP)
+	$(BIN)/python benchmarks/mc_sigma_demod.py
 
 bench-readers: $(STAMP)
 	$(BIN)/python benchmarks/bench_readers.py
