@@ -47,6 +47,12 @@ __all__ = [
     "cov_linear_freq",
     "precision_linear_freq",
     "regularised_autocov",
+    "psd_nodes",
+    "log_hat_basis",
+    "residual_kernel",
+    "ResidualSpectrum",
+    "PSDFit",
+    "fit_residual_psd",
 ]
 
 
