@@ -254,11 +254,10 @@ class OrbitTemplate:
         anywhere within it (the period is not a multiple of the interval), so where
         the mean profile changes by ``Δ`` from one bin to the next, a sample can be
         off its bin's value by up to ``Δ/2`` from orbit to orbit (first-order Taylor of
-        the profile over half a bin), an error no
-        polynomial in time follows.  An eclipse's 40 s penumbra ramp on the
-        cross-track axis (5e-8 m/s²) made 40-sample boxes of ±6e-10 m/s² in
-        2e-10 noise, and bias steps were "found" on them (closure-detection,
-        GRACE-FO storm seeds).  Bins (and their neighbours) whose larger difference
+        the profile over half a bin), an error no polynomial in time follows.  An
+        eclipse's 40 s penumbra ramp on the cross-track axis (5e-8 m/s²) made 40-sample
+        boxes of ±6e-10 m/s² in 2e-10 noise, and bias steps were "found" on them
+        (closure-detection, GRACE-FO storm seeds).  Bins (and their neighbours) whose larger difference
         to a neighbouring bin exceeds ``2·factor·sigma`` are flagged, the steepest
         :data:`UNRESOLVED_MAX_FRACTION` of the bins at most; their samples are left
         out of the analysis by the caller (a step elsewhere is told by the others).
