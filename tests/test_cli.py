@@ -172,6 +172,21 @@ def test_reference_removes_the_signal(simulated_day, tmp_path):
         assert abs(df.loc[ax, "drift"] - truth["drift"][i]) < 4 * df.loc[ax, "drift_sigma"]
         # and the noise-only fit is much tighter than the signal-laden one
         assert df.loc[ax, "rms"] < 1e-9
+        # the table says what the bias holds, and how much signal a fit without the
+        # reference would have put into it (the reference's mean over the used samples)
+        assert df.loc[ax, "bias_includes"] == "instrument"
+        used = np.isin(ref["gps_time"].to_numpy(), sim.time[sim.valid])
+        expect = float(ref.loc[used, f"lin_accl_{ax}"].mean())
+        assert df.loc[ax, "signal_mean"] == pytest.approx(expect, rel=1e-6, abs=1e-15)
+    code, _, err = invoke("grace-bias", day, "--method", "lsq", "--out", tmp_path / "plain")
+    assert code == 0, err
+    plain = table(tmp_path / "plain").set_index("axis")
+    assert (plain["bias_includes"] == "instrument+signal_mean").all()
+    assert plain["signal_mean"].isna().all()
+    # the drag axis: without the reference its day-mean signal goes into the bias
+    assert abs(df.loc["x", "signal_mean"]) > 1e-8
+    moved = plain.loc["x", "bias"] - df.loc["x", "bias"]
+    assert abs(moved) > 10 * df.loc["x", "bias_sigma"]
 
 
 def test_reference_holes_are_left_out_not_bridged(simulated_day, tmp_path):

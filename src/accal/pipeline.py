@@ -65,6 +65,12 @@ BIAS_DRIFT_UNITS = {
     "day_status": "nominal|degraded|transplant|off: whether the day is the instrument's own "
     "nominal measurement (accal.degraded; GRACE-FO D transplant, GRACE-B off/transplant 2016-17)",
     "day_status_reason": "why the day is not nominal (empty when nominal)",
+    "bias_includes": "what 'bias' holds: 'instrument' (fitted to raw - reference) or "
+    "'instrument+signal_mean' (no reference: the day-mean of the non-gravitational signal, "
+    "e.g. -1e-7 m/s^2 of drag on the along-track axis, is in the bias; paper eq. 9 assumes "
+    "a zero-mean signal)",
+    "signal_mean": "m/s^2 (mean of the reference over the used samples: the non-gravitational "
+    "signal's share a fit without --reference would put into the bias; NaN without one)",
 }
 
 CALIBRATED_UNITS = {
@@ -420,6 +426,26 @@ def calibrate(
     )
 
 
+def signal_share(
+    series: AccSeries, minus_ref: AccSeries | None, ax: str, use: np.ndarray
+) -> dict[str, Any]:
+    """``bias_includes`` and ``signal_mean`` of one axis (see :data:`BIAS_DRIFT_UNITS`).
+
+    Without a reference the fitted bias is the instrument's plus the day-mean of the
+    non-gravitational signal (paper eq. 9 with a zero-mean signal assumed); with one,
+    ``signal_mean`` is the mean of ``series − minus_ref`` (the reference on the data's
+    epochs) over the used samples, the share a reference-free fit would have taken.
+    """
+    if minus_ref is None:
+        return {"bias_includes": "instrument+signal_mean", "signal_mean": float("nan")}
+    ref = (series.axis(ax) - minus_ref.axis(ax))[use]
+    ref = ref[np.isfinite(ref)]
+    return {
+        "bias_includes": "instrument",
+        "signal_mean": float(np.mean(ref)) if ref.size else float("nan"),
+    }
+
+
 def table_rows(
     path: Path, series: AccSeries, fits: dict, scale: Sequence[float] | None, opts: GraceBiasOptions
 ) -> list[dict[str, Any]]:
@@ -504,9 +530,10 @@ def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutco
         raise ValidationError("no data records")
     series = _with_warnings(series, *name_mismatch(path, series))
     fit_series = series
+    ref_series = None
     if opts.reference is not None:
         ref = read_input(opts.reference, GraceBiasOptions(columns=opts.columns))
-        fit_series = subtract_reference(series, ref, opts.reference)
+        fit_series = ref_series = subtract_reference(series, ref, opts.reference)
         series = series.replace(report=fit_series.report)  # with the reference's warnings
     scale = parse_scale(opts.scale, series.satellite)
     use = np.ones(len(series), bool) if opts.keep_flagged else fit_series.valid
@@ -552,6 +579,7 @@ def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutco
     rows = table_rows(path, series, fits, scale, opts)
     for r in rows:
         r["model"] = closure.get(r["axis"], {}).get("model", f"poly{opts.order}")
+        r.update(signal_share(series, ref_series, r["axis"], use))
     off = sorted({r["day_status_reason"] for r in rows if r["day_status"] == "off"})
     if off:  # a day the accelerometer was off: whatever the file holds is not its data
         series = _with_warnings(
@@ -679,6 +707,7 @@ def _bias_drift_schema():
         "model",
         "day_status",
         "day_status_reason",
+        "bias_includes",
     }
     ints = {"order", "n", "n_total", "n_flagged", "n_duplicates", "n_out_of_order", "n_gaps"}
     return pa.schema(
