@@ -71,12 +71,7 @@ def outliers(
     """
     w = OUTLIER_WINDOW
     bad = np.zeros(r.size, dtype=bool)
-    groups = (
-        [np.arange(r.size)]
-        if chan is None
-        else [np.flatnonzero(chan == c) for c in np.unique(chan)]
-    )
-    for idx in groups:
+    for idx in _channel_groups(chan, r.size):
         if idx.size < 4 * w:
             continue
         x, tt = r[idx], t[idx]
@@ -87,9 +82,7 @@ def outliers(
             if seg.size < 2 * w:
                 continue  # too short to tell an outlier from structure: none flagged
             xs = x[seg]
-            # windows ending at (left) and starting at (right) each sample
-            left = xs - median_filter(xs, size=w, origin=w // 2, mode="nearest")
-            right = xs - median_filter(xs, size=w, origin=-(w // 2), mode="nearest")
+            left, right = _one_sided(xs, w)
             d = np.minimum(np.abs(left), np.abs(right))
             d[: w - 1] = np.abs(right[: w - 1])  # left window not inside the segment
             d[-(w - 1) :] = np.abs(left[-(w - 1) :])
@@ -138,12 +131,7 @@ def spikes(
     """
     w = SPIKE_WINDOW
     bad = np.zeros(r.size, dtype=bool)
-    groups = (
-        [np.arange(r.size)]
-        if chan is None
-        else [np.flatnonzero(chan == c) for c in np.unique(chan)]
-    )
-    for idx in groups:
+    for idx in _channel_groups(chan, r.size):
         x, tt = r[idx], t[idx]
         steps = np.diff(tt)
         if steps.size < 4 * w:
@@ -155,8 +143,7 @@ def spikes(
             if seg.size >= 2 * w:
                 xs = x[seg]
                 dev[seg] = np.abs(xs - median_filter(xs, size=w, mode="nearest"))
-                left = xs - median_filter(xs, size=w, origin=w // 2, mode="nearest")
-                right = xs - median_filter(xs, size=w, origin=-(w // 2), mode="nearest")
+                left, right = _one_sided(xs, w)
                 side[seg] = np.minimum(np.abs(left), np.abs(right))
         finite = np.isfinite(dev)
         if finite.sum() < 4 * w:
@@ -171,6 +158,21 @@ def spikes(
             pad = np.convolve(hit, np.ones(2 * OUTLIER_PAD + 1), mode="same") > 0
             bad[idx[pad]] = True
     return bad
+
+
+def _channel_groups(chan: NDArray[np.int64] | None, n: int) -> list[NDArray[np.int64]]:
+    """Sample indices of each channel (all samples when there is one)."""
+    if chan is None:
+        return [np.arange(n)]
+    return [np.flatnonzero(chan == c) for c in np.unique(chan)]
+
+
+def _one_sided(xs: NDArray[np.float64], w: int) -> tuple[NDArray, NDArray]:
+    """``xs`` minus the running medians of the ``w`` samples ending (left) and starting
+    (right) at each sample."""
+    left = xs - median_filter(xs, size=w, origin=w // 2, mode="nearest")
+    right = xs - median_filter(xs, size=w, origin=-(w // 2), mode="nearest")
+    return left, right
 
 
 def _bursts_only(hit: NDArray[np.bool_], x: NDArray[np.float64]) -> NDArray[np.bool_]:
