@@ -78,15 +78,18 @@ def outliers(
         steps = np.diff(tt)
         cut = np.flatnonzero(steps > 5.0 * np.median(steps)) + 1  # data gaps
         dev = np.full(x.size, np.inf)
-        for seg in np.split(np.arange(x.size), cut):
-            if seg.size < 2 * w:
-                continue  # too short to tell an outlier from structure: none flagged
-            xs = x[seg]
-            left, right = _one_sided(xs, w)
-            d = np.minimum(np.abs(left), np.abs(right))
-            d[: w - 1] = np.abs(right[: w - 1])  # left window not inside the segment
-            d[-(w - 1) :] = np.abs(left[-(w - 1) :])
-            dev[seg] = d
+        # a segment too short to tell an outlier from structure: none flagged
+        segs = [seg for seg in np.split(np.arange(x.size), cut) if seg.size >= 2 * w]
+        if segs:
+            at = np.concatenate(segs)
+            lo, hi = _segment_medians(x, segs, w, (w // 2, -(w // 2)))
+            left, right = np.abs(x[at] - lo), np.abs(x[at] - hi)
+            pos = np.concatenate([np.arange(seg.size) for seg in segs])
+            back = np.concatenate([np.arange(seg.size)[::-1] for seg in segs])
+            # near a segment's start the left window is not inside it, near its end the right
+            dev[at] = np.where(
+                pos < w - 1, right, np.where(back < w - 1, left, np.minimum(left, right))
+            )
         finite = np.isfinite(dev)
         if finite.sum() < 2 * w:
             continue
@@ -139,12 +142,12 @@ def spikes(
         cut = np.flatnonzero(steps > 5.0 * np.median(steps)) + 1  # data gaps
         dev = np.full(x.size, np.nan)
         side = np.full(x.size, np.nan)
-        for seg in np.split(np.arange(x.size), cut):
-            if seg.size >= 2 * w:
-                xs = x[seg]
-                dev[seg] = np.abs(xs - median_filter(xs, size=w, mode="nearest"))
-                left, right = _one_sided(xs, w)
-                side[seg] = np.minimum(np.abs(left), np.abs(right))
+        segs = [seg for seg in np.split(np.arange(x.size), cut) if seg.size >= 2 * w]
+        if segs:
+            at = np.concatenate(segs)
+            mid, lo, hi = _segment_medians(x, segs, w, (0, w // 2, -(w // 2)))
+            dev[at] = np.abs(x[at] - mid)
+            side[at] = np.minimum(np.abs(x[at] - lo), np.abs(x[at] - hi))
         finite = np.isfinite(dev)
         if finite.sum() < 4 * w:
             continue
@@ -167,12 +170,30 @@ def _channel_groups(chan: NDArray[np.int64] | None, n: int) -> list[NDArray[np.i
     return [np.flatnonzero(chan == c) for c in np.unique(chan)]
 
 
-def _one_sided(xs: NDArray[np.float64], w: int) -> tuple[NDArray, NDArray]:
-    """``xs`` minus the running medians of the ``w`` samples ending (left) and starting
-    (right) at each sample."""
-    left = xs - median_filter(xs, size=w, origin=w // 2, mode="nearest")
-    right = xs - median_filter(xs, size=w, origin=-(w // 2), mode="nearest")
-    return left, right
+def _segment_medians(
+    x: NDArray[np.float64], segs: list[NDArray[np.int64]], w: int, origins: tuple[int, ...]
+) -> list[NDArray[np.float64]]:
+    """Running medians of ``w`` samples of ``x`` within each segment, for each origin.
+
+    ``segs``: increasing, contiguous index runs of ``x``; each result is aligned with
+    their concatenation.  Origin 0: centred; ``w // 2``: the window ending at the
+    sample; ``−(w // 2)``: the one starting there (:func:`scipy.ndimage.median_filter`'s
+    convention), ``mode="nearest"`` at each segment's ends.  One filter call per origin:
+    the segments laid end to end with ``w`` copies of each one's first and last value
+    around it, so no window reaches another segment and every median is the one of
+    the segment alone, bit for bit (a rotating platform's residual has a segment per
+    period: 3,500 calls took 0.3 s).
+    """
+    parts, starts = [], []
+    pos = 0
+    for seg in segs:
+        xs = x[seg]
+        parts += [np.full(w, xs[0]), xs, np.full(w, xs[-1])]
+        starts.append(pos + w)
+        pos += xs.size + 2 * w
+    laid = np.concatenate(parts)
+    take = np.concatenate([np.arange(a, a + seg.size) for a, seg in zip(starts, segs, strict=True)])
+    return [median_filter(laid, size=w, origin=o, mode="nearest")[take] for o in origins]
 
 
 def _bursts_only(hit: NDArray[np.bool_], x: NDArray[np.float64]) -> NDArray[np.bool_]:

@@ -726,8 +726,6 @@ def welch_segments(
     Returns ``(freq [Hz], psd [(m/s²)²/Hz])``, weighted by each segment's number of
     Welch windows; empty arrays when no segment is long enough.
     """
-    from scipy.signal import welch
-
     step = float(np.median(np.diff(t))) if t.size > 1 else 1.0
     acc = None
     total = 0.0
@@ -736,6 +734,10 @@ def welch_segments(
         seg = r[sl]
         if seg.size < nperseg:
             continue
+        # imported here: scipy.signal costs ~0.6 s, and a platform run's residual
+        # (rests every period) has no segment long enough for Welch
+        from scipy.signal import welch
+
         freq, p = welch(seg, fs=1.0 / step, nperseg=nperseg, detrend="constant")
         nwin = 1 + (seg.size - nperseg) // (nperseg // 2)
         acc = p * nwin if acc is None else acc + p * nwin
