@@ -314,8 +314,10 @@ def periodic(ctx: Context) -> list[Proposal]:
         # the orbit-periodic signal is in the null model: no orbit term, and no line
         # at its harmonics (nothing is left there)
         f_t = 1.0 / float(ctx.options["signal_template"])
-        for n in range(1, int(freqs[-1] / f_t) + 1):
-            band &= np.abs(freqs - n * f_t) > 1.5 * df
+        n_top = int(freqs[-1] / f_t)
+        if n_top >= 1:  # the nearest harmonic 1 .. n_top of every frequency, at once
+            nearest = np.clip(np.rint(freqs / f_t), 1, n_top) * f_t
+            band &= np.abs(freqs - nearest) > 1.5 * df
     elif ctx.orbit_period and ctx.orbit_period > 0 and not ctx.is_blocked("periodic", "orbit"):
         f0 = 1.0 / ctx.orbit_period
         # shorter than a revolution, once/twice-per-revolution terms are a smooth curve
