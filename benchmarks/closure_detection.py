@@ -38,7 +38,7 @@ Case counts: see :func:`clean_cases`, :func:`inject_cases` and :func:`other_case
 (full: 525 cases, ~5,300 core-seconds, ~45 min on two idle cores; ``--quick``: 15
 cases, ~1.5 min; on a shared machine both scale with its load).  Run
 ``python benchmarks/closure_detection.py [--quick] [--out DIR] [--workers 2]
-[--only GROUP ...] [--report-only RESULTS_JSON]``.
+[--only GROUP ...] [--kinds KIND ...] [--report-only RESULTS_JSON]``.
 """
 
 from __future__ import annotations
@@ -677,6 +677,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--only", nargs="*", help="groups to run (clean noise storm alpha "
                     "platform accsim inject cli swarm)")  # fmt: skip
+    ap.add_argument("--kinds", nargs="*", help="injected kinds to run (e.g. coupling "
+                    "pf_coupling; 'none' for the cases without one)")  # fmt: skip
     ap.add_argument("--no-figures", action="store_true")
     ap.add_argument("--report-only", type=Path, metavar="RESULTS_JSON",
                     help="no runs: the tables and figures of an earlier results.json")  # fmt: skip
@@ -687,6 +689,8 @@ def main(argv: list[str] | None = None) -> int:
         return _write(doc["results"], doc["meta"], args)
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))  # the pool's workers end too
     todo = [c for c in cases(args.quick) if not args.only or c.group in args.only]
+    if args.kinds:
+        todo = [c for c in todo if (c.kind or "none") in args.kinds]
     args.out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     git0 = git_state()
