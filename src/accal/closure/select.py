@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from accal.closure.basis import Basis, BlockBase
+from accal.closure.candidates import step_placebo_sigma
 from accal.closure.final import covariances, describe, refer_exponentials
 from accal.closure.kinds import EFFECT_NAMES, kind_of, unit_of
 from accal.closure.nuisance import (
@@ -679,6 +680,8 @@ def _finish(search: Search, setup: _Setup, st, knots, noise_psd, floored, consid
         (f.prop, p, {"p_accept": f.p_adj, **f.verdict.details()})
         for f, p in zip(final, ps, strict=True)
     ]
+    if basis.n_blocks > 1 and any(f.prop.name == "bias_step" for f in final):
+        _placebo_step_sigmas(search.context(final, basis, fit, lev), final, found, cov["v_ww"])
     effects = describe(found, fit.gamma, cov["v_ww"], st["span"], st["t0"], units)
     if setup.t_first is not None and setup.t_first < st["t0"]:
         # a search that left out the record's start fitted its exponentials from its own
@@ -743,6 +746,27 @@ def _finish(search: Search, setup: _Setup, st, knots, noise_psd, floored, consid
         considered=tuple(considered),
         signal_model={} if st["template"] is None else st["template"].describe(),
     )
+
+
+def _placebo_step_sigmas(ctx, final: list[Found], found, v_ww) -> None:
+    """A step's size variance: the larger of the noise model's and the placebo epochs'
+    (:func:`~accal.closure.candidates.step_placebo_sigma`), in ``v_ww`` (in place); both
+    σ in the effect's details."""
+    j = 0
+    for i, f in enumerate(final):
+        q = f.prop.columns.shape[1]
+        if f.prop.name == "bias_step" and f.prop.params.get("epoch") is not None:
+            emp = step_placebo_sigma(ctx, float(f.prop.params["epoch"]))
+            if emp is not None and emp.size == q:
+                model = np.sqrt(np.maximum(np.diag(v_ww)[j : j + q], 0.0))
+                for k in range(q):
+                    if emp[k] > model[k] > 0:  # scale its row and column: correlations kept
+                        g = emp[k] / model[k]
+                        v_ww[j + k, :] *= g
+                        v_ww[:, j + k] *= g
+                found[i][2]["sigma_noise_model"] = [float(x) for x in model]
+                found[i][2]["sigma_placebo"] = [float(x) for x in emp]
+        j += q
 
 
 def _base_coefficients(basis, bbase, fit0, fit, cov) -> tuple[BaseCoefficient, ...]:
