@@ -628,10 +628,13 @@ def test_ctrl_c_stops_the_batch_at_once_and_keeps_what_finished(tmp_path, sig):
     from accal.simulate.grace import write_simulated_grace
 
     src = tmp_path / "in"
-    for k in range(6):  # 3 h days: the closure of a real-like day takes ~15 s (6 h: ~75 s)
+    # 12 h days: the batch must still be running well after its first input is done
+    # (measured: first "ok" at 4.6 s, end at 11 s; with 3 h days the batch ended 1.8 s
+    # after its first "ok" once closure got faster, and the signal came too late)
+    for k in range(6):
         write_simulated_grace(
             src / f"ACC1B_2005-01-0{k + 1}_A_02.asc", date=f"2005-01-0{k + 1}", satellite="A",
-            duration=10800.0,
+            duration=43200.0,
         )  # fmt: skip
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "accal", "grace-bias", str(src), "-r", "-j", "2", "--close-loop"]
