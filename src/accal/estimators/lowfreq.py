@@ -411,14 +411,6 @@ class LowFreqSpectrum:
         w, b = self.white, self.b
         if keep is None:
             keep = np.ones(pgram.shape, dtype=bool)
-        # work in units of each row's mean white level: the Whittle fit is scale-
-        # equivariant, and a residual of ~1e-16 (exact data) would overflow 1/E²
-        unit = np.mean(pgram / w, axis=1)
-        zero = ~(unit > 0)  # an all-zero residual (exact data): fitted as white, then 0
-        unit = np.where(zero, 1.0, unit)[:, None]
-        pgram = np.where(zero[:, None], w, pgram / unit)
-        if start is not None:
-            start = {"W": start["W"] / unit, "A": start["A"] / unit}
         mk = keep.astype(np.float64)
         ik = pgram * mk  # (r, nk)
         i = ik[:, None, :]
@@ -459,14 +451,12 @@ class LowFreqSpectrum:
         e = wv[..., None] * w + av[..., None] * b
         loglik = -np.sum((np.log(e) + i / e) * mk[:, None, :], axis=2)
         ll_white = -np.sum(np.log(w_only[:, None] * w) * mk, axis=1) - count
-        ll_white[zero] = np.inf  # white, and zero below
-        unit = np.where(zero, 0.0, unit[:, 0])[:, None]
-        return {  # back in the units of pgram (ℓ up to a constant per row)
-            "W": wv * unit,
-            "A": av * unit,
+        return {
+            "W": wv,
+            "A": av,
             "loglik": loglik,
-            "E": e * unit[..., None],
-            "W_white": w_only * unit[:, 0],
+            "E": e,
+            "W_white": w_only,
             "ll_white": ll_white,
             "keep": keep,
         }
@@ -522,9 +512,7 @@ class LowFreqSpectrum:
         """
         obs = np.add.reduceat(pgram_row, self.groups)[: self.group_size.size]
         exp = np.add.reduceat(expected_row, self.groups)[: self.group_size.size]
-        if not np.all(exp > 0):  # an all-zero residual: nothing to misfit
-            return 0.0, int(self.groups.size - 3), 1.0
-        ratio = np.maximum(obs / exp, np.finfo(float).tiny)
+        ratio = obs / exp
         x = float(np.sum(2.0 * self.group_size / HANN_INFLATION * (ratio - 1.0 - np.log(ratio))))
         dof = int(self.groups.size - 3)
         return x, dof, _chi2_sf(x, dof)
