@@ -60,7 +60,7 @@ lint: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_grace_bias.py
 
-## mc-sigma: Monte-Carlo study of the bias/drift sigmas on 1 Hz days, 7 noise cases x 200 days, before/after table + docs/figures/mc_sigma.png (issue 20; ~2 min on one core)
+## mc-sigma: Monte-Carlo study of the bias/drift sigmas (a few minutes)
 mc-sigma: $(STAMP)
 	$(BIN)/python benchmarks/mc_sigma.py
 
