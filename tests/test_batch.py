@@ -618,6 +618,17 @@ def test_degraded_days_are_flagged_in_the_table(tmp_path):
     )
 
 
+def _terminal_signals() -> None:
+    """In the child before exec: SIGINT and SIGTERM as a terminal gives them (default
+    action, not blocked).  A signal mask and an ignored disposition are inherited
+    across exec, and the test process's may have been changed by what ran before it
+    in the same session (the batch then never saw the SIGINT and exited 0, in full
+    runs only)."""
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT, signal.SIGTERM})
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
 @pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
 @pytest.mark.parametrize("sig", ["SIGINT", "SIGTERM"])
 def test_ctrl_c_stops_the_batch_at_once_and_keeps_what_finished(tmp_path, sig):
@@ -643,6 +654,7 @@ def test_ctrl_c_stops_the_batch_at_once_and_keeps_what_finished(tmp_path, sig):
         stderr=subprocess.PIPE,
         text=True,
         start_new_session=True,
+        preexec_fn=_terminal_signals,
     )
     log = out / "accal.log"
     deadline = time.monotonic() + 120
