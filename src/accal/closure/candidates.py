@@ -480,17 +480,25 @@ def bias_step(ctx: Context) -> list[Proposal]:
     return out
 
 
+def _step_sums(basis, r, m):
+    """For a step ``1[t ≥ e]`` on channel mask ``m`` at every used sample ``e``: its inner
+    product with ``r`` (``Σ_{t≥e} r``), its norm with the design projected out, and
+    where that norm is defined."""
+    rm = r * m
+    s_r = np.cumsum(rm[::-1])[::-1]
+    cnt = np.cumsum(m[::-1].astype(float))[::-1]
+    nrm = cnt - basis.step_norms(m)
+    good = nrm > 1e-6 * np.maximum(cnt, 1.0)
+    return s_r, np.where(good, nrm, 1.0), good
+
+
 def _scan(basis, r, masks, ok) -> NDArray[np.float64]:
     """Explained power of a step at every used sample (``ok`` is cleared where undefined)."""
     stat = np.zeros(r.size)
     for m in masks:
-        rm = r * m
-        s_r = np.cumsum(rm[::-1])[::-1]
-        cnt = np.cumsum(m[::-1].astype(float))[::-1]
-        nrm = cnt - basis.step_norms(m)
-        good = nrm > 1e-6 * np.maximum(cnt, 1.0)
+        s_r, nrm, good = _step_sums(basis, r, m)
         ok &= good
-        stat += np.where(good, s_r**2 / np.where(good, nrm, 1.0), 0.0)
+        stat += np.where(good, s_r**2 / nrm, 0.0)
     return stat
 
 
@@ -523,13 +531,9 @@ def step_placebo_sigma(ctx: Context, epoch: float) -> NDArray[np.float64] | None
     ok = np.r_[True, np.diff(t) > 0] & (block >= 0)
     sizes = []
     for m in ctx.channel_masks():
-        rm = ctx.residual * m
-        s_r = np.cumsum(rm[::-1])[::-1]
-        cnt = np.cumsum(m[::-1].astype(float))[::-1]
-        nrm = cnt - basis.step_norms(m)
-        good = nrm > 1e-6 * np.maximum(cnt, 1.0)
+        s_r, nrm, good = _step_sums(basis, ctx.residual, m)
         ok &= good
-        sizes.append(np.where(good, s_r / np.where(good, nrm, 1.0), np.nan))
+        sizes.append(np.where(good, s_r / nrm, np.nan))
     i0 = min(int(np.searchsorted(t, epoch)), t.size - 1)
     b0 = int(block[i0])
     if b0 < 0:
