@@ -390,6 +390,18 @@ def _detrended(t: np.ndarray, y: np.ndarray) -> np.ndarray:
     return y - a @ np.linalg.lstsq(a, y, rcond=None)[0]
 
 
+def _proxies(y_all: np.ndarray, k: int, ref: np.ndarray | None) -> dict:
+    """``close_loop``'s other axes as signal proxies, as ``grace-bias --close-loop``
+    passes them (none with a reference; nothing for a ``close_loop`` without them)."""
+    import inspect
+
+    from accal.closure import close_loop
+
+    if ref is not None or "signal_proxies" not in inspect.signature(close_loop).parameters:
+        return {}
+    return {"signal_proxies": {ax: y_all[:, j] for j, ax in enumerate("xyz") if j != k}}
+
+
 def run_grace_api(case: Case) -> list[dict[str, Any]]:
     """Close the loop on an independent GRACE day through the library, per axis as
     ``grace-bias --close-loop --aux temperatures`` does; the injected axis only when
@@ -429,6 +441,7 @@ def run_grace_api(case: Case) -> list[dict[str, Any]]:
             channel_units=units,
             screened=screened,
             options={"orbit_period_fixed": True},
+            **_proxies(y_all, k, ref),
         )
         seconds = time.perf_counter() - t_start
         rec = {"axis": ax, "injected": bool(inj), "seconds": seconds, "period": period}

@@ -131,6 +131,11 @@ def test_close_loop_finds_step_and_temperature_without_being_told(undeclared, tm
     assert "auxiliary(temperature)" in df.loc["y", "model"]
     md = (tmp_path / "closure.md").read_text()
     assert "bias_step" in md and "auxiliary" in md
+    # without a reference each axis's instrument effects are checked against the other
+    # axes' signal (a storm's onset is not a step), and the step held up
+    assert closure["z"]["signal_model"]["signal_proxies"] == ["x", "y"]
+    assert "stay significant given the other axes (x, y)" in md
+    assert step["details"]["signal_proxy"]["p_adj"] < 0.01
     for ax in "xyz":
         assert (tmp_path / f"ACC1B_2005-01-01_A_02.closure.{ax}.png").stat().st_size > 5000
 

@@ -342,6 +342,9 @@ def close_the_loop(
             channel_units=units,
             screened=left_out,
             options={"orbit_period_fixed": True},
+            signal_proxies=None
+            if reference
+            else {o: fit_series.axis(o) for o in series.axes if o != ax},
         )
         inst = np.zeros(len(series))
         labels = [f"poly{opts.order}"]

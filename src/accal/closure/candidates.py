@@ -102,6 +102,10 @@ class Context:
         Members not to propose again (rejected: not identifiable, not confirmed on
         held-out stretches, or implausible), as ``(name, channel)`` or
         ``(name, channel, key)``.
+    proxies : ndarray, shape (n, q), optional
+        Series carrying the same signal (the other axes) on the used samples: the
+        step scan looks for its epoch with them fitted
+        (:class:`accal.closure.validation.SignalProxies`).
     """
 
     t_all: NDArray[np.float64]
@@ -125,6 +129,7 @@ class Context:
     cache: dict[Any, Any] = field(default_factory=dict)
     reference: NDArray[np.float64] | None = None
     blocked: frozenset = frozenset()
+    proxies: NDArray[np.float64] | None = None
 
     def is_blocked(self, name: str, channel: str | None, key: Any = None) -> bool:
         """Whether the member ``(name, channel[, key])`` was rejected earlier."""
@@ -446,7 +451,17 @@ def bias_step(ctx: Context) -> list[Proposal]:
         if len(key) == 3 and key[0] == "bias_step":
             i = int(np.searchsorted(t, float(key[2])))
             ok[max(0, i - near) : i + near] = False
-    stat = _scan(ctx.basis, r, masks, ok)
+    basis = ctx.basis
+    if ctx.proxies is not None:
+        # the epoch is looked for with the other axes' signal fitted: a storm's onset,
+        # which they explain, would otherwise be the best epoch again and again (each
+        # rejected by the signal-proxy check) while a real step elsewhere waited
+        extended = basis.extend(ctx.proxies)
+        if extended.keep.size > basis.keep.size:
+            q = extended.qe[:, basis.keep.size - extended.keep.size :]
+            r = r - q @ (q.T @ r)
+            basis = extended
+    stat = _scan(basis, r, masks, ok)
     if not ok.any():
         return []
     i = int(np.argmax(np.where(ok, stat, -1.0)))
@@ -467,8 +482,8 @@ def bias_step(ctx: Context) -> list[Proposal]:
     # noise estimate) are tested together, at the pairs' multiplicity; the selection
     # takes the pair only when no single step is significant
     col = (t >= epoch).astype(np.float64)
-    basis2 = ctx.basis.extend(col)
-    if basis2.keep.size <= ctx.basis.keep.size:
+    basis2 = basis.extend(col)
+    if basis2.keep.size <= basis.keep.size:
         return out
     zt = basis2.qe[:, -1]
     r2 = r - zt * (zt @ r)

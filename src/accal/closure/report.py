@@ -262,6 +262,12 @@ def to_markdown(
             f"{sm['bins']} bins × degree-{sm['amplitude_degree']} amplitude, a smooth curve "
             f"(knots {sm.get('knot_spacing', 0):.0f} s) and {sm.get('modulated_harmonics', 0)} "
             "orbit harmonics with slowly changing amplitude"
+            + (
+                f"; instrument effects must stay significant given the other axes "
+                f"({', '.join(sm['signal_proxies'])})"
+                if sm.get("signal_proxies")
+                else ""
+            )
         )
     considered = [c["channel"] for c in result.considered if c["status"] == "considered"]
     left = [

@@ -344,6 +344,10 @@ class WaldResult:
         ``P(F(q, dof) > stat)`` (not corrected for multiplicity).
     residual : ndarray, shape (n,)
         Residual of the augmented model.
+    psd : ndarray, shape (nf,) or None
+        The one-sided-grid PSD the covariance used (None when none was formed): a
+        later test of the same columns can hold it (:func:`accal.closure.validation.
+        signal_proxy_test`).
     """
 
     gamma: NDArray[np.float64]
@@ -352,6 +356,7 @@ class WaldResult:
     dof: float
     pvalue: float
     residual: NDArray[np.float64]
+    psd: NDArray[np.float64] | None = None
 
     @property
     def q(self) -> int:
@@ -437,18 +442,19 @@ def wald_test(
     lev = _as_leverage(basis_leverage, grid.n_chan) + np.sum(np.abs(z_fft) ** 2, axis=0)
     noise = estimate_psd(grid, r1, lev, min_bin=min_bin)
     nf = z_fft.shape[-1]
-    w = _two_sided(grid.size, nf) * (noise.psd if psd is None else psd)
+    used = noise.psd if psd is None else np.asarray(psd, dtype=np.float64)
+    w = _two_sided(grid.size, nf) * used
     cov = _quad(z_fft, w, grid.size)
     cov = 0.5 * (cov + cov.T)
     try:
         cinv = np.linalg.pinv(cov, rcond=1e-12)
     except np.linalg.LinAlgError:
-        return WaldResult(gamma, cov, 0.0, np.inf, 1.0, r1)
+        return WaldResult(gamma, cov, 0.0, np.inf, 1.0, r1, used)
     stat = float(gamma @ cinv @ gamma) / q
     if psd is not None:
         if np.isfinite(psd_dof):
-            return WaldResult(gamma, cov, stat, psd_dof, float(f_sf(stat, q, psd_dof)), r1)
-        return WaldResult(gamma, cov, stat, np.inf, float(chi2_sf(stat * q, q)), r1)
+            return WaldResult(gamma, cov, stat, psd_dof, float(f_sf(stat, q, psd_dof)), r1, used)
+        return WaldResult(gamma, cov, stat, np.inf, float(chi2_sf(stat * q, q)), r1, used)
     # Satterthwaite: contribution of each PSD bin to tr(Σ⁻¹Σ) = q
     zf = z_fft.reshape(q, -1)
     zr, zi = zf.real, zf.imag
@@ -459,7 +465,7 @@ def wald_test(
     denom = float(np.sum(c**2 / (2.0 * m)))
     dof = float(max(q**2 / denom, 2.0)) if denom > 0 else np.inf
     pvalue = float(f_sf(stat, q, dof)) if np.isfinite(dof) else float(chi2_sf(stat * q, q))
-    return WaldResult(gamma, cov, stat, dof, pvalue, r1)
+    return WaldResult(gamma, cov, stat, dof, pvalue, r1, used)
 
 
 def sandwich_cov(

@@ -35,7 +35,7 @@ from accal.closure.final import with_jacobian
 from accal.closure.kinds import kind_of
 from accal.closure.residual import Grid
 from accal.closure.significance import Tested, p_given_others, test_proposal
-from accal.closure.validation import Verdict, validate
+from accal.closure.validation import SignalProxies, Verdict, validate
 
 __all__ = ["MAX_REJECTED", "Found", "Search", "run"]
 
@@ -89,6 +89,7 @@ class Search:
     names: tuple[str, ...] = ()
     reference: NDArray[np.float64] | None = None
     beta: NDArray[np.float64] | None = None
+    proxies: SignalProxies | None = None
     found: list[Found] = field(default_factory=list)
     rejected: list[Found] = field(default_factory=list)
     removed: list[Found] = field(default_factory=list)
@@ -163,6 +164,7 @@ class Search:
             cache=self.cache,
             reference=self.reference,
             blocked=frozenset(blocked),
+            proxies=None if self.proxies is None else self.proxies.columns[self.use],
         )
 
     # ---------------------------------------------------------------- one step's parts
@@ -189,6 +191,13 @@ class Search:
         return p_given_others(
             self.grid, basis, lev, self.y_u, found[i].prop, self.use, self.n_families
         )
+
+    def proxy_args(self, tested: Tested) -> dict[str, Any]:
+        """:func:`~accal.closure.validation.validate`'s signal-proxy arguments for ``tested``."""
+        if self.proxies is None:
+            return {}
+        factor = max(tested.prop.multiplicity, 1.0) * max(self.n_families, 1)
+        return {"proxies": self.proxies, "wald": tested.wald, "factor": factor, "alpha": self.alpha}
 
     def note(self, name: str, channel: str | None, text: str, params=None) -> None:
         """Record a note once."""
@@ -243,6 +252,7 @@ def run(s: Search, max_effects: int, stop: Callable[[Search], bool] | None = Non
                 s.bias_state(s.found),
                 s.t_all[s.use],
                 s.signal_state(s.found, basis),
+                **s.proxy_args(t),
             )
             entry = Found(t.prop, t.p_adj, verdict, t.wald.stat)
             if verdict.ok:
@@ -313,7 +323,12 @@ def swap_smooth(s: Search) -> None:
     if score(t_exp, 2) <= score(t_poly, cols.shape[1]) + SWAP_MIN_GAIN:
         return
     verdict = validate(
-        t_exp.prop, ctx, s.bias_state(rest), s.t_all[s.use], s.signal_state(rest, basis)
+        t_exp.prop,
+        ctx,
+        s.bias_state(rest),
+        s.t_all[s.use],
+        s.signal_state(rest, basis),
+        **s.proxy_args(t_exp),
     )
     if not verdict.ok:
         return

@@ -46,6 +46,7 @@ from accal.closure.residual import characterise, make_grid, projection_bias
 from accal.closure.results import BaseCoefficient, ClosureResult, Effect
 from accal.closure.search import Found, Search, run, swap_smooth
 from accal.closure.significance import describe_smooth, unexplained_test
+from accal.closure.validation import SignalProxies
 from accal.errors import ValidationError, check_option
 
 __all__ = [
@@ -244,6 +245,44 @@ def _check_inputs(t, y, valid, reference, aux, channel, channel_names):
     return t_all, y_all, chan_all, names, use, ref_all, aux_all
 
 
+def _check_proxies(proxies, t_all) -> dict[str, NDArray[np.float64]]:
+    """``signal_proxies`` of :func:`close_loop` as float arrays of the data's shape."""
+    out = {}
+    for k, v in (proxies or {}).items():
+        a = np.asarray(v, dtype=np.float64)
+        if a.shape != t_all.shape:
+            raise ValidationError(
+                f"signal proxy {k!r} must have shape {t_all.shape}, got {a.shape}"
+            )
+        out[str(k)] = a
+    return out
+
+
+def _signal_proxies(proxies, use, notes) -> SignalProxies | None:
+    """The ``signal_proxies`` finite on every used sample (None: none); notes the others."""
+    cols, names = [], []
+    for k, a in proxies.items():
+        if not np.all(np.isfinite(a[use])):
+            text = f"signal proxy {k} left out: not finite on every used sample"
+            notes[("closure", None, text)] = {"name": "closure", "channel": k, "note": text}
+            continue
+        cols.append(a)
+        names.append(str(k))
+    if not cols:
+        return None
+    return SignalProxies(np.column_stack(cols), tuple(names))
+
+
+def _signal_model(template, proxies: SignalProxies | None) -> dict[str, Any]:
+    """``ClosureResult.signal_model``: the template's description and the proxies used."""
+    if template is None:
+        return {}
+    out = dict(template.describe())
+    if proxies is not None:
+        out["signal_proxies"] = list(proxies.names)
+    return out
+
+
 def _spikes_out(t_all, y_all, chan_all, use):
     """``use`` without the data's short pulses (:func:`~accal.closure.outliers.spikes`),
     before the null model is fitted: (use, number left out)."""
@@ -325,6 +364,7 @@ def close_loop(
     signal_model: str = "auto",
     channel_units: dict[str, str] | None = None,
     screened: Sequence[dict[str, Any]] = (),
+    signal_proxies: dict[str, ArrayLike] | None = None,
 ) -> ClosureResult:
     """Find the effects a linear base model lacks, add them and refit.
 
@@ -386,6 +426,14 @@ def close_loop(
     screened : sequence of dict, optional
         Channels the caller left out before (``{"channel", "status", "reason"}``),
         reported with this screening's in ``result.considered``.
+    signal_proxies : dict of str to array_like, shape (N,), optional
+        Series carrying the same signal but not this channel's instrument: the other
+        axes of the same accelerometer [m/s²].  Never candidates.  With the
+        orbit-phase signal model (no reference), an instrument effect is removed only
+        when it stays significant with them in the model
+        (:func:`accal.closure.validation.signal_proxy_test`: a storm's onset on every
+        axis is not a bias step).  A series not finite on every used sample is left
+        out (noted).
 
     Returns
     -------
@@ -403,6 +451,7 @@ def close_loop(
     t_all, y_all, chan_all, names, use, ref_all, aux_all = _check_inputs(
         t, y, valid, reference, aux, channel, channel_names
     )
+    proxies_all = _check_proxies(signal_proxies, t_all)
     aux_all, considered = screen_channels(aux_all, y_all, use, ref_all)
     considered = [*screened, *considered]
     if signal_model == "auto":
@@ -423,6 +472,7 @@ def close_loop(
     st = setup.build(use)
     st, use, notes = _leave_out_outliers(setup, st, use, aux_all, n_spikes)
     fit0 = st["fit0"]
+    proxies = _signal_proxies(proxies_all, use, notes) if st["template"] else None
     opts.update(
         families=_families(builders, orbit_period, st["template"] is not None),
         enabled=tuple(name for name, _ in builders),
@@ -453,6 +503,7 @@ def close_loop(
             names=names,
             reference=ref_all,
             beta=st["beta"],
+            proxies=proxies,
         )
         search.notes.update(notes)
         search.cache["template"] = st["template"]
@@ -744,7 +795,7 @@ def _finish(search: Search, setup: _Setup, st, knots, noise_psd, floored, consid
         removed=tuple(_rejected_effect(f, units) for f in search.removed),
         rejected=tuple(_rejected_effect(f, units) for f in search.rejected),
         considered=tuple(considered),
-        signal_model={} if st["template"] is None else st["template"].describe(),
+        signal_model=_signal_model(st["template"], search.proxies),
     )
 
 

@@ -114,7 +114,7 @@ def _local_test(grid: Grid, residual, zt, freqs: list[float]) -> WaldResult:
     cinv = np.linalg.pinv(cov, rcond=1e-12)
     stat = float(gamma @ cinv @ gamma) / q
     dof = max(2.0 * n_ord, 2.0)
-    return WaldResult(gamma, cov, stat, dof, float(f_sf(stat, q, dof)), r1)
+    return WaldResult(gamma, cov, stat, dof, float(f_sf(stat, q, dof)), r1, psd)
 
 
 def sinusoid_freqs(prop: Proposal) -> list[float]:

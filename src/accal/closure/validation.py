@@ -28,6 +28,9 @@ added to the model (and, for an instrument effect, removed from the data):
    the in-sample gain, the check does not apply and says so.
 3. **Physically plausible** (:func:`accal.closure.kinds.plausible`).
 
+Without a reference, an instrument effect must also not be a change of the signal
+seen on the other axes (:func:`signal_proxy_test`, with ``proxies``).
+
 A candidate that fails is reported with the reason and never removed.
 """
 
@@ -43,8 +46,17 @@ from scipy.linalg import eigh
 from accal.closure.basis import Basis
 from accal.closure.candidates import Context, Proposal
 from accal.closure.kinds import EFFECT_NAMES, IDENT_MIN, kind_of, plausible
+from accal.closure.residual import WaldResult, wald_test
 
-__all__ = ["N_FOLDS", "Verdict", "cross_validate", "identifiability", "validate"]
+__all__ = [
+    "N_FOLDS",
+    "SignalProxies",
+    "Verdict",
+    "cross_validate",
+    "identifiability",
+    "signal_proxy_test",
+    "validate",
+]
 
 #: Contiguous stretches of the cross-validation.
 N_FOLDS = 6
@@ -73,6 +85,9 @@ class Verdict:
         Fitted coefficient (largest contribution over the columns), SI.
     plausible : bool
         Within the kind's physical bounds.
+    signal_proxy : dict
+        :func:`signal_proxy_test` (empty when not made): ``channels``, ``p_adj``,
+        ``stat``.
     """
 
     ok: bool
@@ -81,14 +96,85 @@ class Verdict:
     cv: dict[str, Any] = field(default_factory=dict)
     coefficient: float = float("nan")
     plausible: bool = True
+    signal_proxy: dict[str, Any] = field(default_factory=dict)
 
     def details(self) -> dict[str, Any]:
         """The checks as ``closure.json`` details."""
-        return {
+        out = {
             "identifiability": self.identifiability,
             "cross_validation": dict(self.cv),
             "plausible": self.plausible,
         }
+        if self.signal_proxy:
+            out["signal_proxy"] = dict(self.signal_proxy)
+        return out
+
+
+@dataclass(frozen=True)
+class SignalProxies:
+    """Series that carry the target's signal, not its instrument (the other axes).
+
+    Attributes
+    ----------
+    columns : ndarray, shape (N, q)
+        The series on all samples [m/s²] (finite wherever the closure uses samples).
+    names : tuple of str
+        Their names, for reports.
+    """
+
+    columns: NDArray[np.float64]
+    names: tuple[str, ...]
+
+
+def signal_proxy_test(
+    prop: Proposal,
+    ctx: Context,
+    proxies: SignalProxies,
+    wald: WaldResult,
+    factor: float,
+) -> dict[str, Any]:
+    """The candidate's test again with the other axes' signal in the model, its noise held.
+
+    A change of the signal that the orbit-phase template cannot follow (a storm's
+    onset: the density rises within an hour and the cross-track and radial drag,
+    1-3 % of the along-track drag, rise with it) leaves a kink in the residual that a
+    bias step fits (closure-detection: a removed 1-3e-9 m/s² step on 3 of 12 storm
+    days, none without the storm on the same days and noise).  The same change is on
+    the other axes, many times larger than their noise, so with those series as
+    regressors (one free coefficient each: their coefficients are pinned by the whole
+    day's signal, so an instrument effect on one axis cannot hide in them) it is
+    explained, while an instrument effect of one axis is not.  The test is the
+    candidate's Wald test (:func:`accal.closure.residual.wald_test`) of its columns
+    orthogonalised against the model and the proxies, on the residual with the
+    proxies fitted, with the noise PSD and degrees of freedom of the test that
+    admitted it held: a re-estimated PSD would be lowered by the signal the proxies
+    explain and make every candidate more significant (a 1/f wander then became a 5σ
+    step on a quiet day).  This is the identifiability rule (issue 19, item 3:
+    "tested with the orbit harmonics and other signal-shaped nuisances already in
+    the null model") applied to the signal that is not orbit-periodic.
+
+    Returns
+    -------
+    dict
+        ``channels``, ``stat`` (Wald statistic per column), ``p_adj`` (p-value times
+        ``factor``, the multiplicity and families of the admitting test).
+    """
+    use = ctx.use
+    pcols = proxies.columns[use]
+    q_p = ctx.basis.complement(pcols)
+    out: dict[str, Any] = {"channels": list(proxies.names)}
+    if q_p.shape[1] == 0 or wald.psd is None:
+        return {**out, "stat": float(wald.stat), "p_adj": float(min(1.0, wald.pvalue * factor))}
+    r_p = ctx.residual - q_p @ (q_p.T @ ctx.residual)
+    z = prop.columns[use]
+    z = ctx.basis.complement(z)
+    z = z - q_p @ (q_p.T @ z)
+    u, sv, _ = np.linalg.svd(z, full_matrices=False)
+    keep = sv > 1e-8 * max(float(sv[0]) if sv.size else 0.0, 1e-300)
+    if not keep.any():
+        return {**out, "stat": 0.0, "p_adj": 1.0}
+    w = wald_test(ctx.grid, r_p, u[:, keep], ctx.leverage, psd=wald.psd, psd_dof=wald.dof)
+    return {**out, "stat": float(w.stat), "p_adj": float(min(1.0, w.pvalue * factor))}
 
 
 def _gram_ratio(a: NDArray[np.float64], b: NDArray[np.float64]) -> float:
@@ -191,11 +277,18 @@ def validate(
     bias_basis: Basis | None,
     t_used: NDArray[np.float64],
     signal_basis: Basis | None = None,
+    *,
+    proxies: SignalProxies | None = None,
+    wald: WaldResult | None = None,
+    factor: float = 1.0,
+    alpha: float = 0.01,
 ) -> Verdict:
-    """The three checks of the module notes for ``prop`` on top of the model in ``ctx``.
+    """The checks of the module notes for ``prop`` on top of the model in ``ctx``.
 
     ``signal_basis``: the model with the signal's extension (the signal may vary
     within a modulation period beyond the declared model), for identifiability.
+    ``proxies``: the other axes (:func:`signal_proxy_test`), applied to instrument
+    kinds with ``wald`` (the admitting test), its multiplicity ``factor`` and ``alpha``.
     """
     kind = kind_of(prop.name) if prop.name in EFFECT_NAMES else None
     z = prop.columns[ctx.use]
@@ -216,6 +309,21 @@ def validate(
             coef,
             ok_plaus,
         )
+    proxy: dict[str, Any] = {}
+    if proxies is not None and wald is not None and kind is not None and kind.instrument:
+        proxy = signal_proxy_test(prop, ctx, proxies, wald, factor)
+        if not proxy["p_adj"] < alpha:
+            return Verdict(
+                False,
+                "not identifiable: a change of the signal on the other axes "
+                f"({', '.join(proxies.names)}) explains it as well (corrected p "
+                f"{proxy['p_adj']:.2g} given them, needs < {alpha:g})",
+                ident,
+                cv,
+                coef,
+                ok_plaus,
+                proxy,
+            )
     if cv["applicable"] and not cv["gain"] > 0:
         return Verdict(
             False,
@@ -227,7 +335,8 @@ def validate(
             cv,
             coef,
             ok_plaus,
+            proxy,
         )
     if not ok_plaus:
-        return Verdict(False, f"implausible: {why}", ident, cv, coef, False)
-    return Verdict(True, "", ident, cv, coef, True)
+        return Verdict(False, f"implausible: {why}", ident, cv, coef, False, proxy)
+    return Verdict(True, "", ident, cv, coef, True, proxy)

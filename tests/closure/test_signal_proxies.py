@@ -1,0 +1,102 @@
+"""The other axes as signal proxies: a storm's onset is not a bias step (issue 19).
+
+Without a reference the orbit-phase template cannot follow a change of the signal
+that is not orbit-periodic, such as a storm's density rise; its kink in the
+cross-track axis is fitted by bias steps.  The same rise is on the other axes, so an
+instrument effect has to stay significant with them in the model
+(:func:`accal.closure.validation.signal_proxy_test`).  The day is drawn here, not by
+``accal simulate`` or ``tests.indep``: drag proportional to a density with a
+once-per-revolution term, 0.5 % slow fluctuations and a storm that doubles it within
+~10 minutes; its cross-track and radial parts 3 % and 1 % of the along-track drag;
+solar pressure; white plus AR(1) noise on every axis.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from accal.closure import close_loop
+from accal.errors import ValidationError
+
+PERIOD = 5640.0
+ONSET = 15000.0
+
+
+def drawn_day(seed: int, storm: bool, step: tuple[float, float] | None = None):
+    """(t, data (n, 3)) of one 1 Hz day; ``step``: (epoch [s], size [m/s²]) on y."""
+    rng = np.random.default_rng(seed)
+    n = 86400
+    t = np.arange(n, dtype=float)
+    u = 2.0 * np.pi * t / PERIOD
+    f = np.fft.rfftfreq(n, 1.0)
+    spec = np.fft.rfft(rng.standard_normal(n)) / np.sqrt(1.0 + (f / 3e-4) ** 4)
+    fluct = np.fft.irfft(spec, n)
+    fluct *= 0.005 / fluct.std()
+    density = (1.0 + 0.3 * np.cos(u - 0.5)) * (1.0 + fluct)
+    if storm:
+        density *= 1.0 + (1.0 - np.exp(-np.clip(t - ONSET, 0.0, None) / 600.0))
+    drag = 3e-7 * density
+    srp = 4e-8 * np.column_stack([np.sin(u), np.full(n, 0.2), np.cos(u)])
+    data = np.column_stack([-drag, 0.03 * drag, 0.01 * drag]) + srp
+    a = np.exp(-1.0 / 900.0)
+    red = np.zeros((n, 3))
+    kick = 3e-12 * rng.standard_normal((n, 3))
+    for i in range(1, n):
+        red[i] = a * red[i - 1] + kick[i]
+    data += 1e-10 * rng.standard_normal((n, 3)) + red
+    if step is not None:
+        data[:, 1] += step[1] * (t >= step[0])
+    return t, data
+
+
+def closure_y(t, data, proxies: dict | None):
+    return close_loop(
+        t,
+        data[:, 1],
+        base="poly1",
+        orbit_period=PERIOD,
+        candidates=("bias_step",),
+        options={"orbit_period_fixed": True},
+        signal_proxies=proxies,
+    )
+
+
+def removed(res) -> list:
+    return [e for e in res.effects if e.instrument]
+
+
+def test_a_storm_onset_is_not_removed_as_a_step():
+    t, data = drawn_day(0, storm=True)
+    # the hazard is real on this day: without the other axes, steps at the onset
+    alone = closure_y(t, data, None)
+    assert any(abs(e.epoch - ONSET) < 2000.0 for e in removed(alone)), removed(alone)
+    res = closure_y(t, data, {"x": data[:, 0], "z": data[:, 2]})
+    assert removed(res) == []
+    assert res.signal_model["signal_proxies"] == ["x", "z"]
+    for e in res.rejected:  # whatever was significant was told from the signal
+        assert e.name == "bias_step"
+        assert "other axes (x, z)" in e.details["reason"]
+        assert e.details["signal_proxy"]["p_adj"] >= 0.01
+
+
+def test_a_real_step_stays_and_a_bad_proxy_is_left_out_with_a_note():
+    epoch, size = 50000.0, 3e-9
+    t, data = drawn_day(1, storm=False, step=(epoch, size))
+    bad = data[:, 2].copy()
+    bad[100] = np.nan
+    res = closure_y(t, data, {"x": data[:, 0], "z": data[:, 2], "broken": bad})
+    assert res.signal_model["signal_proxies"] == ["x", "z"]
+    assert any("signal proxy broken left out" in n["note"] for n in res.notes)
+    (step,) = removed(res)
+    assert step.name == "bias_step"
+    assert abs(step.epoch - epoch) <= 60.0
+    assert abs(step.coefficient - size) < 3.0 * step.sigma
+    assert step.details["signal_proxy"]["p_adj"] < 0.01
+
+
+def test_a_proxy_of_the_wrong_length_is_a_clear_error():
+    t = np.arange(5000.0)
+    y = np.zeros_like(t)
+    with pytest.raises(ValidationError, match="signal proxy 'x' must have shape"):
+        close_loop(t, y, orbit_period=PERIOD, signal_proxies={"x": np.zeros(10)})
