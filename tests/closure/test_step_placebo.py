@@ -24,7 +24,8 @@ def _day(seed: int, curvature: float):
     t = 5000.0 + np.arange(n, dtype=float)
     blk = np.arange(n) // Q
     u = (np.arange(n) % Q - (Q - 1) / 2) / Q
-    y = 1e-6 * rng.standard_normal(NB)[blk] + 1e-9 * rng.standard_normal(NB)[blk] * u
+    bias = 1e-6 * rng.standard_normal(NB)
+    y = bias[blk] + 1e-9 * rng.standard_normal(NB)[blk] * u
     y += NOISE * rng.standard_normal(n)
     # an unmodelled shape inside every block, a different amplitude in each
     y += curvature * rng.standard_normal(NB)[blk] * (u**2 - 1.0 / 12.0)
@@ -32,6 +33,7 @@ def _day(seed: int, curvature: float):
     epoch = t[b_step * Q + int(rng.integers(100, Q - 100))]
     y += SIZE * (t >= epoch)
     bb = BlockBase(blk, np.column_stack([np.ones(n), u]), ("bias", "drift"))
+    _day.truth = {"bias": bias, "step_block": b_step}
     return t, y, bb, epoch
 
 
@@ -84,3 +86,26 @@ def test_one_block_base_has_no_placebo():
     st = _step(res, 12_345.0)
     assert "sigma_placebo" not in st.details
     assert abs(st.coefficient - SIZE) < 5 * st.sigma
+
+
+def test_the_wider_step_sigma_reaches_the_bias_of_the_steps_block():
+    """The step's block estimates its bias with the step: ``b = b_plain − a·γ``, so the
+    step's wider σ must widen that bias's σ (error propagation), not stay the noise
+    model's."""
+    zs, widened = [], []
+    for seed in range(6):
+        t, y, bb, epoch = _day(seed, curvature=2e-9)
+        truth = _day.truth
+        res = close_loop(t, y, base=bb, candidates=("bias_step",), noise_psd=_white)
+        _step(res, epoch)
+        b = res.base_coefficient(f"bias[{truth['step_block']}]")
+        zs.append((b.after - truth["bias"][truth["step_block"]]) / b.sigma_after)
+        widened.append(b.sigma_after / b.sigma_plain)
+        # a block before the step does not see it: its σ stays the plain one's (a
+        # block after it has ``b = mean − γ`` and carries the step's σ in full)
+        before = res.base_coefficient(f"bias[{truth['step_block'] - 5}]")
+        assert before.sigma_after == pytest.approx(before.sigma_plain, rel=0.05)
+        after = res.base_coefficient(f"bias[{truth['step_block'] + 5}]")
+        assert after.sigma_after > 0.9 * _step(res, epoch).sigma
+    assert min(widened) > 2.0, widened
+    assert np.sqrt(np.mean(np.square(zs))) < 1.5, zs

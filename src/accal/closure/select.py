@@ -732,7 +732,7 @@ def _finish(search: Search, setup: _Setup, st, knots, noise_psd, floored, consid
         for f, p in zip(final, ps, strict=True)
     ]
     if basis.n_blocks > 1 and any(f.prop.name == "bias_step" for f in final):
-        _placebo_step_sigmas(search.context(final, basis, fit, lev), final, found, cov["v_ww"])
+        _placebo_step_sigmas(search.context(final, basis, fit, lev), final, found, cov, fit)
     effects = describe(found, fit.gamma, cov["v_ww"], st["span"], st["t0"], units)
     if setup.t_first is not None and setup.t_first < st["t0"]:
         # a search that left out the record's start fitted its exponentials from its own
@@ -799,10 +799,18 @@ def _finish(search: Search, setup: _Setup, st, knots, noise_psd, floored, consid
     )
 
 
-def _placebo_step_sigmas(ctx, final: list[Found], found, v_ww) -> None:
+def _placebo_step_sigmas(ctx, final: list[Found], found, cov, fit) -> None:
     """A step's size variance: the larger of the noise model's and the placebo epochs'
-    (:func:`~accal.closure.candidates.step_placebo_sigma`), in ``v_ww`` (in place); both
-    σ in the effect's details."""
+    (:func:`~accal.closure.candidates.step_placebo_sigma`), in ``cov`` (in place); both
+    σ in the effect's details.
+
+    The base coefficients after the closure are the plain ones less ``A γ`` (``A``:
+    ``fit.a_mat``, per block), so the wider step covariance ``V_ww + ΔV`` reaches them
+    as ``cov_b + A ΔV Aᵀ`` (the step's own block: its a_Y, a_Z), ``cov_d + A ΔV Aᵀ``
+    and ``cov_bg − A ΔV`` (error propagation of ``b_after = b_plain − A γ``).
+    """
+    v_ww = cov["v_ww"]
+    v_old = v_ww.copy()
     j = 0
     for i, f in enumerate(final):
         q = f.prop.columns.shape[1]
@@ -818,6 +826,14 @@ def _placebo_step_sigmas(ctx, final: list[Found], found, v_ww) -> None:
                 found[i][2]["sigma_noise_model"] = [float(x) for x in model]
                 found[i][2]["sigma_placebo"] = [float(x) for x in emp]
         j += q
+    dv = v_ww - v_old
+    if not np.any(dv):
+        return
+    a = fit.a_mat  # (segments, p, k)
+    add = a @ (dv[None] @ np.transpose(a, (0, 2, 1)))
+    cov["cov_b"] = cov["cov_b"] + add
+    cov["cov_d"] = cov["cov_d"] + add
+    cov["cov_bg"] = cov["cov_bg"] - a @ dv[None]
 
 
 def _base_coefficients(basis, bbase, fit0, fit, cov) -> tuple[BaseCoefficient, ...]:
