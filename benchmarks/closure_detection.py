@@ -213,6 +213,10 @@ def run_all(cases: list[Case], workers: int = 2, progress: bool = True) -> list[
                     file=sys.stderr,
                     flush=True,
                 )
+        # an orderly exit: the context's terminate() alone left a worker hanging in a
+        # lock after a 196-case run (its SIGTERM caught), and the report unwritten
+        pool.close()
+        pool.join()
     return [r for r in results if r is not None]
 
 
