@@ -192,9 +192,7 @@ def test_platform_shape_that_stands_in_for_a_coupling_is_not_removed():
     (``kinds.SHAPE_IDENT_MIN``): reported, not removed; a_Y/a_Z no worse."""
     from accal.estimators.noise import as_psd
 
-    run = platform_run(
-        7301, days=1.0, effects=[("coupling", "temperature", 3e-8, 1465.83, "both")]
-    )
+    run = platform_run(7301, days=1.0, effects=[("coupling", "temperature", 3e-8, 1465.83, "both")])
     t, m, theta, aux = _platform(run)
     res, per = close_loop_demod(
         t, m, theta, tau=600.0, aux=aux, rest_tol=1e-9, noise_psd=as_psd(None)
