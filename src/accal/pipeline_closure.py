@@ -217,7 +217,7 @@ def candidate_channels(
     acceleration: the L1B fit residuals, other columns of a table such as
     ``a_cal``/``a_raw``; derived from the target or the reference) and flags or
     counters (integer, at most :data:`FLAG_LEVELS` distinct values).  The closure
-    then screens what is left (:func:`accal.closure.select.screen_channels`).
+    then screens what is left (:func:`accal.closure.inputs.screen_channels`).
 
     Returns ``(channels, units, report, warnings)``.
     """

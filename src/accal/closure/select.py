@@ -10,7 +10,7 @@ and makes the final fit (:mod:`accal.closure.final`):
    the signal already fitted, so a candidate that can mimic the signal finds nothing
    to fit;
 2. the channels offered for couplings are screened: never the target itself or a
-   copy of it (a channel collinear with the data, ``|r| >`` :data:`SELF_CORRELATION`),
+   copy of it (a channel collinear with the data, ``|r| >`` :data:`~accal.closure.inputs.SELF_CORRELATION`),
    nor a constant or too short one; ``result.considered`` says which were tried and
    why the others were not;
 3. outliers (bursts, spikes) are left out of the analysis
@@ -35,6 +35,14 @@ from numpy.typing import ArrayLike, NDArray
 from accal.closure.basis import Basis, BlockBase
 from accal.closure.candidates import step_placebo_sigma
 from accal.closure.final import covariances, describe, refer_exponentials
+from accal.closure.inputs import (
+    MIN_SAMPLES,
+    base_design,
+    check_inputs,
+    check_proxies,
+    screen_channels,
+    usable_proxies,
+)
 from accal.closure.kinds import EFFECT_NAMES, kind_of, unit_of
 from accal.closure.nuisance import (
     OrbitTemplate,
@@ -59,12 +67,6 @@ __all__ = [
     "screen_channels",
 ]
 
-#: Fewest usable samples :func:`close_loop` analyses.
-MIN_SAMPLES = 50
-#: A channel correlated with the data beyond this is the data (or derived from it).
-SELF_CORRELATION = 0.99
-#: Least share of the used samples a channel must cover to be offered.
-MIN_COVERAGE = 0.9
 #: A residual within this factor of the data's numerical resolution is rounding.
 RESOLUTION_FACTOR = 1000.0
 
@@ -77,120 +79,6 @@ DEFAULT_CANDIDATES = (
     "auxiliary",
     "scale",
 )
-_POLY_BASES = ("poly0", "poly1", "poly2", "poly3")
-_POLY_NAMES = ("bias", "drift", "quadratic", "cubic")
-
-
-def _poly_base(order: int, t, t0: float, span: float, chan, names) -> BlockBase:
-    u = (t - t0) / span
-    cols = np.column_stack([u**k for k in range(order + 1)])
-    scale = np.array([span**-k for k in range(order + 1)])
-    nm = _POLY_NAMES[: order + 1]
-    lb = tuple(f"t^{k}" for k in range(order + 1))
-    if not names:
-        return BlockBase.from_dense(cols, nm, lb, scale)
-    split = np.column_stack([cols * (chan == c)[:, None] for c in range(len(names))])
-    return BlockBase.from_dense(
-        split,
-        tuple(f"{x}:{c}" for c in names for x in nm),
-        tuple(f"{x}:{c}" for c in names for x in lb),
-        np.tile(scale, len(names)),
-    )
-
-
-def _base_design(base, t, t0: float, span: float, chan, names) -> BlockBase:
-    """The base as a :class:`BlockBase` on all samples."""
-    if isinstance(base, BlockBase):
-        if base.block.size != t.size:
-            raise ValidationError(f"base must cover {t.size} samples, got {base.block.size}")
-        return base
-    if isinstance(base, str):
-        check_option("base", base, _POLY_BASES)
-        return _poly_base(int(base[-1]), t, t0, span, chan, names)
-    x = np.asarray(base, dtype=np.float64)
-    if x.ndim == 1:
-        x = x[:, None]
-    if x.ndim != 2 or x.shape[0] != t.size:
-        raise ValidationError(f"base design must have shape ({t.size}, p), got {x.shape}")
-    p = x.shape[1]
-    return BlockBase.from_dense(
-        x, tuple(f"b{j}" for j in range(p)), tuple(f"base{j}" for j in range(p))
-    )
-
-
-def _check_channels(t_all, channel, channel_names):
-    if channel is None:
-        if t_all.size > 1 and not np.all(np.diff(t_all) > 0):
-            raise ValidationError("sample times must be strictly increasing")
-        if channel_names:
-            raise ValidationError("channel_names given without channel")
-        return None, ()
-    ch = np.asarray(channel)
-    if ch.shape != t_all.shape or not np.issubdtype(ch.dtype, np.integer):
-        raise ValidationError(
-            f"channel must be integers of shape {t_all.shape}, got {ch.dtype} {ch.shape}"
-        )
-    ch = ch.astype(np.int64)
-    n_ch = int(ch.max()) + 1 if ch.size else 1
-    if ch.min(initial=0) < 0 or np.unique(ch).size != n_ch:
-        raise ValidationError(f"channel must use every index 0 .. {n_ch - 1}")
-    if t_all.size > 1 and not np.all(np.diff(t_all) >= 0):
-        raise ValidationError("sample times must be non-decreasing")
-    for c in range(n_ch):
-        tc = t_all[ch == c]
-        if tc.size > 1 and not np.all(np.diff(tc) > 0):
-            raise ValidationError(f"sample times of channel {c} must be strictly increasing")
-    names = (
-        tuple(channel_names) if channel_names is not None else tuple(str(c) for c in range(n_ch))
-    )
-    if len(names) != n_ch:
-        raise ValidationError(f"channel_names must have {n_ch} entries, got {len(names)}")
-    if n_ch == 1:
-        return None, ()
-    return ch, names
-
-
-def screen_channels(
-    aux: dict[str, NDArray[np.float64]],
-    y: NDArray[np.float64],
-    use: NDArray[np.bool_],
-    reference: NDArray[np.float64] | None = None,
-) -> tuple[dict[str, NDArray[np.float64]], list[dict[str, Any]]]:
-    """The channels a coupling may be tested to, and what became of each.
-
-    Left out, with the reason: a channel covering under :data:`MIN_COVERAGE` of the
-    used samples, a constant one, and one collinear with the data or the reference
-    (``|corr| >`` :data:`SELF_CORRELATION` over the used samples): the target against
-    itself (a table passed as its own ``--aux``) would "explain" everything.
-    """
-    kept, report = {}, []
-    for name, x in aux.items():
-        xu = x[use]
-        ok = np.isfinite(xu)
-        if ok.mean() < MIN_COVERAGE:
-            report.append(
-                {"channel": name, "status": "left out", "reason": f"covers {ok.mean():.0%}"}
-            )
-            continue
-        if np.ptp(xu[ok]) == 0:
-            report.append({"channel": name, "status": "left out", "reason": "constant"})
-            continue
-        why = ""
-        for other, label in ((y, "the data"), (reference, "the reference")):
-            if other is None:
-                continue
-            o = other[use][ok]
-            if np.ptp(o) == 0:
-                continue
-            rho = float(np.corrcoef(xu[ok], o)[0, 1])
-            if abs(rho) > SELF_CORRELATION:
-                why = f"collinear with {label} (|r| = {abs(rho):.4f}): derived from it"
-        if why:
-            report.append({"channel": name, "status": "left out", "reason": why})
-            continue
-        kept[name] = x
-        report.append({"channel": name, "status": "considered", "reason": ""})
-    return kept, report
 
 
 def _resolve(candidates: Sequence[str | Callable]) -> list[tuple[str, Callable]]:
@@ -209,68 +97,6 @@ def _families(builders, orbit_period, template: bool) -> int:
     for name, _ in builders:
         n += 2 if name == "periodic" and orbit_period and not template else 1
     return max(n, 1)
-
-
-def _check_inputs(t, y, valid, reference, aux, channel, channel_names):
-    """``close_loop``'s arrays checked: (t, y, channel, names, use, reference, aux)."""
-    t_all = np.asarray(t, dtype=np.float64)
-    y_all = np.asarray(y, dtype=np.float64)
-    if t_all.ndim != 1 or y_all.shape != t_all.shape:
-        raise ValidationError(
-            f"t and y must be 1-D of equal length, got {t_all.shape}, {y_all.shape}"
-        )
-    chan_all, names = _check_channels(t_all, channel, channel_names)
-    use = np.isfinite(y_all) & np.isfinite(t_all)
-    if valid is not None:
-        v = np.asarray(valid, dtype=bool)
-        if v.shape != t_all.shape:
-            raise ValidationError(f"valid must have shape {t_all.shape}, got {v.shape}")
-        use &= v
-    if use.sum() < MIN_SAMPLES:
-        raise ValidationError(f"need at least {MIN_SAMPLES} usable samples, got {int(use.sum())}")
-    ref_all = None
-    if reference is not None:
-        ref_all = np.asarray(reference, dtype=np.float64)
-        if ref_all.shape != t_all.shape:
-            raise ValidationError(f"reference must have shape {t_all.shape}, got {ref_all.shape}")
-        use &= np.isfinite(ref_all)
-    aux_all = {}
-    for k, v in (aux or {}).items():
-        a = np.asarray(v, dtype=np.float64)
-        if a.shape != t_all.shape:
-            raise ValidationError(
-                f"auxiliary channel {k!r} must have shape {t_all.shape}, got {a.shape}"
-            )
-        aux_all[k] = a
-    return t_all, y_all, chan_all, names, use, ref_all, aux_all
-
-
-def _check_proxies(proxies, t_all) -> dict[str, NDArray[np.float64]]:
-    """``signal_proxies`` of :func:`close_loop` as float arrays of the data's shape."""
-    out = {}
-    for k, v in (proxies or {}).items():
-        a = np.asarray(v, dtype=np.float64)
-        if a.shape != t_all.shape:
-            raise ValidationError(
-                f"signal proxy {k!r} must have shape {t_all.shape}, got {a.shape}"
-            )
-        out[str(k)] = a
-    return out
-
-
-def _signal_proxies(proxies, use, notes) -> SignalProxies | None:
-    """The ``signal_proxies`` finite on every used sample (None: none); notes the others."""
-    cols, names = [], []
-    for k, a in proxies.items():
-        if not np.all(np.isfinite(a[use])):
-            text = f"signal proxy {k} left out: not finite on every used sample"
-            notes[("closure", None, text)] = {"name": "closure", "channel": k, "note": text}
-            continue
-        cols.append(a)
-        names.append(str(k))
-    if not cols:
-        return None
-    return SignalProxies(np.column_stack(cols), tuple(names))
 
 
 def _signal_model(template, proxies: SignalProxies | None) -> dict[str, Any]:
@@ -448,10 +274,10 @@ def close_loop(
     check_option("signal_model", signal_model, ("auto", "orbit", "none"))
     if not 0 < alpha < 1:
         raise ValidationError(f"alpha must be in (0, 1), got {alpha}")
-    t_all, y_all, chan_all, names, use, ref_all, aux_all = _check_inputs(
+    t_all, y_all, chan_all, names, use, ref_all, aux_all = check_inputs(
         t, y, valid, reference, aux, channel, channel_names
     )
-    proxies_all = _check_proxies(signal_proxies, t_all)
+    proxies_all = check_proxies(signal_proxies, t_all)
     aux_all, considered = screen_channels(aux_all, y_all, use, ref_all)
     considered = [*screened, *considered]
     if signal_model == "auto":
@@ -472,7 +298,7 @@ def close_loop(
     st = setup.build(use)
     st, use, notes = _leave_out_outliers(setup, st, use, aux_all, n_spikes)
     fit0 = st["fit0"]
-    proxies = _signal_proxies(proxies_all, use, notes) if st["template"] else None
+    proxies = usable_proxies(proxies_all, use, notes) if st["template"] else None
     opts.update(
         families=_families(builders, orbit_period, st["template"] is not None),
         enabled=tuple(name for name, _ in builders),
@@ -614,7 +440,7 @@ class _Setup:
             self.t_first = t0
         span = float(t_u[-1] - t_u[0]) or 1.0
         grid = make_grid(t_u, chan_u)
-        bbase = _base_design(self.base, self.t_all, t0, span, self.chan_all, self.names)
+        bbase = base_design(self.base, self.t_all, t0, span, self.chan_all, self.names)
         plain = Basis(bbase.block[use], bbase.columns[use], n_blocks=bbase.n_blocks)
         if plain.rank_total + 10 > t_u.size:
             raise ValidationError(
