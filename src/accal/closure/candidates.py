@@ -451,17 +451,14 @@ def bias_step(ctx: Context) -> list[Proposal]:
         if len(key) == 3 and key[0] == "bias_step":
             i = int(np.searchsorted(t, float(key[2])))
             ok[max(0, i - near) : i + near] = False
-    basis = ctx.basis
+    extra = None
     if ctx.proxies is not None:
         # the epoch is looked for with the other axes' signal fitted: a storm's onset,
         # which they explain, would otherwise be the best epoch again and again (each
         # rejected by the signal-proxy check) while a real step elsewhere waited
-        extended = basis.extend(ctx.proxies)
-        if extended.keep.size > basis.keep.size:
-            q = extended.qe[:, basis.keep.size - extended.keep.size :]
-            r = r - q @ (q.T @ r)
-            basis = extended
-    stat = _scan(basis, r, masks, ok)
+        extra = ctx.basis.complement(ctx.proxies)
+        r = r - extra @ (extra.T @ r)
+    stat = _scan(ctx.basis, r, masks, ok, extra)
     if not ok.any():
         return []
     i = int(np.argmax(np.where(ok, stat, -1.0)))
@@ -481,37 +478,41 @@ def bias_step(ctx: Context) -> list[Proposal]:
     # +1e-9/-1e-9 m/s²: alone each had p 1.0, the other inflating the low-frequency
     # noise estimate) are tested together, at the pairs' multiplicity; the selection
     # takes the pair only when no single step is significant
-    col = (t >= epoch).astype(np.float64)
-    basis2 = basis.extend(col)
-    if basis2.keep.size <= basis.keep.size:
+    zt = ctx.basis.complement((t >= epoch).astype(np.float64))
+    if zt.shape[1] == 0:
         return out
-    zt = basis2.qe[:, -1]
-    r2 = r - zt * (zt @ r)
+    if extra is not None and extra.shape[1]:
+        zt = np.linalg.qr(np.column_stack([extra, zt]))[0]
+    r2 = ctx.residual - zt @ (zt.T @ ctx.residual)
     ok2 = ok & (np.abs(t - epoch) >= STEP_SEPARATION)
-    stat2 = _scan(basis2, r2, masks, ok2)
+    stat2 = _scan(ctx.basis, r2, masks, ok2, zt)
     if ok2.any():
         j = int(np.argmax(np.where(ok2, stat2, -1.0)))
         out.append(_step_proposal(ctx, sorted([epoch, float(t[j])]), 0.5 * mult**2))
     return out
 
 
-def _step_sums(basis, r, m):
+def _step_sums(basis, r, m, extra=None):
     """For a step ``1[t ≥ e]`` on channel mask ``m`` at every used sample ``e``: its inner
     product with ``r`` (``Σ_{t≥e} r``), its norm with the design projected out, and
-    where that norm is defined."""
+    where that norm is defined.  ``extra``: orthonormal columns orthogonal to the
+    design, projected out too (the design extended without forming it)."""
     rm = r * m
     s_r = np.cumsum(rm[::-1])[::-1]
     cnt = np.cumsum(m[::-1].astype(float))[::-1]
     nrm = cnt - basis.step_norms(m)
+    if extra is not None and extra.shape[1]:
+        nrm = nrm - np.sum(np.cumsum((extra * m[:, None])[::-1], axis=0)[::-1] ** 2, axis=1)
     good = nrm > 1e-6 * np.maximum(cnt, 1.0)
     return s_r, np.where(good, nrm, 1.0), good
 
 
-def _scan(basis, r, masks, ok) -> NDArray[np.float64]:
-    """Explained power of a step at every used sample (``ok`` is cleared where undefined)."""
+def _scan(basis, r, masks, ok, extra=None) -> NDArray[np.float64]:
+    """Explained power of a step at every used sample (``ok`` is cleared where undefined);
+    ``extra``: see :func:`_step_sums`."""
     stat = np.zeros(r.size)
     for m in masks:
-        s_r, nrm, good = _step_sums(basis, r, m)
+        s_r, nrm, good = _step_sums(basis, r, m, extra)
         ok &= good
         stat += np.where(good, s_r**2 / nrm, 0.0)
     return stat
