@@ -174,27 +174,23 @@ def check_inputs(t, y, valid, reference, aux, channel, channel_names):
         if ref_all.shape != t_all.shape:
             raise ValidationError(f"reference must have shape {t_all.shape}, got {ref_all.shape}")
         use &= np.isfinite(ref_all)
-    aux_all = {}
-    for k, v in (aux or {}).items():
-        a = np.asarray(v, dtype=np.float64)
-        if a.shape != t_all.shape:
-            raise ValidationError(
-                f"auxiliary channel {k!r} must have shape {t_all.shape}, got {a.shape}"
-            )
-        aux_all[k] = a
+    aux_all = _series_like(aux, t_all, "auxiliary channel")
     return t_all, y_all, chan_all, names, use, ref_all, aux_all
 
 
 def check_proxies(proxies, t_all) -> dict[str, NDArray[np.float64]]:
     """``signal_proxies`` of :func:`close_loop` as float arrays of the data's shape."""
+    return {str(k): a for k, a in _series_like(proxies, t_all, "signal proxy").items()}
+
+
+def _series_like(series, t_all, what: str) -> dict:
+    """Each series of the mapping as a float array, which must have ``t_all``'s shape."""
     out = {}
-    for k, v in (proxies or {}).items():
+    for k, v in (series or {}).items():
         a = np.asarray(v, dtype=np.float64)
         if a.shape != t_all.shape:
-            raise ValidationError(
-                f"signal proxy {k!r} must have shape {t_all.shape}, got {a.shape}"
-            )
-        out[str(k)] = a
+            raise ValidationError(f"{what} {k!r} must have shape {t_all.shape}, got {a.shape}")
+        out[k] = a
     return out
 
 

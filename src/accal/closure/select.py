@@ -9,10 +9,10 @@ and makes the final fit (:mod:`accal.closure.final`):
    period refined on the data): candidates are tested, validated and estimated with
    the signal already fitted, so a candidate that can mimic the signal finds nothing
    to fit;
-2. the channels offered for couplings are screened: never the target itself or a
-   copy of it (a channel collinear with the data, ``|r| >`` :data:`~accal.closure.inputs.SELF_CORRELATION`),
-   nor a constant or too short one; ``result.considered`` says which were tried and
-   why the others were not;
+2. the channels offered for couplings are screened
+   (:func:`accal.closure.inputs.screen_channels`): never the target itself or a copy
+   of it (a channel collinear with the data), nor a constant or too short one;
+   ``result.considered`` says which were tried and why the others were not;
 3. outliers (bursts, spikes) are left out of the analysis
    (:func:`accal.closure.outliers.outliers`);
 4. forward selection (:func:`accal.closure.search.run`): test of significance with
