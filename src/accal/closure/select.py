@@ -337,7 +337,20 @@ def close_loop(
         return search
 
     search = make(st, use)
-    floor = RESOLUTION_FACTOR * float(resolution) if resolution and resolution > 0 else 0.0
+    stop = _floor_stop(resolution)
+    run(search, max_effects, stop)
+    swap_smooth(search)
+    search, st = _without_unknown_history(search, st, use, setup, make, max_effects, stop)
+    floored = stop is not None and stop(search)
+    return _finish(search, setup, st, catchall_knots, noise_psd, floored, considered, opts)
+
+
+def _floor_stop(resolution: float | None) -> Callable[[Search], bool] | None:
+    """The search's stop at the data's numerical resolution (None without one): a
+    residual within :data:`RESOLUTION_FACTOR` of it is rounding (noted)."""
+    if not resolution or resolution <= 0:
+        return None
+    floor = RESOLUTION_FACTOR * float(resolution)
 
     def at_floor(s: Search) -> bool:
         rms = float(np.sqrt(np.mean(s.state(s.found)[1].resid ** 2)))
@@ -351,34 +364,40 @@ def close_loop(
         )
         return True
 
-    run(search, max_effects, at_floor if floor else None)
-    swap_smooth(search)
-    unknown = _unknown_history(search, t_all)
-    if unknown is not None and int((use & ~unknown.mask).sum()) >= MIN_SAMPLES:
-        # a lagged or low-passed channel is unknown before the record and after its
-        # holes (its regressor there held the last value): those samples were fitted
-        # with a made-up regressor (QA: a 1000 s lag, its coefficient 7σ off; after a
-        # resampled gap, false steps).  The search again without them.
-        lead, coupled = unknown.lead, unknown.channels
-        use2 = use & ~unknown.mask
-        st2 = setup.build(use2)
-        again = make(st2, use2)
-        run(again, max_effects, at_floor if floor else None)
-        swap_smooth(again)
-        kept = {f.prop.channel for f in again.found if f.prop.name == "auxiliary"}
-        if coupled <= kept:
-            again.note(
-                "auxiliary",
-                None,
-                f"{int((use & unknown.mask).sum())} samples left out of the analysis: the "
-                f"first {lead:.0f} s and as much after each hole of the coupled channel(s) "
-                f"{', '.join(sorted(coupled))}, whose lagged and filtered values are unknown "
-                "there",
-                {"left_out": lead},
-            )
-            search, st = again, st2
-    return _finish(search, setup, st, catchall_knots, noise_psd, floor and at_floor(search),
-                   considered, opts)  # fmt: skip
+    return at_floor
+
+
+def _without_unknown_history(search, st, use, setup, make, max_effects, stop):
+    """The search again without the samples a coupled channel's history is unknown at.
+
+    A lagged or low-passed channel is unknown before the record and after its holes
+    (its regressor there held the last value): those samples were fitted with a
+    made-up regressor (QA: a 1000 s lag, its coefficient 7σ off; after a resampled
+    gap, false steps).  Kept when the second search keeps the couplings; returns
+    ``(search, st)``.
+    """
+    unknown = _unknown_history(search, search.t_all)
+    if unknown is None or int((use & ~unknown.mask).sum()) < MIN_SAMPLES:
+        return search, st
+    lead, coupled = unknown.lead, unknown.channels
+    use2 = use & ~unknown.mask
+    st2 = setup.build(use2)
+    again = make(st2, use2)
+    run(again, max_effects, stop)
+    swap_smooth(again)
+    kept = {f.prop.channel for f in again.found if f.prop.name == "auxiliary"}
+    if not coupled <= kept:
+        return search, st
+    again.note(
+        "auxiliary",
+        None,
+        f"{int((use & unknown.mask).sum())} samples left out of the analysis: the "
+        f"first {lead:.0f} s and as much after each hole of the coupled channel(s) "
+        f"{', '.join(sorted(coupled))}, whose lagged and filtered values are unknown "
+        "there",
+        {"left_out": lead},
+    )
+    return again, st2
 
 
 class _Unknown(NamedTuple):
