@@ -398,6 +398,10 @@ class Basis:
             qp = np.zeros((ns, lmax, p))
             qp[self.sample_seg, pos] = q
             self._qp = qp
+            self._qpt = np.ascontiguousarray(np.transpose(qp, (0, 2, 1)))
+            # segments of one length tiling the samples (every platform period fully
+            # sampled): the padded layout is a reshape, no scatter or gather
+            self._tiled = ns * lmax == n
 
     def _build_extra(self) -> None:
         """QR of the extra columns after projecting the blocks out.
@@ -461,9 +465,12 @@ class Basis:
             return (self.q.T @ z)[None]
         if self._pad is not None:
             pos, lmax = self._pad
-            zp = np.zeros((self.seg_start.size, lmax, z.shape[1]))
-            zp[self.sample_seg, pos] = z
-            return np.matmul(np.transpose(self._qp, (0, 2, 1)), zp)
+            if self._tiled:
+                zp = z.reshape(self.seg_start.size, lmax, z.shape[1])
+            else:
+                zp = np.zeros((self.seg_start.size, lmax, z.shape[1]))
+                zp[self.sample_seg, pos] = z
+            return np.matmul(self._qpt, zp)
         out = np.empty((self.seg_start.size, self.p, z.shape[1]))
         for j in range(self.p):
             out[:, j, :] = np.add.reduceat(self.q[:, j : j + 1] * z, self.seg_start, axis=0)
@@ -475,7 +482,8 @@ class Basis:
             return self.q @ c[0]
         if self._pad is not None:
             pos, _ = self._pad
-            return np.matmul(self._qp, c)[self.sample_seg, pos]
+            prod = np.matmul(self._qp, c)
+            return prod.reshape(self.n, -1) if self._tiled else prod[self.sample_seg, pos]
         out = np.zeros((self.n, c.shape[2]))
         for j in range(self.p):
             out += self.q[:, j : j + 1] * c[self.sample_seg, j, :]
