@@ -150,3 +150,26 @@ def test_two_channels_step_in_one_channel():
     assert {b.name for b in res.base} == {"bias:y", "drift:y", "bias:z", "drift:z"}
     with pytest.raises(ValidationError, match="channel 0 must be strictly increasing"):
         close_loop(np.zeros(100), np.zeros(100), channel=np.r_[np.zeros(99, int), 1])
+
+
+@pytest.mark.parametrize("drop", [False, True])
+def test_block_products_equal_dense_on_tiled_and_ragged_layouts(drop):
+    """``Q_bᵀ z`` and ``Σ Q_b c_b`` per block: the reshape path (blocks of one length
+    tiling the samples) and the padded path (a shorter block) equal the dense basis."""
+    rng = np.random.default_rng(4)
+    n = 8 * 250
+    keep = np.ones(n, bool)
+    if drop:
+        keep[1010:1060] = False  # block 4 is shorter: not tiled
+    blk = (np.arange(n) // 250)[keep]
+    u = (np.arange(n) % 250 / 250.0)[keep]
+    cols = np.column_stack([np.ones(u.size), u, np.cos(7 * u)])
+    b = Basis(blk, cols)
+    assert b._tiled is not drop
+    z = rng.standard_normal((u.size, 5))
+    q = b.dense_q()
+    np.testing.assert_allclose(b.block_project(z), q @ (q.T @ z), rtol=0, atol=1e-12)
+    coef = b.block_coef(z)
+    for s in range(b.seg_start.size):
+        sl = slice(b.seg_start[s], b.seg_stop[s])
+        np.testing.assert_allclose(coef[s], b.q[sl].T @ z[sl], rtol=0, atol=1e-12)
