@@ -244,19 +244,16 @@ def _scan_fft(
 
 
 def _scan_direct(ctx: Context, hp: NDArray[np.float64], lags: NDArray[np.int64]):
-    """The same as :func:`_scan_fft`, lag by lag (block bases, several channels).
+    """The same as :func:`_scan_fft`, exactly, lag by lag (block bases, several channels).
 
-    Known limitation, kept on purpose: the channel's mean is not taken out here (nor
-    in :func:`_power_at`), so a 293 K temperature's mK variation (1e-9 of its norm) is
-    lost to cancellation and the platform's couplings scan as zero power.  Taking it
-    out in both made the couplings visible (2/4 found at 3e-8), and then a lagged
-    coupling to a temperature with an orbital cycle was taken for a sinusoidal bias
-    line (a_Y error 8e-12 → 2.6e-9 m/s², tests/closure/test_demod.py): the platform's
-    couplings need an identifiability check against lines and in-period shapes first
-    (docs/closure.md).
+    The channel's mean is taken out first, as in :func:`_scan_fft`: each channel's
+    bias holds the constant, and a 293 K temperature's norm with the base projected
+    out is its 0.1 K variation, 1e-8 of its own norm, lost to cancellation (QA: every
+    platform coupling scanned as zero power, 0/16 found).
     """
     big = int(lags.max()) if lags.size else 0
     idx = ctx.grid.idx
+    hp = hp - float(np.mean(hp))
     z = np.stack([hp[idx + big - lag] for lag in lags])
     return channel_power(ctx, z)
 
@@ -271,10 +268,10 @@ def _column(ctx: Context, name: str, x, tc: float, lag: float) -> NDArray[np.flo
 
 
 def _power_at(ctx: Context, name: str, x, tc: float, lag: float) -> float:
-    """Explained power of the coupling at (``lag``, ``τ``) (the raw column: see the
-    known limitation in :func:`_scan_direct`)."""
+    """Explained power of the coupling at (``lag``, ``τ``), the column's mean taken out
+    (the base holds the constant; see :func:`_scan_direct`)."""
     col = _column(ctx, name, x, tc, lag)[ctx.use]
-    return float(channel_power(ctx, col[None, :])[0])
+    return float(channel_power(ctx, (col - float(np.mean(col)))[None, :])[0])
 
 
 def _refine(ctx: Context, name: str, x, lag: float, tc: float, lag_step: float, top: float):

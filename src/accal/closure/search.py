@@ -193,9 +193,8 @@ class Search:
         )
 
     def proxy_args(self, tested: Tested) -> dict[str, Any]:
-        """:func:`~accal.closure.validation.validate`'s signal-proxy arguments for ``tested``."""
-        if self.proxies is None:
-            return {}
+        """:func:`~accal.closure.validation.validate`'s test arguments for ``tested``
+        (the other axes, the admitting test, its multiplicity, alpha)."""
         factor = max(tested.prop.multiplicity, 1.0) * max(self.n_families, 1)
         return {"proxies": self.proxies, "wald": tested.wald, "factor": factor, "alpha": self.alpha}
 
@@ -240,10 +239,13 @@ def run(s: Search, max_effects: int, stop: Callable[[Search], bool] | None = Non
             (t for t in tested if t.p_adj < s.alpha),
             key=lambda t: (kind_of(t.prop.name).last_resort, t.log_p, -t.power),
         )
+        # a pair (a channel with its square) only when its single coupling is not
+        # significant, or when the single was rejected (a linear coupling that lines at
+        # the channel's periods explain may still be the proxy of a quadratic one)
         singles = {t.prop.name for t in significant if not t.prop.params.get("pair")}
-        significant = [
-            t for t in significant if not t.prop.params.get("pair") or t.prop.name not in singles
-        ]
+        significant = sorted(
+            significant, key=lambda t: bool(t.prop.params.get("pair")) and t.prop.name in singles
+        )
         added = False
         for t in significant:
             verdict = validate(

@@ -29,7 +29,9 @@ added to the model (and, for an instrument effect, removed from the data):
 3. **Physically plausible** (:func:`accal.closure.kinds.plausible`).
 
 Without a reference, an instrument effect must also not be a change of the signal
-seen on the other axes (:func:`signal_proxy_test`, with ``proxies``).
+seen on the other axes (:func:`signal_proxy_test`, with ``proxies``), and a coupling
+must explain more than lines at its channel's own periods do
+(:func:`competing_line_test`).
 
 A candidate that fails is reported with the reason and never removed.
 """
@@ -46,12 +48,15 @@ from scipy.linalg import eigh
 from accal.closure.basis import Basis
 from accal.closure.candidates import Context, Proposal
 from accal.closure.kinds import EFFECT_NAMES, IDENT_MIN, kind_of, plausible
+from accal.closure.periodic import _line_background
 from accal.closure.residual import WaldResult, wald_test
 
 __all__ = [
     "N_FOLDS",
     "SignalProxies",
     "Verdict",
+    "competing_line_test",
+    "competing_lines",
     "cross_validate",
     "identifiability",
     "signal_proxy_test",
@@ -88,6 +93,9 @@ class Verdict:
     signal_proxy : dict
         :func:`signal_proxy_test` (empty when not made): ``channels``, ``p_adj``,
         ``stat``.
+    competing_lines : dict
+        :func:`competing_line_test` (couplings only; empty when not made):
+        ``periods_s``, ``explained_coupling``, ``explained_lines``, ``score``.
     """
 
     ok: bool
@@ -97,6 +105,7 @@ class Verdict:
     coefficient: float = float("nan")
     plausible: bool = True
     signal_proxy: dict[str, Any] = field(default_factory=dict)
+    competing_lines: dict[str, Any] = field(default_factory=dict)
 
     def details(self) -> dict[str, Any]:
         """The checks as ``closure.json`` details."""
@@ -107,6 +116,8 @@ class Verdict:
         }
         if self.signal_proxy:
             out["signal_proxy"] = dict(self.signal_proxy)
+        if self.competing_lines:
+            out["competing_lines"] = dict(self.competing_lines)
         return out
 
 
@@ -159,22 +170,139 @@ def signal_proxy_test(
         ``channels``, ``stat`` (Wald statistic per column), ``p_adj`` (p-value times
         ``factor``, the multiplicity and families of the admitting test).
     """
-    use = ctx.use
-    pcols = proxies.columns[use]
-    q_p = ctx.basis.complement(pcols)
     out: dict[str, Any] = {"channels": list(proxies.names)}
+    return {**out, **_test_given(prop, ctx, proxies.columns[ctx.use], wald, factor)}
+
+
+def _test_given(
+    prop: Proposal, ctx: Context, cols: NDArray[np.float64], wald: WaldResult, factor: float
+) -> dict[str, float]:
+    """The candidate's Wald test with the columns ``cols`` (used rows) added to the model.
+
+    The candidate's columns are orthogonalised against the model and ``cols``, the
+    residual has ``cols`` fitted, and the noise PSD and degrees of freedom of the test
+    that admitted the candidate (``wald``) are held: a re-estimated PSD would be
+    lowered by what ``cols`` explain and make every candidate more significant.
+    ``p_adj`` is the p-value times ``factor`` (the admitting test's multiplicity).
+    """
+    q_p = ctx.basis.complement(cols)
     if q_p.shape[1] == 0 or wald.psd is None:
-        return {**out, "stat": float(wald.stat), "p_adj": float(min(1.0, wald.pvalue * factor))}
+        return {"stat": float(wald.stat), "p_adj": float(min(1.0, wald.pvalue * factor))}
     r_p = ctx.residual - q_p @ (q_p.T @ ctx.residual)
-    z = prop.columns[use]
-    z = ctx.basis.complement(z)
+    z = ctx.basis.complement(prop.columns[ctx.use])
     z = z - q_p @ (q_p.T @ z)
     u, sv, _ = np.linalg.svd(z, full_matrices=False)
     keep = sv > 1e-8 * max(float(sv[0]) if sv.size else 0.0, 1e-300)
     if not keep.any():
-        return {**out, "stat": 0.0, "p_adj": 1.0}
+        return {"stat": 0.0, "p_adj": 1.0}
     w = wald_test(ctx.grid, r_p, u[:, keep], ctx.leverage, psd=wald.psd, psd_dof=wald.dof)
-    return {**out, "stat": float(w.stat), "p_adj": float(min(1.0, w.pvalue * factor))}
+    return {"stat": float(w.stat), "p_adj": float(min(1.0, w.pvalue * factor))}
+
+
+#: Spectral lines of a coupling's regressor (per column) tried as competing lines.
+N_COMPETING_LINES = 1
+#: Zero-padding of the regressor's periodogram for the peak frequencies (a peak within
+#: 1/8 of a Fourier bin: a sinusoid at it drifts by at most π/8 of phase over the record).
+_LINE_PAD = 8
+
+
+def competing_lines(
+    prop: Proposal, ctx: Context, k_lines: int = N_COMPETING_LINES
+) -> tuple[NDArray[np.float64], list[float]]:
+    """Sinusoids at the strongest spectral peaks of a coupling's regressor.
+
+    A channel that is mostly a few sinusoids (a temperature with an orbital cycle)
+    explains, with a fitted lag, any line of the residual at those frequencies: a
+    coupling is then only the line under another name, and removing it would also
+    put the channel's other variation (its walk, its kicks) times the coefficient
+    into the data.  Returns the columns ``cos, sin(2πf(t − t0))`` per data channel for
+    the ``k_lines`` strongest spectral lines of each of the candidate's columns less
+    a straight line (a channel and its square: the lines of both), and those
+    frequencies [Hz].  A line is an ordinate above its local background by the line
+    search's threshold (:func:`accal.closure.periodic.periodic`), its frequency the
+    maximum of the periodogram zero-padded by :data:`_LINE_PAD` near it.
+    """
+    use = ctx.use
+    grid = ctx.grid
+    tt = ctx.t - ctx.t0
+    n_pad = _LINE_PAD * grid.size
+    f_pad = np.fft.rfftfreq(n_pad, grid.step)
+    df = 1.0 / (grid.size * grid.step)
+    freqs: list[float] = []
+    cols_in = prop.columns[use]
+    # each column's own spectrum (its mean and slope out), not the projected one: a
+    # per-period base moves a slow line's power to the sidebands k/τ ± f
+    for j in range(cols_in.shape[1]):
+        c = cols_in[:, j]
+        on = c != 0
+        if on.sum() < 3:
+            continue
+        fit = np.polynomial.polynomial.polyfit(tt[on], c[on], 1)
+        reg = np.where(on, c - np.polynomial.polynomial.polyval(tt, fit), 0.0)
+        placed = grid.place(reg)[0]
+        placed = placed[np.any(placed != 0, axis=1)]  # the column's own data channel(s)
+        pg = np.sum(np.abs(np.fft.rfft(placed, axis=-1)) ** 2, axis=0)
+        # lines: ordinates far above the local background (periodic's running median,
+        # a noise ordinate over it is exp(1)), at twice the 1 % Bonferroni level of the
+        # ordinates (the line search's rule): a walk's or a noise's peaks are not lines
+        rat = pg / np.maximum(_line_background(pg), 1e-300)
+        k = np.arange(pg.size)
+        thr = 2.0 * np.log(max(pg.size, 2) / 0.01)
+        hits = np.flatnonzero((rat > thr) & (k >= 2))
+        if hits.size == 0:
+            continue
+        pw = np.sum(np.abs(np.fft.rfft(placed, n=n_pad, axis=-1)) ** 2, axis=0)
+        mine: list[tuple[float, float]] = []
+        for grp in np.split(hits, np.flatnonzero(np.diff(hits) > 1) + 1):
+            lo_i, hi_i = (grp[0] - 1) * _LINE_PAD, (grp[-1] + 1) * _LINE_PAD + 1
+            i = lo_i + int(np.argmax(pw[lo_i:hi_i]))
+            mine.append((float(pw[i]), float(f_pad[i])))
+        for _, g in sorted(mine, reverse=True)[:k_lines]:
+            if all(abs(g - h) >= 2.0 * df for h in freqs):
+                freqs.append(g)
+    if not freqs:
+        return np.zeros((int(use.sum()), 0)), []
+    ph = 2.0 * np.pi * np.outer(ctx.t - ctx.t0, freqs)
+    trig = np.concatenate([np.cos(ph), np.sin(ph)], axis=1)
+    cols = np.concatenate([trig * mk[:, None] for mk in ctx.channel_masks()], axis=1)
+    return cols, freqs
+
+
+def competing_line_test(
+    prop: Proposal, ctx: Context, wald: WaldResult, factor: float
+) -> dict[str, Any]:
+    """Whether a coupling explains the residual better than lines at its channel's periods.
+
+    The coupling and the sinusoids of :func:`competing_lines` are two explanations of
+    the same structure, not nested.  Each is scored by Mallows' Cp for correlated
+    errors (Mallows 1973): the residual power it explains, ``‖Qᵀr‖²`` (``Q`` its columns
+    orthonormalised against the model), less twice what noise alone would put there,
+    ``2·tr(QᵀCQ)`` (the sandwich covariance of the Wald test, the admitting test's noise
+    PSD held for both); ``score = score_coupling − score_lines`` must be positive for
+    the coupling to be kept.  When the truth is a line at the channel's period, the
+    lines explain all of it and the coupling only the share its channel has there (QA,
+    platform: a lagged coupling of −1.6e-7 m/s²/K stood in for a 1e-8 m/s² line at
+    5400 s and put the temperature's walk into a_Y, error 8e-12 → 2.6e-9 m/s²); when
+    the truth is a coupling, it also explains the channel's variation off the lines.
+    A line already in the model leaves no competitor (its columns are in the design),
+    so a line and a coupling can both be found.  Issue 19, item 3: "tested with ...
+    other signal-shaped nuisances already in the null model".  ``factor`` is not used
+    (the comparison is between two fits of the same residual).
+    """
+    cols, freqs = competing_lines(prop, ctx)
+    out: dict[str, Any] = {"periods_s": [1.0 / f for f in freqs]}
+    q_l = ctx.basis.complement(cols) if freqs else np.zeros((cols.shape[0], 0))
+
+    def cp(w: WaldResult) -> tuple[float, float]:
+        return float(w.gamma @ w.gamma), float(np.trace(w.cov))
+
+    ss_c, noise_c = cp(wald)
+    if q_l.shape[1] == 0 or wald.psd is None:
+        return {**out, "explained_coupling": ss_c, "explained_lines": 0.0, "score": float("inf")}
+    w_l = wald_test(ctx.grid, ctx.residual, q_l, ctx.leverage, psd=wald.psd, psd_dof=wald.dof)
+    ss_l, noise_l = cp(w_l)
+    score = (ss_c - 2.0 * noise_c) - (ss_l - 2.0 * noise_l)
+    return {**out, "explained_coupling": ss_c, "explained_lines": ss_l, "score": float(score)}
 
 
 def _gram_ratio(a: NDArray[np.float64], b: NDArray[np.float64]) -> float:
@@ -288,7 +416,9 @@ def validate(
     ``signal_basis``: the model with the signal's extension (the signal may vary
     within a modulation period beyond the declared model), for identifiability.
     ``proxies``: the other axes (:func:`signal_proxy_test`), applied to instrument
-    kinds with ``wald`` (the admitting test), its multiplicity ``factor`` and ``alpha``.
+    kinds with ``wald`` (the admitting test), its multiplicity ``factor`` and ``alpha``;
+    with ``wald``, a coupling is also tested against the lines at its channel's own
+    periods (:func:`competing_line_test`).
     """
     kind = kind_of(prop.name) if prop.name in EFFECT_NAMES else None
     z = prop.columns[ctx.use]
@@ -299,44 +429,41 @@ def validate(
     coef, extent = _coefficient(prop, zp, zb, ctx.residual)
     cv = cross_validate(t_used, ctx.residual, zp)
     ok_plaus, why = plausible(prop, coef, ctx, extent)
-    if ident < ident_min:
-        return Verdict(
-            False,
-            f"not identifiable: only {ident:.1%} of it lies outside the signal model "
-            f"(needs {ident_min:.1%}): it cannot be told from the signal",
-            ident,
-            cv,
-            coef,
-            ok_plaus,
-        )
     proxy: dict[str, Any] = {}
+    lines: dict[str, Any] = {}
+
+    def verdict(reason: str = "") -> Verdict:
+        return Verdict(not reason, reason, ident, cv, coef, ok_plaus, proxy, lines)
+
+    if ident < ident_min:
+        return verdict(
+            f"not identifiable: only {ident:.1%} of it lies outside the signal model "
+            f"(needs {ident_min:.1%}): it cannot be told from the signal"
+        )
     if proxies is not None and wald is not None and kind is not None and kind.instrument:
         proxy = signal_proxy_test(prop, ctx, proxies, wald, factor)
         if not proxy["p_adj"] < alpha:
-            return Verdict(
-                False,
+            return verdict(
                 "not identifiable: a change of the signal on the other axes "
                 f"({', '.join(proxies.names)}) explains it as well (corrected p "
-                f"{proxy['p_adj']:.2g} given them, needs < {alpha:g})",
-                ident,
-                cv,
-                coef,
-                ok_plaus,
-                proxy,
+                f"{proxy['p_adj']:.2g} given them, needs < {alpha:g})"
+            )
+    if wald is not None and prop.name == "auxiliary":
+        lines = competing_line_test(prop, ctx, wald, factor)
+        if not lines["score"] > 0:
+            periods = ", ".join(f"{p:.6g} s" for p in lines["periods_s"])
+            return verdict(
+                f"not identifiable: lines at the channel's own periods ({periods}) explain "
+                f"the residual as well (explained power {lines['explained_lines']:.4g} against "
+                f"{lines['explained_coupling']:.4g} (m/s²)² for the coupling, Mallows' Cp)"
             )
     if cv["applicable"] and not cv["gain"] > 0:
-        return Verdict(
-            False,
+        return verdict(
             "not confirmed on held-out stretches: fitted on the rest of the record it "
             f"predicts them worse than without it (held-out gain {cv['gain']:.3g} against "
             f"{cv['gain_in_sample']:.3g} in sample, {cv['assessable']} of {cv['folds']} "
-            "stretches assessable)",
-            ident,
-            cv,
-            coef,
-            ok_plaus,
-            proxy,
+            "stretches assessable)"
         )
     if not ok_plaus:
-        return Verdict(False, f"implausible: {why}", ident, cv, coef, False, proxy)
-    return Verdict(True, "", ident, cv, coef, True, proxy)
+        return verdict(f"implausible: {why}")
+    return verdict()
