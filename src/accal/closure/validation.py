@@ -31,7 +31,7 @@ added to the model (and, for an instrument effect, removed from the data):
 Without a reference, an instrument effect must also not be a change of the signal
 seen on the other axes (:func:`signal_proxy_test`, with ``proxies``), and a coupling
 must explain more than lines at its channel's own periods do
-(:func:`competing_line_test`).
+(:func:`competing_line_test`, without a reference).
 
 A candidate that fails is reported with the reason and never removed.
 """
@@ -278,8 +278,19 @@ def competing_line_test(
     errors (Mallows 1973): the residual power it explains, ``‖Qᵀr‖²`` (``Q`` its columns
     orthonormalised against the model), less twice what noise alone would put there,
     ``2·tr(QᵀCQ)`` (the sandwich covariance of the Wald test, the admitting test's noise
-    PSD held for both); ``score = score_coupling − score_lines`` must be positive for
-    the coupling to be kept.  When the truth is a line at the channel's period, the
+    PSD held for both), ``score = score_coupling − score_lines``.  The coupling is
+    rejected when the lines score at least as high *and* it adds nothing significant to
+    them (``p_adj_given_lines``: its test with the lines in the model, noise held, see
+    :func:`_test_given`; corrected p ≥ α).  Either alone was tried: the nested test
+    alone rejected a true coupling to a 2500 s cycle on a 2-hour record (p 0.022), the
+    comparison alone let a line fit half of an undeclared decay and beat a true coupling
+    to a temperature with an orbital cycle and a walk (``tests/test_cli_closure.py``).
+    Only without a reference (:func:`validate`): with one, the signal is out of the
+    data and a line at a channel's period has no signal to stand for, and on that same
+    day (raw − reference) even both together rejected the true coupling (the undeclared
+    decay's red power made it insignificant given the line) and the search ended with an
+    orbit term and the decay unfound.
+    When the truth is a line at the channel's period, the
     lines explain all of it and the coupling only the share its channel has there (QA,
     platform: a lagged coupling of −1.6e-7 m/s²/K stood in for a 1e-8 m/s² line at
     5400 s and put the temperature's walk into a_Y, error 8e-12 → 2.6e-9 m/s²); when
@@ -298,11 +309,18 @@ def competing_line_test(
 
     ss_c, noise_c = cp(wald)
     if q_l.shape[1] == 0 or wald.psd is None:
-        return {**out, "explained_coupling": ss_c, "explained_lines": 0.0, "score": float("inf")}
+        return {
+            **out, "explained_coupling": ss_c, "explained_lines": 0.0,
+            "score": float("inf"), "p_adj_given_lines": float(min(1.0, wald.pvalue * factor)),
+        }  # fmt: skip
     w_l = wald_test(ctx.grid, ctx.residual, q_l, ctx.leverage, psd=wald.psd, psd_dof=wald.dof)
     ss_l, noise_l = cp(w_l)
     score = (ss_c - 2.0 * noise_c) - (ss_l - 2.0 * noise_l)
-    return {**out, "explained_coupling": ss_c, "explained_lines": ss_l, "score": float(score)}
+    given = _test_given(prop, ctx, cols, wald, factor)
+    return {
+        **out, "explained_coupling": ss_c, "explained_lines": ss_l, "score": float(score),
+        "p_adj_given_lines": given["p_adj"],
+    }  # fmt: skip
 
 
 def _gram_ratio(a: NDArray[np.float64], b: NDArray[np.float64]) -> float:
@@ -417,8 +435,8 @@ def validate(
     within a modulation period beyond the declared model), for identifiability.
     ``proxies``: the other axes (:func:`signal_proxy_test`), applied to instrument
     kinds with ``wald`` (the admitting test), its multiplicity ``factor`` and ``alpha``;
-    with ``wald``, a coupling is also tested against the lines at its channel's own
-    periods (:func:`competing_line_test`).
+    with ``wald`` and without a reference, a coupling is also tested against the lines
+    at its channel's own periods (:func:`competing_line_test`).
     """
     kind = kind_of(prop.name) if prop.name in EFFECT_NAMES else None
     z = prop.columns[ctx.use]
@@ -448,14 +466,16 @@ def validate(
                 f"({', '.join(proxies.names)}) explains it as well (corrected p "
                 f"{proxy['p_adj']:.2g} given them, needs < {alpha:g})"
             )
-    if wald is not None and prop.name == "auxiliary":
+    if wald is not None and prop.name == "auxiliary" and ctx.reference is None:
         lines = competing_line_test(prop, ctx, wald, factor)
-        if not lines["score"] > 0:
+        if not lines["score"] > 0 and not lines["p_adj_given_lines"] < alpha:
             periods = ", ".join(f"{p:.6g} s" for p in lines["periods_s"])
             return verdict(
                 f"not identifiable: lines at the channel's own periods ({periods}) explain "
                 f"the residual as well (explained power {lines['explained_lines']:.4g} against "
-                f"{lines['explained_coupling']:.4g} (m/s²)² for the coupling, Mallows' Cp)"
+                f"{lines['explained_coupling']:.4g} (m/s²)² for the coupling, Mallows' Cp) "
+                f"and it adds nothing significant to them (corrected p "
+                f"{lines['p_adj_given_lines']:.2g}, needs < {alpha:g})"
             )
     if cv["applicable"] and not cv["gain"] > 0:
         return verdict(
