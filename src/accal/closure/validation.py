@@ -273,32 +273,31 @@ def competing_line_test(
 ) -> dict[str, Any]:
     """Whether a coupling explains the residual better than lines at its channel's periods.
 
-    The coupling and the sinusoids of :func:`competing_lines` are two explanations of
-    the same structure, not nested.  Each is scored by Mallows' Cp for correlated
-    errors (Mallows 1973): the residual power it explains, ``‖Qᵀr‖²`` (``Q`` its columns
-    orthonormalised against the model), less twice what noise alone would put there,
-    ``2·tr(QᵀCQ)`` (the sandwich covariance of the Wald test, the admitting test's noise
-    PSD held for both), ``score = score_coupling − score_lines``.  The coupling is
-    rejected when the lines score at least as high *and* it adds nothing significant to
-    them (``p_adj_given_lines``: its test with the lines in the model, noise held, see
-    :func:`_test_given`; corrected p ≥ α).  Either alone was tried: the nested test
-    alone rejected a true coupling to a 2500 s cycle on a 2-hour record (p 0.022), the
-    comparison alone let a line fit half of an undeclared decay and beat a true coupling
-    to a temperature with an orbital cycle and a walk (``tests/test_cli_closure.py``).
-    Only without a reference (:func:`validate`): with one, the signal is out of the
-    data and a line at a channel's period has no signal to stand for, and on that same
-    day (raw − reference) even both together rejected the true coupling (the undeclared
-    decay's red power made it insignificant given the line) and the search ended with an
-    orbit term and the decay unfound.
-    When the truth is a line at the channel's period, the
-    lines explain all of it and the coupling only the share its channel has there (QA,
-    platform: a lagged coupling of −1.6e-7 m/s²/K stood in for a 1e-8 m/s² line at
-    5400 s and put the temperature's walk into a_Y, error 8e-12 → 2.6e-9 m/s²); when
-    the truth is a coupling, it also explains the channel's variation off the lines.
-    A line already in the model leaves no competitor (its columns are in the design),
-    so a line and a coupling can both be found.  Issue 19, item 3: "tested with ...
-    other signal-shaped nuisances already in the null model".  ``factor`` is not used
-    (the comparison is between two fits of the same residual).
+    When the truth is a line at the channel's period, the lines explain all of it and
+    the coupling only the share its channel has there (QA, platform: a lagged coupling
+    of −1.6e-7 m/s²/K stood in for a 1e-8 m/s² line at 5400 s and put the temperature's
+    walk into a_Y, error 8e-12 → 2.6e-9 m/s²); when the truth is a coupling, it also
+    explains the channel's variation off the lines.  The coupling and the sinusoids of
+    :func:`competing_lines` are two explanations of the same structure, not nested.
+    Each is scored by Mallows' Cp for correlated errors (Mallows 1973): the residual
+    power it explains, ``‖Qᵀr‖²`` (``Q`` its columns orthonormalised against the model),
+    less twice what noise alone would put there, ``2·tr(QᵀCQ)`` (the sandwich covariance
+    of the Wald test, the admitting test's noise PSD held for both);
+    ``score = score_coupling − score_lines``.  :func:`validate` rejects the coupling when
+    the lines score at least as high *and* it adds nothing significant to them
+    (``p_adj_given_lines``: its test with the lines in the model, noise held,
+    :func:`_test_given`, times ``factor``, the admitting test's multiplicity).
+
+    Either criterion alone was tried: the nested test alone rejected a true coupling to
+    a 2500 s cycle on a 2-hour record (p 0.022); the comparison alone let a line fit
+    half of an undeclared decay and beat a true coupling to a temperature with an
+    orbital cycle and a walk (``tests/test_cli_closure.py``, raw − reference), where even
+    both together rejected it (the decay's red power made it insignificant given the
+    line): :func:`validate` makes the check only without a reference (the signal is then
+    in the data, and a line at a channel's period may be the signal's).  A line already
+    in the model leaves no competitor (its columns are in the design), so a line and a
+    coupling can both be found.  Issue 19, item 3: "tested with ... other
+    signal-shaped nuisances already in the null model".
     """
     cols, freqs = competing_lines(prop, ctx)
     out: dict[str, Any] = {"periods_s": [1.0 / f for f in freqs]}
