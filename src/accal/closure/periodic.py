@@ -220,6 +220,16 @@ def _line_background(pgram: NDArray[np.float64]) -> NDArray[np.float64]:
     return out / np.log(2.0)
 
 
+def line_threshold(n: float) -> float:
+    """Least ratio of a periodogram ordinate to :func:`_line_background` that is a line.
+
+    Twice the 1 % Bonferroni level over ``n`` ordinates (a noise ordinate over its
+    background is exp(1)-distributed: ``P(ratio > x) = e^(−x)``, so ``ln(n/0.01)`` is
+    the 1 % level; doubled, a line stands far above it).
+    """
+    return 2.0 * np.log(max(float(n), 1.0) / 0.01)
+
+
 def _excluded(f: float, ctx: Context, width: float) -> bool:
     return any(abs(f - g) < width for g in ctx.excluded_freqs)
 
@@ -277,7 +287,7 @@ def periodic(ctx: Context) -> list[Proposal]:
             band &= np.abs(freqs - float(key[2])) > 1.5 * df
     for g in ctx.cache.get("modulated_freqs", ()):  # the signal's own variation (below)
         band &= np.abs(freqs - g) > 1.5 * df
-    thr = 2.0 * np.log(max(float(band.sum()), 1.0) / 0.01)
+    thr = line_threshold(band.sum())
     r = ctx.residual
 
     def clear_at(f: float, rat: NDArray[np.float64], level: float) -> bool:
@@ -292,7 +302,7 @@ def periodic(ctx: Context) -> list[Proposal]:
         # every harmonic clearly above its background, at twice the Bonferroni level of
         # the harmonics searched
         top = min(fmax, freqs[-1])
-        level = 2.0 * np.log(max(n_max, 1) / 0.01)
+        level = line_threshold(n_max)
         x = _harmonic_cols(tau, [f, 2 * f])
         r2 = r.copy()
         for m in masks:

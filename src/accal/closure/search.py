@@ -192,7 +192,7 @@ class Search:
             self.grid, basis, lev, self.y_u, found[i].prop, self.use, self.n_families
         )
 
-    def proxy_args(self, tested: Tested) -> dict[str, Any]:
+    def validate_args(self, tested: Tested) -> dict[str, Any]:
         """:func:`~accal.closure.validation.validate`'s test arguments for ``tested``
         (the other axes, the admitting test, its multiplicity, alpha)."""
         factor = max(tested.prop.multiplicity, 1.0) * max(self.n_families, 1)
@@ -254,7 +254,7 @@ def run(s: Search, max_effects: int, stop: Callable[[Search], bool] | None = Non
                 s.bias_state(s.found),
                 s.t_all[s.use],
                 s.signal_state(s.found, basis),
-                **s.proxy_args(t),
+                **s.validate_args(t),
             )
             entry = Found(t.prop, t.p_adj, verdict, t.wald.stat)
             if verdict.ok:
@@ -330,7 +330,7 @@ def swap_smooth(s: Search) -> None:
         s.bias_state(rest),
         s.t_all[s.use],
         s.signal_state(rest, basis),
-        **s.proxy_args(t_exp),
+        **s.validate_args(t_exp),
     )
     if not verdict.ok:
         return

@@ -48,7 +48,7 @@ from scipy.linalg import eigh
 from accal.closure.basis import Basis
 from accal.closure.candidates import Context, Proposal
 from accal.closure.kinds import EFFECT_NAMES, IDENT_MIN, kind_of, plausible
-from accal.closure.periodic import _line_background
+from accal.closure.periodic import _line_background, line_threshold
 from accal.closure.residual import WaldResult, wald_test
 
 __all__ = [
@@ -171,21 +171,23 @@ def signal_proxy_test(
         ``factor``, the multiplicity and families of the admitting test).
     """
     out: dict[str, Any] = {"channels": list(proxies.names)}
-    return {**out, **_test_given(prop, ctx, proxies.columns[ctx.use], wald, factor)}
+    q_p = ctx.basis.complement(proxies.columns[ctx.use])
+    return {**out, **_test_given(prop, ctx, q_p, wald, factor)}
 
 
 def _test_given(
-    prop: Proposal, ctx: Context, cols: NDArray[np.float64], wald: WaldResult, factor: float
+    prop: Proposal, ctx: Context, q_p: NDArray[np.float64], wald: WaldResult, factor: float
 ) -> dict[str, float]:
-    """The candidate's Wald test with the columns ``cols`` (used rows) added to the model.
+    """The candidate's Wald test with columns added to the model.
 
-    The candidate's columns are orthogonalised against the model and ``cols``, the
-    residual has ``cols`` fitted, and the noise PSD and degrees of freedom of the test
+    ``q_p``: an orthonormal basis of the added columns with the model projected out
+    (``ctx.basis.complement``, used rows).  The candidate's columns are orthogonalised
+    against the model and ``q_p``, the residual has ``q_p`` fitted, and the noise PSD
+    and degrees of freedom of the test
     that admitted the candidate (``wald``) are held: a re-estimated PSD would be
     lowered by what ``cols`` explain and make every candidate more significant.
     ``p_adj`` is the p-value times ``factor`` (the admitting test's multiplicity).
     """
-    q_p = ctx.basis.complement(cols)
     if q_p.shape[1] == 0 or wald.psd is None:
         return {"stat": float(wald.stat), "p_adj": float(min(1.0, wald.pvalue * factor))}
     r_p = ctx.residual - q_p @ (q_p.T @ ctx.residual)
@@ -242,13 +244,10 @@ def competing_lines(
         placed = grid.place(reg)[0]
         placed = placed[np.any(placed != 0, axis=1)]  # the column's own data channel(s)
         pg = np.sum(np.abs(np.fft.rfft(placed, axis=-1)) ** 2, axis=0)
-        # lines: ordinates far above the local background (periodic's running median,
-        # a noise ordinate over it is exp(1)), at twice the 1 % Bonferroni level of the
-        # ordinates (the line search's rule): a walk's or a noise's peaks are not lines
+        # lines by the line search's rule: a walk's or a noise's peaks are not lines
         rat = pg / np.maximum(_line_background(pg), 1e-300)
-        k = np.arange(pg.size)
-        thr = 2.0 * np.log(max(pg.size, 2) / 0.01)
-        hits = np.flatnonzero((rat > thr) & (k >= 2))
+        hits = np.flatnonzero(rat > line_threshold(pg.size))
+        hits = hits[hits >= 2]
         if hits.size == 0:
             continue
         pw = np.sum(np.abs(np.fft.rfft(placed, n=n_pad, axis=-1)) ** 2, axis=0)
@@ -315,7 +314,7 @@ def competing_line_test(
     w_l = wald_test(ctx.grid, ctx.residual, q_l, ctx.leverage, psd=wald.psd, psd_dof=wald.dof)
     ss_l, noise_l = cp(w_l)
     score = (ss_c - 2.0 * noise_c) - (ss_l - 2.0 * noise_l)
-    given = _test_given(prop, ctx, cols, wald, factor)
+    given = _test_given(prop, ctx, q_l, wald, factor)
     return {
         **out, "explained_coupling": ss_c, "explained_lines": ss_l, "score": float(score),
         "p_adj_given_lines": given["p_adj"],
