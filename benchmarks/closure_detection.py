@@ -136,8 +136,8 @@ def inject_cases(quick: bool) -> list[Case]:
 
 def other_cases(quick: bool) -> list[Case]:
     """CLI runs of days also run through the library, accal-simulator effects, the
-    Swarm day (null, coupling 3e-7 and 9e-7 m/s²/K, step 1e-7 and 1e-6 m/s², in the
-    three table modes), platform runs through ``accal demod``."""
+    Swarm day (null, coupling 3e-7 and 9e-7 m/s²/K, step 1e-6 and 3e-6 m/s²: below and
+    above the day's step detection limit, in the three table modes), platform runs through ``accal demod``."""
     sw_modes = ("table", "table+aux", "csv-nounits")
     if quick:
         out = [Case("cli", "indep", 1000, "A", path="cli")]
@@ -166,7 +166,7 @@ def other_cases(quick: bool) -> list[Case]:
                                 path="cli"))  # fmt: skip
     for m in sw_modes:
         out.append(Case("swarm", "swarm", 0, "-", path="cli", mode=m))
-        for kind, sizes in (("swarm_coupling", (3e-7, 9e-7)), ("swarm_step", (1e-7, 1e-6))):
+        for kind, sizes in (("swarm_coupling", (3e-7, 9e-7)), ("swarm_step", (1e-6, 3e-6))):
             out += [Case("swarm", "swarm", 0, "-", kind=kind, size=s, axis="x", path="cli",
                          mode=m) for s in sizes]  # fmt: skip
     out += [Case("platform", "platform", 5000 + k, "-", path="cli") for k in range(3)]
