@@ -270,7 +270,9 @@ def describe(
             sig = float(np.hypot(sig, spread * coef))
             for d in details.get("axes", {}).values():
                 d["sigma"] = float(np.hypot(d["sigma"], spread * d["coefficient"]))
-            details["lag_aliases"] = [float(a) for a in prop.params["lag_aliases"]]
+            # moved with the final fit's lag (its Gauss-Newton step, _nonlinear)
+            shift = float(kw.get("lag", prop.params["lag"])) - float(prop.params["lag"])
+            details["lag_aliases"] = [float(a) + shift for a in prop.params["lag_aliases"]]
             details["alias_spread"] = spread
         known = prop.name in EFFECT_NAMES
         out.append(
