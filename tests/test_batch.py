@@ -566,7 +566,8 @@ def _row(source: str, date: str, ax: str, m: str, bias: float = 1e-6) -> dict:
     row.update(
         source=source, satellite="GRACE-A", date=date, axis=ax, frame="SRF", method=m,
         order=1, bias=bias, n=86400, n_total=86400, n_flagged=0, n_duplicates=0,
-        n_out_of_order=0, n_gaps=0, accal_version="0", model="poly1",
+        n_out_of_order=0, n_gaps=0, accal_version="0", model="poly1", sigma_model="day",
+        sigma_days=1,
     )  # fmt: skip
     return row
 

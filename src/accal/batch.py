@@ -47,6 +47,7 @@ DEFAULT_INCLUDE = ("*ACC1B_*", "*ACT1B_*")
 #: Names never taken from a directory scan (accal's own outputs).
 EXCLUDE = (
     "*.calibrated.*",
+    "*.noise.npz",
     "bias_drift.*",
     "*.json",
     "*.md",

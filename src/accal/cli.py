@@ -173,6 +173,15 @@ def main(debug: bool) -> None:
     help="TOML/YAML table of degraded/transplant/off periods, ahead of the built-in one.",
 )
 @click.option(
+    "--pool-days",
+    type=click.IntRange(min=0),
+    default=0,
+    show_default=True,
+    metavar="N",
+    help="Sigmas from a noise model fitted to N adjacent days together (archives; noise "
+    "correlated over hours needs it; >= 2, 8 recommended; 0: each day's own estimate).",
+)
+@click.option(
     "--keep-going/--fail-fast",
     default=True,
     show_default=True,
@@ -204,6 +213,7 @@ def grace_bias(
     truth: Path | None,
     alpha: float,
     degraded_days: Path | None,
+    pool_days: int,
     keep_going: bool,
     quiet: bool,
 ) -> None:
@@ -245,6 +255,7 @@ def grace_bias(
             alpha=alpha,
             plots=plots,
             degraded_days=degraded_days,
+            pool_days=pool_days,
         )
     except AccalError as exc:
         raise click.UsageError(str(exc)) from None

@@ -71,6 +71,10 @@ BIAS_DRIFT_UNITS = {
     "a zero-mean signal)",
     "signal_mean": "m/s^2 (mean of the reference over the used samples: the non-gravitational "
     "signal's share a fit without --reference would put into the bias; NaN without one)",
+    "sigma_model": "noise model of the sigmas: 'day' (the day's own binned residual periodogram) "
+    "or 'pooled: <model>' (--pool-days: white + power-law/AR(1) noise fitted to adjacent days, "
+    "accal.estimators.lowfreq)",
+    "sigma_days": "days whose residual spectra the sigmas rest on",
 }
 
 CALIBRATED_UNITS = {
@@ -126,6 +130,10 @@ class GraceBiasOptions:
     degraded_days : Path or None
         TOML/YAML table of degraded/transplant/off periods ahead of the built-in
         one (:func:`accal.degraded.load_periods`).
+    pool_days : int
+        ``>= 2``: the σ of the ``bias_drift`` table come from a noise model fitted to
+        this many adjacent days together (:mod:`accal.pooling`); ``0``: each day's
+        own estimate.
     """
 
     methods: tuple[str, ...] = ("wavelet",)
@@ -143,6 +151,7 @@ class GraceBiasOptions:
     orbit_period: float | None = 5600.0
     plots: bool = False
     degraded_days: Path | None = None
+    pool_days: int = 0
 
     def __post_init__(self) -> None:
         from accal.estimators.trend import METHODS
@@ -151,6 +160,8 @@ class GraceBiasOptions:
             check_option("method", m, tuple(METHODS))
         check_option("order", self.order, (1, 2))
         check_option("format", self.fmt, ("parquet", "csv"))
+        if not (isinstance(self.pool_days, int) and (self.pool_days == 0 or self.pool_days >= 2)):
+            raise ValidationError(f"pool_days must be 0 (off) or >= 2, got {self.pool_days!r}")
         if self.scale is not None and str(self.scale).lower() != "tn02":
             from accal.calibration import parse_scale
 
@@ -495,6 +506,8 @@ def table_rows(
                 "n_gaps": rep.n_gaps,
                 "gap_seconds": rep.gap_seconds,
                 "accal_version": __version__,
+                "sigma_model": "day",  # accal.pooling.DAY_MODEL (imported with scipy)
+                "sigma_days": 1,
             }
         )
         day = rows[-1]["date"]
@@ -621,6 +634,8 @@ def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutco
         report["closure"] = {ax: c["summary"] for ax, c in closure.items()}
     rep_path = out_dir / f"{stem}.report.json"
     _write_json(rep_path, report, sync=False)
+    if opts.pool_days:
+        extra_outputs.append(_save_spectra(out_dir / stem, fit_series, opts, exclude, fits))
     return FileOutcome(
         path,
         True,
@@ -631,6 +646,40 @@ def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutco
         closure={ax: c["summary"] for ax, c in closure.items()},
         warnings=tuple(report["read_report"]["warnings"]),
     )
+
+
+def _save_spectra(
+    stem_path: Path,
+    fit_series: AccSeries,
+    opts: GraceBiasOptions,
+    exclude: dict[str, np.ndarray],
+    fits: dict[tuple[str, str], Any],
+) -> Path:
+    """Write ``<stem>.noise.npz``: the residual spectra of ``fits`` (``--pool-days``)."""
+    from accal.pooling import day_spectra, spectra_path, write_spectra
+
+    base = np.ones(len(fit_series), bool) if opts.keep_flagged else fit_series.valid
+    base = base & np.isfinite(fit_series.time)
+    masks = {}
+    for k, ax in enumerate(fit_series.axes):
+        m = base & np.isfinite(fit_series.acc[:, k])
+        masks[ax] = m & ~exclude[ax] if ax in exclude else m
+    spectra = day_spectra(fit_series.time, fit_series.acc, fit_series.axes, masks, fits)
+    return write_spectra(spectra_path(stem_path.parent, stem_path.name), spectra, fits)
+
+
+def _pool_table(out_dir: Path, opts: GraceBiasOptions, table_path: Path | None, rlog) -> None:
+    """Give the ``bias_drift`` rows pooled σ (``--pool-days``, :mod:`accal.pooling`)."""
+    if table_path is None:
+        return
+    from accal.pooling import pool_rows
+
+    table = _read_bias_drift_arrow(table_path)
+    rows = table.to_pylist()
+    stems = {r["source"]: output_stem(Path(r["source"])) for r in rows}
+    n = pool_rows(rows, out_dir, stems, opts.pool_days)
+    merge_bias_drift(out_dir, rows, opts.fmt)
+    rlog(f"pooled sigmas (--pool-days {opts.pool_days}): {n} of {len(rows)} rows")
 
 
 def _with_warnings(series: AccSeries, *warnings: str) -> AccSeries:
@@ -708,8 +757,18 @@ def _bias_drift_schema():
         "day_status",
         "day_status_reason",
         "bias_includes",
+        "sigma_model",
     }
-    ints = {"order", "n", "n_total", "n_flagged", "n_duplicates", "n_out_of_order", "n_gaps"}
+    ints = {
+        "order",
+        "n",
+        "n_total",
+        "n_flagged",
+        "n_duplicates",
+        "n_out_of_order",
+        "n_gaps",
+        "sigma_days",
+    }
     return pa.schema(
         [
             (c, pa.string() if c in strings else pa.int64() if c in ints else pa.float64())
@@ -894,6 +953,10 @@ def options_key(opts: GraceBiasOptions) -> dict[str, Any]:
     from accal.batch import file_signature
 
     d = asdict(opts)
+    # outputs differ only in whether the noise spectra are saved; the pooling itself
+    # is redone over the whole table after every run
+    if d.pop("pool_days"):
+        d["noise_spectra"] = True
     if not opts.close_loop:  # settings of the closure alone change nothing without it
         for k in ("alpha", "orbit_period", "plots"):
             d.pop(k)
@@ -1122,6 +1185,8 @@ def run(
                 interrupted = True  # keep what finished: commit it below
                 gen.close()  # stops the worker pool now if Ctrl-C came between results
             table_path = _commit(out_dir, opts, manifest, key, pending, checksum) or table_path
+            if opts.pool_days and not interrupted:
+                _pool_table(out_dir, opts, table_path, rlog)
             if manifest.changed:  # checksums added to entries recorded without one
                 manifest.save()
             outcomes = [results[i] for i in sorted(results)]
