@@ -2,8 +2,12 @@
 
 One-day records (1 Hz, 86,400 samples) of noise only (true bias = drift = 0), drawn by
 the generators below (numpy/scipy.signal only, independent of ``accal.simulate``),
-fitted by ``fit_trend`` with both methods.  For each case and method it prints, for the
-bias and the drift:
+fitted by ``fit_trend`` with both methods.  Two σ per day: the day's own estimate
+(``day``: the binned residual periodogram, what a single input gets) and the pooled one
+(``pooled``: :func:`accal.estimators.lowfreq.pooled_covariance` over blocks of
+``--pool`` consecutive days, each day with the others of its block, as
+``accal grace-bias --pool-days`` does; a misfit keeps the day's σ).  For each case,
+method and estimator it prints, for the bias and the drift:
 
 * ``scatter/σ``: standard deviation of the estimates / RMS reported σ (target 0.8–1.25);
 * ``|z|>3``: fraction of days with |estimate/σ| > 3 (target ≤ 1 %, Gaussian 0.27 %);
@@ -21,7 +25,7 @@ Noise cases (σ per sample unless stated; "white" is 1e-10 m/s² per sample):
 
 It writes ``docs/figures/mc_sigma.png`` and prints the markdown table of
 ``docs/grace_bias.md``.  Run: ``python benchmarks/mc_sigma.py [--reps N] [--cases a,b]``
-(default 200 days per case; ~3 minutes on one core).
+(default 200 days per case, pools of 8; ~1 minute on one core).
 """
 
 from __future__ import annotations
@@ -33,7 +37,8 @@ from pathlib import Path
 import numpy as np
 import scipy.signal
 
-from accal.estimators.trend import fit_trend
+from accal.estimators.lowfreq import noise_spectra, pooled_covariance
+from accal.estimators.trend import METHODS, fit_trend
 
 N = 86400
 DT = 1.0
@@ -115,39 +120,54 @@ def summarise(est: np.ndarray, sig: np.ndarray) -> tuple[float, float, float]:
     return float(ratio), float(np.mean(np.abs(est / sig) > 3)), float(np.std(sig) / np.mean(sig))
 
 
-def study(name: str, gen, reps: int, seed: int) -> list[dict]:
-    """Both methods on the same ``reps`` days of noise case ``name``."""
+def study(name: str, gen, reps: int, seed: int, pool: int = 8) -> list[dict]:
+    """Both methods on the same ``reps`` days of noise case ``name``, day and pooled σ."""
     rng = np.random.default_rng(seed)
     t = np.arange(N) * DT
-    acc = {m: {"est": [], "sig": []} for m in ("wavelet", "lsq")}
-    for _ in range(reps):
-        e = gen(rng)
+    keys = ("est", "day", "pooled", "misfit")
+    acc = {m: {k: [] for k in keys} for m in ("wavelet", "lsq")}
+    done = 0
+    while done < reps:
+        days = [gen(rng) for _ in range(min(pool, reps - done))]
+        done += len(days)
         for m, a in acc.items():
-            fit = fit_trend(t, e, method=m)
-            a["est"].append(fit.coef)
-            a["sig"].append(fit.sigma)
+            fits = [fit_trend(t, e, method=m) for e in days]
+            res = np.array([e - f.evaluate(t) for e, f in zip(days, fits, strict=True)])
+            specs = noise_spectra(t, res, METHODS[m](t, 1), method=m)
+            for i, fit in enumerate(fits):
+                cov, _ = pooled_covariance(specs[i], specs[:i] + specs[i + 1 :])
+                a["est"].append(fit.coef)
+                a["day"].append(fit.sigma)
+                a["misfit"].append(cov is None)
+                a["pooled"].append(fit.sigma if cov is None else np.sqrt(np.diag(cov)))
     rows = []
     for m, a in acc.items():
-        est, sig = np.array(a["est"]), np.array(a["sig"])
-        row = {"case": name, "method": m, "reps": reps}
-        for j, coef in enumerate(("bias", "drift")):
-            row[coef] = summarise(est[:, j], sig[:, j])
-        rows.append(row)
+        est = np.array(a["est"])
+        for which in ("day", "pooled"):
+            sig = np.array(a[which])
+            row = {"case": name, "method": m, "sigma": which, "reps": reps, "pool": pool}
+            row["misfit"] = float(np.mean(a["misfit"])) if which == "pooled" else 0.0
+            for j, coef in enumerate(("bias", "drift")):
+                row[coef] = summarise(est[:, j], sig[:, j])
+            rows.append(row)
     return rows
 
 
 def table(rows: list[dict]) -> str:
     """Markdown table of the study."""
     out = [
-        "| noise | method | bias scatter/σ | drift scatter/σ | bias \\|z\\|>3 | drift \\|z\\|>3 "
-        "| σ_bias scatter | σ_drift scatter |",
-        "|---|---|---|---|---|---|---|---|",
+        "| noise | method | σ | bias scatter/σ | drift scatter/σ | bias \\|z\\|>3 "
+        "| drift \\|z\\|>3 | σ_bias scatter | σ_drift scatter | misfit (day's σ kept) |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         b, d = r["bias"], r["drift"]
+        sig = r["sigma"] if r["sigma"] == "day" else f"pooled {r['pool']} d"
+        mis = f"{100 * r['misfit']:.0f} %" if r["sigma"] == "pooled" else "–"
         out.append(
-            f"| {r['case']} | {r['method']} | {b[0]:.2f} | {d[0]:.2f} | {100 * b[1]:.1f} % "
-            f"| {100 * d[1]:.1f} % | {100 * b[2]:.0f} % | {100 * d[2]:.0f} % |"
+            f"| {r['case']} | {r['method']} | {sig} | {b[0]:.2f} | {d[0]:.2f} "
+            f"| {100 * b[1]:.1f} % | {100 * d[1]:.1f} % | {100 * b[2]:.0f} % "
+            f"| {100 * d[2]:.0f} % | {mis} |"
         )
     return "\n".join(out)
 
@@ -160,11 +180,17 @@ def figure(rows: list[dict], path: Path) -> None:
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.8), sharey=True)
-    labels = [f"{r['case']} ({r['method'][:3]})" for r in rows]
-    y = np.arange(len(rows))
+    day = [r for r in rows if r["sigma"] == "day"]
+    pooled = [r for r in rows if r["sigma"] == "pooled"]
+    labels = [f"{r['case']} ({r['method'][:3]})" for r in day]
+    y = np.arange(len(day))
     for ax, coef in zip(axes, ("bias", "drift"), strict=True):
         ax.axvspan(0.8, 1.25, color="0.9", label="target 0.8–1.25")
-        ax.plot([r[coef][0] for r in rows], y, "o", color="C0", label="accal σ")
+        ax.plot([r[coef][0] for r in day], y, "o", color="C0", label="the day's own σ")
+        ax.plot(
+            [r[coef][0] for r in pooled], y, "s", color="C3", mfc="none",
+            label=f"pooled σ ({pooled[0]['pool']} days, --pool-days)",
+        )  # fmt: skip
         ax.set_xscale("log")
         ax.set_xlabel(f"{coef}: scatter / RMS σ")
         ax.axvline(1.0, color="k", lw=0.5)
@@ -182,13 +208,14 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--reps", type=int, default=200)
     ap.add_argument("--cases", default=",".join(CASES))
+    ap.add_argument("--pool", type=int, default=8, help="days per pool [8]")
     ap.add_argument("--figure", default=str(ROOT / "docs" / "figures" / "mc_sigma.png"))
     args = ap.parse_args()
     rows = []
     t0 = time.perf_counter()
     for i, name in enumerate(args.cases.split(",")):
         t1 = time.perf_counter()
-        rows.extend(study(name, CASES[name], args.reps, seed=100 + i))
+        rows.extend(study(name, CASES[name], args.reps, seed=100 + i, pool=args.pool))
         print(f"# {name}: {time.perf_counter() - t1:.0f} s", flush=True)
     print(table(rows))
     print(f"\n# {time.perf_counter() - t0:.0f} s in all")
