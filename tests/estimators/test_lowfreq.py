@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.linalg import toeplitz
 
 from accal.estimators.lowfreq import (
@@ -125,3 +127,30 @@ def test_a_line_is_a_misfit_and_keeps_the_days_estimate():
     specs = noise_spectra(t, e - e.mean(axis=1, keepdims=True), g, method="wavelet")
     cov, info = pooled_covariance(specs[0], specs[1:])
     assert cov is None and info["misfit"] and info["lines"] > 0
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    scale=st.floats(1e-12, 1e3),
+    seed=st.integers(0, 2**32 - 1),
+    walk=st.sampled_from([0.0, 0.03]),
+)
+def test_pooled_covariance_is_scale_equivariant_symmetric_and_order_free(scale, seed, walk):
+    """cov(c·e) = c²·cov(e), symmetric with a positive diagonal, the same for any order
+    of the other days (the Whittle fit's estimating equations are scale-equivariant)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(1200.0)
+    g = lsq_weights(t, 1)
+    e = _days(rng, 4, t.size, walk)
+    e -= (np.vander(t, 2, increasing=True) @ (g @ e.T)).T  # the residuals of the fit
+    specs = noise_spectra(t, e, g, method="lsq")
+    scaled = noise_spectra(t, scale * e, g, method="lsq")
+    cov, info = pooled_covariance(specs[0], specs[1:])
+    cov_s, info_s = pooled_covariance(scaled[0], scaled[:0:-1])
+    assert info["model"] == info_s["model"]
+    if cov is None:
+        assert cov_s is None
+        return
+    np.testing.assert_allclose(cov_s, scale**2 * cov, rtol=1e-6)
+    np.testing.assert_allclose(cov, cov.T, rtol=0, atol=0)
+    assert np.all(np.diag(cov) > 0)

@@ -529,6 +529,7 @@ def pooled_covariance(
     if info["misfit"]:
         return None, info
     cov = _refined(target, fit, kinds) if fit["s"] >= 0 else fit["W"] * target.white_cov
+    cov = 0.5 * (cov + cov.T)  # exactly symmetric (the products above are to rounding)
     var = np.diag(cov)
     scale = np.sqrt(np.maximum(1.0, target.floor / np.maximum(var, 1e-300)))
-    return cov * scale[:, None] * scale[None, :], info
+    return cov * (scale[:, None] * scale[None, :]), info
