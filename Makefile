@@ -10,7 +10,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 OUT    ?= out
 
-.PHONY: install run demo test test-all lint bench bench-readers bench-archive bench-demod-year bench-closure closure-detection mc-sigma mc-sigma-demod clean
+.PHONY: install run demo test test-all lint bench bench-readers bench-archive bench-demod-year bench-closure closure-detection mc-sigma mc-sigma-indep mc-sigma-demod clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -60,9 +60,13 @@ lint: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_grace_bias.py
 
-## mc-sigma: Monte-Carlo study of the bias/drift sigmas (a few minutes)
+## mc-sigma: Monte-Carlo study of the bias/drift sigmas, day and pooled (~1 min)
 mc-sigma: $(STAMP)
 	$(BIN)/python benchmarks/mc_sigma.py
+
+## mc-sigma-indep: the same on the tests' realistic days with a reference (~6 min)
+mc-sigma-indep: $(STAMP)
+	$(BIN)/python benchmarks/mc_sigma_indep.py
 
 ## mc-sigma-demod: Monte-Carlo check of demod's per-period sigma from the data (issue 20; ~3 min on one core)
 mc-sigma-demod: $(STAMP)

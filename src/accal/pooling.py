@@ -7,7 +7,9 @@ covariance of :func:`accal.estimators.lowfreq.pooled_covariance` fitted to its d
 the ``pool_days − 1`` nearest other days of the same satellite, axis, method and
 order (within ``pool_days`` calendar days); ``sigma_model`` says which model (or
 ``day`` when the day's own estimate stays: no neighbours, too short a record, or a
-spectrum the model does not fit).  Days processed by earlier runs in the same output
+spectrum the model does not fit).  The model is of noise: a residual that holds the
+orbit's non-gravitational signal (no ``--reference``) has spectral lines, and its
+day keeps its own σ, which counts the signal as noise.  Days processed by earlier runs in the same output
 directory take part, so a daily cron job pools with the days before.
 """
 
@@ -159,7 +161,12 @@ def pool_rows(
                 continue
             cov, info = pooled_covariance(spectrum(rows[i]), [spectrum(rows[j]) for j in near])
             if cov is None:
-                rows[i]["sigma_model"] = f"{DAY_MODEL} (pooled spectrum misfit: {info['model']})"
+                why = (
+                    f"{info['lines']} bins of spectral lines (an orbit signal: use --reference)"
+                    if info["lines"]
+                    else f"misfit of {info['model']}, p {info['p_misfit']:.1g}"
+                )
+                rows[i]["sigma_model"] = f"{DAY_MODEL} (not pooled: {why})"
                 continue
             _set_sigmas(rows[i], cov)
             rows[i]["sigma_model"] = f"pooled: {info['model']}"

@@ -154,3 +154,20 @@ def test_pooled_covariance_is_scale_equivariant_symmetric_and_order_free(scale, 
     np.testing.assert_allclose(cov_s, scale**2 * cov, rtol=1e-6)
     np.testing.assert_allclose(cov, cov.T, rtol=0, atol=0)
     assert np.all(np.diag(cov) > 0)
+
+
+def test_a_spectrum_rising_above_the_low_band_is_fitted_on_a_narrower_band():
+    """White noise plus differenced white noise (PSD 4 sin²(πf), rising above the bins
+    that carry the estimators' weight): the full band is a misfit, a narrower one fits
+    and the σ are those of the white level there (QA: the tests' realistic L1B noise)."""
+    rng = np.random.default_rng(8)
+    t = np.arange(3000.0) * 10.0
+    g = wavelet_weights(t, 1)
+    x = rng.standard_normal((9, t.size + 1))
+    e = rng.standard_normal((8, t.size)) + 3.0 * np.diff(x[:8], axis=1)
+    specs = noise_spectra(t, e - e.mean(axis=1, keepdims=True), g, method="wavelet")
+    cov, info = pooled_covariance(specs[0], specs[1:])
+    assert cov is not None and info["bins"] < specs[0].periodogram.size
+    # the low band's level: white (1) + 9·4 sin²(πf) ≈ 1 there; σ within 25 % of white's
+    white = np.sqrt(np.diag(g @ g.T))
+    assert np.all(np.abs(np.sqrt(np.diag(cov)) / white - 1) < 0.25)

@@ -60,8 +60,10 @@ the smaller is used:
   frequencies ``f_j = (j + ½)/N`` with ``S`` held at its value at ``1/(2N)`` below.
 
 Between the grid's shapes the covariance is interpolated at the vertex of the
-profile likelihood's parabola.  No variance is below the white-noise one of the
-residual's level, ``s² (G Gᵀ)_jj``.
+profile likelihood's parabola.  No variance is below that of white noise at the mean
+level of the fitted band (``mean(P̄/w)·(G Gᵀ)_jj``; not the residual's variance, which
+content above the band, e.g. real L1B noise at 10–100 mHz, inflates without reaching
+the estimates).
 
 Measured (``make mc-sigma``, 1 Hz days, 8-day pools): scatter/σ 0.76–1.10 for white,
 white + 1/f, random walk, AR(1) of 1–6 h, except the drift under AR(1) of 3–6 h
@@ -113,6 +115,11 @@ BETAS = np.round(np.arange(-0.5, 1.951, 0.1), 2)
 TAUS_PER_N = np.geomspace(1 / 400, 1 / 2, 16)
 #: Whittle band: Fourier bins 1 … K_BAND of the day.
 K_BAND = 400
+#: Narrower bands tried, widest first, when the model does not fit the wider one: the
+#: estimators' weights are at the lowest bins (|G(f)|² ∝ f⁻² for the bias), and a
+#: spectrum that rises again above ~1 mHz (QA: the tests' realistic L1B noise, 3× from
+#: bin 40 to 100) is no misfit of the part that matters.
+NARROWER_BANDS = (200, 100, 50)
 #: Fewer samples or bins: no model (the day's own estimate stays).
 MIN_N = 400
 MIN_BINS = 32
@@ -287,8 +294,6 @@ class NoiseSpectrum:
         ``G Gᵀ`` and ``G C_θ Gᵀ`` of the estimators (weights ``G``).
     names : tuple of str
         The red shapes.
-    floor : ndarray, shape (p,)
-        ``s² (G Gᵀ)_jj``, ``s²`` the residual's variance [SI units squared].
     """
 
     periodogram: NDArray[np.float64]
@@ -297,11 +302,10 @@ class NoiseSpectrum:
     white_cov: NDArray[np.float64]
     covs: NDArray[np.float64]
     names: tuple[str, ...]
-    floor: NDArray[np.float64]
 
     def to_arrays(self, prefix: str = "") -> dict[str, NDArray]:
         """The fields as arrays (``numpy.savez``); :meth:`from_arrays` reads them."""
-        out = {f: getattr(self, f) for f in ("periodogram", "white", "white_cov", "covs", "floor")}
+        out = {f: getattr(self, f) for f in ("periodogram", "white", "white_cov", "covs")}
         out["shapes"] = self.shapes.astype(np.float32)  # ~7 digits: far below the fit's
         out["names"] = np.array(self.names)
         return {prefix + k: v for k, v in out.items()}
@@ -317,7 +321,6 @@ class NoiseSpectrum:
             get("white_cov").astype(float),
             get("covs").astype(float),
             tuple(str(s) for s in get("names")),
-            get("floor").astype(float),
         )
 
 
@@ -373,18 +376,9 @@ def noise_spectra(
         return [None] * res.shape[0]
     grid = _on_grid(res, lay.idx, lay.n_grid) * lay.taper[None, :]
     spec = np.fft.fft(grid, axis=1)[:, 1 : lay.w.size + 1]
-    s2 = np.einsum("ij,ij->i", res, res) / max(n - g.shape[0], 1)
-    gg = np.einsum("ij,ij->i", g, g)
+    power = spec.real**2 + spec.imag**2
     return [
-        NoiseSpectrum(
-            spec[j].real ** 2 + spec[j].imag ** 2,
-            lay.w,
-            lay.h,
-            lay.white_cov,
-            lay.covs,
-            lay.shapes,
-            s2[j] * gg,
-        )
+        NoiseSpectrum(power[j], lay.w, lay.h, lay.white_cov, lay.covs, lay.shapes)
         for j in range(res.shape[0])
     ]
 
@@ -479,6 +473,30 @@ def _refined(target: NoiseSpectrum, fit: dict, kinds: NDArray) -> NDArray[np.flo
     return out
 
 
+def _fit_band(p, w, h, kinds, weight):
+    """The model of bins ``1 … len(p)``, lines left out: ``(fit, p_misfit, n_lines)``.
+
+    Ordinates above ``1 + (LINE_FACTOR − 1)/√D`` times the fitted expectation (the
+    mean of ``D`` days' ordinates) are left out with their neighbours and the fit is
+    repeated (at most 4 times).
+    """
+    use = np.ones(p.size, bool)
+    factor = 1.0 + (LINE_FACTOR - 1.0) / math.sqrt(weight)
+    for _ in range(4):
+        fit = _select(p, w, h, kinds, use, weight)
+        lines = p / fit["E"] > factor
+        if not np.any(lines & use):
+            break
+        grow = lines.copy()
+        for d in range(1, LINE_NEIGHBOURS + 1):
+            grow[d:] |= lines[:-d]
+            grow[:-d] |= lines[d:]
+        use &= ~grow
+        if use.sum() < MIN_BINS:
+            break
+    return fit, _gof(p[use], fit["E"][use], weight), int(np.sum(~use))
+
+
 def pooled_covariance(
     target: NoiseSpectrum, others: Sequence[NoiseSpectrum] = ()
 ) -> tuple[NDArray[np.float64] | None, dict[str, Any]]:
@@ -499,7 +517,8 @@ def pooled_covariance(
         estimate then).
     info : dict
         ``days`` pooled, ``model`` (a description), ``misfit`` (bool), ``p_misfit``
-        (the goodness-of-fit tail), ``lines`` (bins left out).
+        (the goodness-of-fit tail), ``lines`` (bins left out), ``bins`` (the band
+        fitted: the widest of ``K_BAND`` and :data:`NARROWER_BANDS` the model fits).
     """
     days = [target, *[o for o in others if o.periodogram.size == target.periodogram.size]]
     weight = float(len(days))
@@ -507,29 +526,21 @@ def pooled_covariance(
     w = np.mean([d.white for d in days], axis=0)
     h = np.mean([d.shapes for d in days], axis=0)
     kinds = np.array(["pow" if n.startswith("power") else "ar" for n in target.names])
-    use = np.ones(p.size, bool)
-    factor = 1.0 + (LINE_FACTOR - 1.0) / math.sqrt(weight)  # the mean of D ordinates
-    for _ in range(4):
-        fit = _select(p, w, h, kinds, use, weight)
-        lines = p / fit["E"] > factor
-        if not np.any(lines & use):
+    info: dict[str, Any] = {"days": len(days)}
+    for band in (p.size, *[b for b in NARROWER_BANDS if MIN_BINS <= b < p.size]):
+        fit, p_misfit, n_lines = _fit_band(p[:band], w[:band], h[:, :band], kinds, weight)
+        info.update(p_misfit=p_misfit, lines=n_lines, bins=band)
+        info["model"] = "white" if fit["s"] < 0 else f"white + {target.names[fit['s']]}"
+        info["misfit"] = bool(p_misfit < GOF_P_FLAG or n_lines > 0)
+        if not info["misfit"]:
             break
-        grow = lines.copy()
-        for d in range(1, LINE_NEIGHBOURS + 1):
-            grow[d:] |= lines[:-d]
-            grow[:-d] |= lines[d:]
-        use &= ~grow
-        if use.sum() < MIN_BINS:
-            break
-    p_misfit = _gof(p[use], fit["E"][use], weight)
-    n_lines = int(np.sum(~use))
-    info: dict[str, Any] = {"days": len(days), "p_misfit": p_misfit, "lines": n_lines}
-    info["model"] = "white" if fit["s"] < 0 else f"white + {target.names[fit['s']]}"
-    info["misfit"] = bool(p_misfit < GOF_P_FLAG or n_lines > 0)
     if info["misfit"]:
         return None, info
     cov = _refined(target, fit, kinds) if fit["s"] >= 0 else fit["W"] * target.white_cov
     cov = 0.5 * (cov + cov.T)  # exactly symmetric (the products above are to rounding)
+    # floor: white noise at the band's mean level (not the residual's variance: content
+    # above the band, e.g. real L1B noise at 10-100 mHz, does not reach the estimates)
     var = np.diag(cov)
-    scale = np.sqrt(np.maximum(1.0, target.floor / np.maximum(var, 1e-300)))
+    floor = float(np.mean(p[:band] / w[:band])) * np.diag(target.white_cov)
+    scale = np.sqrt(np.maximum(1.0, floor / np.maximum(var, 1e-300)))
     return cov * (scale[:, None] * scale[None, :]), info
