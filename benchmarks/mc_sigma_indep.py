@@ -25,9 +25,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from tests.indep.grace import grace_day  # noqa: E402
+
 from accal.estimators.lowfreq import noise_spectra, pooled_covariance  # noqa: E402
 from accal.estimators.trend import METHODS, fit_trend  # noqa: E402
-from tests.indep.grace import grace_day  # noqa: E402
 
 #: Noise models of the generator (``tests.indep._common.noise_psd``) and their options.
 CASES = {
