@@ -26,7 +26,7 @@ References
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -76,7 +76,6 @@ class TrendFit:
     cov: NDArray[np.float64]
     n_used: int
     rms: float
-    notes: tuple[str, ...] = field(default=())
 
     @property
     def bias(self) -> float:
