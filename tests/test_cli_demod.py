@@ -222,6 +222,7 @@ def test_batch_one_bad_one_good(tmp_path):
         "good.summary.json",
         "good.summary.md",
         "periods.csv",
+        "periods.csv-metadata.json",  # its units (CSVW sidecar)
     ]
     df = pd.read_csv(out / "periods.csv", comment="#")
     assert len(df) == 20 and {"a_Y", "sigma_Z", "bias_y", "drift_z", "leakage"} <= set(df)

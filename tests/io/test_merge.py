@@ -28,7 +28,7 @@ def test_merge_replaces_by_key_and_grows_the_schema(tmp_path, fmt):
     merge_table(
         path, b, key=("source", "axis"), sort=("source", "axis"), units={"w": "s"}, meta=meta
     )
-    df = pd.read_parquet(path) if fmt == "parquet" else pd.read_csv(path, comment="#")
+    df = pd.read_parquet(path) if fmt == "parquet" else pd.read_csv(path)  # pandas' defaults
     assert df[["source", "axis"]].values.tolist() == [
         ["a", "x"],
         ["a", "y"],
@@ -44,7 +44,7 @@ def test_merge_replaces_by_key_and_grows_the_schema(tmp_path, fmt):
                        "v": np.array([0.0])}, key=("source",), sort=("source", "axis"))  # fmt: skip
     merge_table(path, {"source": np.array(["a"], object), "axis": np.array(["x"], object),
                        "v": np.array([9.0])}, key=("source",), sort=("source", "axis"))  # fmt: skip
-    df = pd.read_parquet(path) if fmt == "parquet" else pd.read_csv(path, comment="#")
+    df = pd.read_parquet(path) if fmt == "parquet" else pd.read_csv(path)  # pandas' defaults
     assert df[["source", "axis", "v"]].values.tolist() == [
         ["a", "x", 9.0],
         ["b", "x", 3.0],
@@ -67,10 +67,12 @@ def test_chunked_writer_is_atomic_and_round_trips(tmp_path, fmt):
         for i in range(3):
             w.write({"t": np.arange(4.0) + 4 * i, "n": np.arange(4) + 4 * i})
         assert not path.exists()  # appears only when the block ends
-    df = pd.read_parquet(path) if fmt == "parquet" else pd.read_csv(path, comment="#")
+    df = pd.read_parquet(path) if fmt == "parquet" else pd.read_csv(path)  # pandas' defaults
     np.testing.assert_array_equal(df.t, np.arange(12.0))
     assert read_table_metadata(path) == ({"t": "s"}, {"k": 1})
     with pytest.raises(RuntimeError), chunked_table_writer(tmp_path / f"bad.{fmt}") as w:
         w.write({"t": np.arange(2.0)})
         raise RuntimeError("simulated crash")
-    assert sorted(p.name for p in tmp_path.iterdir()) == [path.name]
+    # nothing of the crashed one; a CSV's units are in its sidecar
+    want = [path.name] + ([f"{path.name}-metadata.json"] if fmt == "csv" else [])
+    assert sorted(p.name for p in tmp_path.iterdir()) == want

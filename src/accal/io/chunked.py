@@ -4,8 +4,8 @@ For outputs too large to hold in memory at once, e.g. a simulated year of 1 Hz
 data: the chunks go to a temporary file next to the target, renamed over it only
 when the writer is closed without an error (:func:`accal.io.writers.atomic_path`).
 The file layout is :func:`accal.io.writers.write_table`'s: units in the
-``accal.units`` schema metadata and per-field ``unit`` (Parquet) or a
-``# units:`` comment line (CSV), free metadata in ``accal.meta`` / ``# meta:``.
+``accal.units`` schema metadata and per-field ``unit`` (Parquet) or the CSV's
+``<file>-metadata.json`` sidecar, free metadata in ``accal.meta`` / the sidecar.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from accal.errors import check_option
-from accal.io.writers import FORMATS, _json_default, atomic_path
+from accal.io.writers import FORMATS, _json_default, atomic_path, write_csv_metadata
 
 __all__ = ["ChunkedTableWriter", "chunked_table_writer"]
 
@@ -37,6 +37,7 @@ class ChunkedTableWriter:
         self.units_json = json.dumps(self.units, sort_keys=True)
         self._writer: Any = None
         self._fh: Any = None
+        self.schema: Any = None
         self.rows = 0
 
     def write(self, chunk: Mapping[str, Any]) -> None:
@@ -69,8 +70,6 @@ class ChunkedTableWriter:
                 import pyarrow.csv as pacsv
 
                 self._fh = open(self.tmp, "wb")  # noqa: SIM115 (closed in close())
-                self._fh.write(f"# units: {self.units_json}\n".encode())
-                self._fh.write(f"# meta: {self.meta_json}\n".encode())
                 self.schema = table.schema
                 self._writer = pacsv.CSVWriter(self._fh, table.schema)
         self._writer.write_table(pa.Table.from_arrays(table.columns, schema=self.schema))
@@ -121,3 +120,6 @@ def chunked_table_writer(
             yield w
         finally:
             w.close()
+    if fmt == "csv":  # the units and metadata beside the CSV (write_table's convention)
+        names = list(w.schema.names) if w.schema is not None else []
+        write_csv_metadata(path, names, w.units, json.loads(w.meta_json))

@@ -11,8 +11,9 @@ the accelerations against temperatures, voltages and the like.  Supported inputs
 * GRACE-FO AHK1B ASCII (RL04): YAML header ending with ``# End of YAML header``,
   header in ``meta["gracefo"]``;
 * a generic table (CSV or Parquet) with a ``gps_time`` or ``time`` column [s, GPS]
-  (or ``time_utc``) and numeric channel columns, units from ``# units:`` /
-  ``accal.units`` metadata (as written by :func:`accal.io.writers.write_table`).
+  (or ``time_utc``) and numeric channel columns, units from the CSV's
+  ``-metadata.json`` sidecar or ``# units:`` lines, or ``accal.units`` metadata (as
+  written by :func:`accal.io.writers.write_table`).
 
 The AHK1B record
 ----------------

@@ -151,4 +151,6 @@ def merge_table(
     all_units = {**old_units, **dict(units or {})}
     all_units = {k: v for k, v in all_units.items() if k in table.column_names}
     md = meta(dict(old_meta)) if callable(meta) else dict(meta or {})
-    return write_table(table, out or path, fmt=fmt, units=all_units, meta=md)
+    return write_table(
+        table, out or path, fmt=fmt, units=all_units, meta=md, csv_name=path if out else None
+    )

@@ -3,8 +3,8 @@
 A run file is a Parquet or CSV (optionally gzipped) table with the columns below;
 every other numeric column is an auxiliary channel (a temperature, a current, ...)
 carried in :attr:`AccSeries.aux` with its unit from the file metadata.  The parsing
-itself is :mod:`accal.io.tables`' (comment header, ``# units:`` / ``# meta:``
-lines, Parquet ``accal.units`` metadata); this module only fixes the column
+itself is :mod:`accal.io.tables`' (a CSV's ``-metadata.json`` sidecar or comment
+header, ``# units:`` / ``# meta:`` lines, Parquet ``accal.units`` metadata); this module only fixes the column
 names, the units and the checks that belong to the file.
 
 The reader normalises and checks, it does not repair: time must be finite and

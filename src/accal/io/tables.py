@@ -12,7 +12,7 @@ Column conventions understood by :func:`read_table_series`:
 * every other numeric column goes to ``aux``.
 
 Files written by :func:`write_series` carry the series' satellite, frame, units,
-history and meta (``accal.meta`` / ``# meta:``), so reading them gives back the same
+history and meta (``accal.meta`` / the CSV's sidecar), so reading them gives back the same
 :class:`~accal.series.AccSeries`.
 """
 
@@ -50,7 +50,7 @@ from accal.io._common import (
     tidy,
 )
 from accal.io.grace_l1b import DEFAULT_INVALID_BITS
-from accal.io.writers import write_table
+from accal.io.writers import read_csv_metadata, write_table
 from accal.series import UNITS, AccSeries, ReadReport
 from accal.timescale import utc_to_gps
 
@@ -354,6 +354,14 @@ def last_line_complete(body: bytes, header: bytes | None = None) -> bool:
     return len(row) == n_header and row[-1].strip() != ""
 
 
+def _plain_name(path: Path) -> Path:
+    """``x.csv`` for ``x.csv.gz`` (a compressed CSV's sidecar keeps the CSV's name)."""
+    for suffix in (".gz", ".bz2", ".xz"):
+        if path.name.lower().endswith(suffix):
+            return path.with_name(path.name[: -len(suffix)])
+    return path
+
+
 def read_csv_table(raw: bytes, path: Path) -> tuple[Any, dict, dict, int]:
     """Parse a whole CSV table (comment header, then a header line and rows).
 
@@ -369,7 +377,8 @@ def read_csv_table(raw: bytes, path: Path) -> tuple[Any, dict, dict, int]:
     table : pyarrow.Table
         The columns, types inferred by pyarrow (``qualflg`` kept as strings).
     units, meta : dict
-        From the ``# units: {...}`` and ``# meta: {...}`` comment lines.
+        From the sidecar ``<file>-metadata.json`` (:func:`accal.io.writers.write_csv_metadata`)
+        and the ``# units: {...}`` and ``# meta: {...}`` comment lines (which win).
     first_line : int
         1-based line number of the first data row.
 
@@ -389,6 +398,9 @@ def read_csv_table(raw: bytes, path: Path) -> tuple[Any, dict, dict, int]:
         nl = len(raw) if nl < 0 else nl
         _comment(raw[pos:nl], path, n_comment + 1, units, meta)
         pos, n_comment = nl + 1, n_comment + 1
+    side = read_csv_metadata(_plain_name(path))
+    if side is not None:  # accal's own CSVs: units in the sidecar (comment lines win)
+        units, meta = {**side[0], **units}, {**side[1], **meta}
     body = raw[pos:]
     check_binary(body[:65536], path, n_comment + 1)
     if not body.strip():
@@ -798,7 +810,8 @@ def read_table_series(path: str | Path, *, columns: dict[str, str] | None = None
     path : str or Path
         The file.  Parquet is recognised by its magic bytes, gzip likewise;
         anything else is read as CSV (comment lines starting with ``#`` at the top
-        are skipped; ``# units:`` and ``# meta:`` lines are read as JSON).
+        are skipped; ``# units:`` and ``# meta:`` lines are read as JSON, as is the
+        ``<file>-metadata.json`` sidecar accal writes).
     columns : dict of str to str, optional
         Map an axis (``"x"``, ``"y"``, ``"z"``) to a source column, e.g.
         ``{"x": "a_cal_x"}``; unmapped axes use ``lin_accl_<axis>`` if present.
@@ -1145,7 +1158,8 @@ class TableStream:
     names : list of str
         Column names.
     units, meta : dict
-        ``accal.units`` / ``accal.meta`` (Parquet) or ``# units:`` / ``# meta:`` (CSV).
+        ``accal.units`` / ``accal.meta`` (Parquet) or the sidecar and ``# units:`` /
+        ``# meta:`` lines (CSV).
     first_line : int
         1-based line of the first data row (CSV); 0 for Parquet.
     rows : int
@@ -1261,6 +1275,9 @@ class TableStream:
         check_unique_names(self.names, self.path, lineno)
         self.first_line = lineno + 1
         self.num_rows = None
+        side = read_csv_metadata(_plain_name(self.path))
+        if side is not None:  # accal's own CSVs: units in the sidecar (comment lines win)
+            self.units, self.meta = {**side[0], **self.units}, {**side[1], **self.meta}
 
     def _iter_csv(self) -> Iterator[tuple[int, Any]]:
         import itertools

@@ -1,7 +1,7 @@
 """Declared units of run-file columns, and their factors to SI.
 
-A run file may say the unit of each column (Parquet ``accal.units`` metadata, a CSV
-``# units:`` line).  accal works in SI (m/s², s, rad): a column declared in another
+A run file may say the unit of each column (Parquet ``accal.units`` metadata, a CSV's
+``-metadata.json`` sidecar or ``# units:`` line).  accal works in SI (m/s², s, rad): a column declared in another
 unit it knows is converted (with a warning that says so), a column declared in a
 unit it does not know is refused, and a column whose unit is not declared is taken
 as SI.  QA: m_y in ``g`` was read as m/s², a 9.8× wrong acceleration with no

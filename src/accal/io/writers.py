@@ -177,6 +177,7 @@ def write_table(
     meta: Mapping[str, Any] | None = None,
     sync: bool = True,
     required: bool = False,
+    csv_name: str | Path | None = None,
 ) -> Path:
     """Write a table atomically as Parquet or CSV.
 
@@ -190,11 +191,13 @@ def write_table(
         Output format; default from the suffix of ``path`` (``.csv`` or Parquet).
     units : mapping of str to str, optional
         Unit of each column.  Parquet: schema key-value metadata ``accal.units``
-        (JSON) plus per-field metadata ``unit``.  CSV: ``# units: {...}`` comment
-        line at the top.
+        (JSON) plus per-field metadata ``unit``.  CSV: the sidecar
+        ``<file>-metadata.json`` (:func:`write_csv_metadata`), so that the CSV itself
+        is a plain header line and rows that ``pandas.read_csv``, R and spreadsheets
+        read with their defaults.
     meta : mapping, optional
-        Free metadata, stored as JSON under ``accal.meta`` (Parquet) or a
-        ``# meta: {...}`` comment line (CSV).
+        Free metadata, stored as JSON under ``accal.meta`` (Parquet) or in the CSV's
+        sidecar.
     sync : bool
         ``fsync`` before the rename (see :func:`atomic_path`).
     required : bool
@@ -202,6 +205,9 @@ def write_table(
         ``REQUIRED``: no definition levels to encode; ~0.5 ms less per calibrated
         1 Hz day, same values).  For tables that are written once, not for those
         merged with later rows, whose nulls would then not fit the schema.
+    csv_name : str or Path, optional
+        CSV: the file the sidecar describes when ``path`` is a temporary name that an
+        outer :func:`atomic_path` renames (default ``path``).
 
     Returns
     -------
@@ -266,19 +272,75 @@ def write_table(
             import pyarrow.csv as pacsv
 
             with open(tmp, "wb") as fh:
-                fh.write(f"# units: {units_json}\n".encode())
-                fh.write(f"# meta: {meta_json}\n".encode())
                 pacsv.write_csv(table, fh)
+    if fmt == "csv":
+        name = Path(csv_name) if csv_name is not None else path
+        write_csv_metadata(name, table.column_names, units, json.loads(meta_json), sync=sync)
     return path
+
+
+def csv_metadata_path(path: str | Path) -> Path:
+    """The metadata sidecar of a CSV file: ``<file>-metadata.json`` (the CSV on the Web
+    convention for a table's metadata document, W3C 2015)."""
+    path = Path(path)
+    return path.with_name(path.name + "-metadata.json")
+
+
+def write_csv_metadata(
+    path: str | Path,
+    columns: Iterable[str],
+    units: Mapping[str, str],
+    meta: Mapping[str, Any],
+    *,
+    sync: bool = True,
+) -> Path:
+    """Write the sidecar of the CSV ``path`` (atomically): a CSVW metadata document
+    (W3C, "Metadata Vocabulary for Tabular Data", 2015) whose columns carry their
+    unit (``accal:unit``), with ``accal:units`` and ``accal:meta`` as
+    :func:`read_table_metadata` returns them."""
+    path = Path(path)
+    doc = {
+        "@context": "http://www.w3.org/ns/csvw",
+        "url": path.name,
+        "tableSchema": {
+            "columns": [
+                {"name": c, "titles": c, **({"accal:unit": units[c]} if c in units else {})}
+                for c in columns
+            ]
+        },
+        "accal:units": dict(units),
+        "accal:meta": dict(meta),
+    }
+    out = csv_metadata_path(path)
+    with atomic_path(out, sync=sync) as tmp:
+        tmp.write_text(json.dumps(doc, indent=1, default=_json_default) + "\n")
+    return out
+
+
+def read_csv_metadata(path: str | Path) -> tuple[dict[str, str], dict[str, Any]] | None:
+    """``(units, meta)`` of the sidecar of the CSV ``path``; None without one (or an
+    unreadable one: the data stand without their units)."""
+    side = csv_metadata_path(path)
+    try:
+        doc = json.loads(side.read_text())
+    except (OSError, ValueError):
+        return None
+    units, meta = doc.get("accal:units", {}), doc.get("accal:meta", {})
+    if not isinstance(units, dict) or not isinstance(meta, dict):
+        return None
+    return {str(k): str(v) for k, v in units.items()}, meta
 
 
 def read_table_metadata(path: str | Path) -> tuple[dict[str, str], dict[str, Any]]:
     """Return ``(units, meta)`` stored by :func:`write_table` in ``path``."""
     path = Path(path)
     if path.suffix.lower() == ".csv":
+        side = read_csv_metadata(path)
+        if side is not None:
+            return side
         units: dict[str, str] = {}
         meta: dict[str, Any] = {}
-        with open(path) as fh:
+        with open(path) as fh:  # written before the sidecar: comment lines
             for line in fh:
                 if not line.startswith("#"):
                     break
