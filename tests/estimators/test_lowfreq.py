@@ -23,10 +23,10 @@ from accal.estimators.lowfreq import (
 from accal.estimators.trend import fit_trend, lsq_weights, wavelet_weights
 
 
-def _gappy_times(n: int = 900) -> np.ndarray:
+def _gappy_times(n: int = 480) -> np.ndarray:
     keep = np.ones(n, bool)
-    keep[200:260] = False
-    keep[610:613] = False
+    keep[120:160] = False
+    keep[330:333] = False
     return np.arange(n, dtype=float)[keep] * 2.0
 
 
