@@ -10,6 +10,19 @@ from typing import Any
 import click
 
 
+class OutPath(click.Path):
+    """A ``click.Path`` that refuses an empty or blank value.
+
+    ``Path("")`` is the current directory: an unset variable in a cron line
+    (``--out "$OUT"``) wrote a run's outputs there (issue 23).
+    """
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Any:
+        if isinstance(value, str) and not value.strip():
+            self.fail("empty path (an unset variable?)", param, ctx)
+        return super().convert(value, param, ctx)
+
+
 def _command_names(ctx: click.Context) -> set[str]:
     """Names of every accal command and sub-command (``grace-bias``, ``gap``, ...)."""
     root = ctx.find_root().command

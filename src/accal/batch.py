@@ -24,6 +24,7 @@ re-run therefore ends with the same outputs as an uninterrupted one.
 from __future__ import annotations
 
 import contextlib
+import errno
 import fnmatch
 import glob
 import hashlib
@@ -41,6 +42,7 @@ from typing import Any
 
 from accal import __version__
 from accal.errors import AccalError
+from accal.io.writers import TEMP_MARK
 
 #: Names taken from a directory scan unless ``--include`` says otherwise.
 DEFAULT_INCLUDE = ("*ACC1B_*", "*ACT1B_*")
@@ -275,6 +277,34 @@ def group_inputs(paths: Sequence[Path]) -> list[InputGroup]:
     return [InputGroup(k, tuple(groups[k])) for k in keys]
 
 
+def open_own(path: Path, mode: str, **kw: Any) -> Any:
+    """Open one of accal's own files of an output directory for appending (``"a"`` or
+    ``"a+"``), created if missing; never through a symbolic link or onto anything but
+    a regular file.
+
+    Issue 23: ``OUT/.accal.lock`` or ``OUT/accal.log`` as a symlink to any file got that
+    file truncated or appended to.  ``O_NOFOLLOW`` refuses a link in the last component.
+
+    Raises
+    ------
+    OSError
+        ``PATH: a symbolic link or not a regular file, not accal's own: remove it``.
+    """
+    flags = os.O_CREAT | os.O_APPEND | (os.O_RDWR if "+" in mode else os.O_WRONLY)
+    flags |= getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0)
+    why = "a symbolic link or not a regular file, not accal's own: remove it"
+    try:
+        fd = os.open(path, flags, 0o666)
+    except OSError as exc:
+        if exc.errno in (errno.ELOOP, errno.ENXIO, errno.EISDIR):
+            raise OSError(exc.errno, why, str(path)) from None
+        raise
+    if not stat.S_ISREG(os.fstat(fd).st_mode):  # a FIFO or a device
+        os.close(fd)
+        raise OSError(errno.EINVAL, why, str(path))
+    return os.fdopen(fd, mode, **kw)
+
+
 class OutputLock:
     """Exclusive lock on an output directory (``OUT/.accal.lock``, ``fcntl.flock``).
 
@@ -293,7 +323,7 @@ class OutputLock:
         import fcntl
 
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        fh = open(self.path, "a+")  # noqa: SIM115 - kept open while locked
+        fh = open_own(self.path, "a+")  # kept open while locked
         try:
             fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
@@ -350,9 +380,12 @@ if hasattr(os, "register_at_fork"):
 
 
 def remove_stale_temporaries(out_dir: Path) -> int:
-    """Delete temporary files left by a killed run (``.NAME.XXXX.tmp``); call under the lock."""
+    """Delete temporary files left by a killed run (``.NAME.accal-XXXX.tmp``, and a
+    plot's ``.NAME.accal-XXXX.tmp.png``); call under the lock.  Other programs'
+    temporaries are not accal's to remove."""
     n = 0
-    stale = {*Path(out_dir).glob(".*.tmp"), *Path(out_dir).glob(".*.tmp.*")}
+    mark = f".*.{TEMP_MARK}*.tmp"
+    stale = {*Path(out_dir).glob(mark), *Path(out_dir).glob(mark + ".*")}
     for q in stale:
         with contextlib.suppress(OSError):
             q.unlink()
@@ -500,7 +533,7 @@ class RunLog:
         self.path = Path(out_dir) / LOG
         # a file name that is not UTF-8 (bytes kept as surrogates) is logged escaped
         self._fh = (
-            open(self.path, "a", encoding="utf-8", errors="backslashreplace")  # noqa: SIM115
+            open_own(self.path, "a", encoding="utf-8", errors="backslashreplace")
             if enabled
             else None
         )

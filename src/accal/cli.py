@@ -16,6 +16,7 @@ import numpy as np
 from accal import __version__
 from accal._cliutil import (
     Group,
+    OutPath,
     alpha_option,
     aux_option,
     check_number,
@@ -67,7 +68,7 @@ def main(debug: bool) -> None:
 @click.option(
     "--out",
     "out",
-    type=click.Path(file_okay=False, path_type=Path),
+    type=OutPath(file_okay=False, path_type=Path),
     required=True,
     help="Output directory (created).",
 )
@@ -473,7 +474,7 @@ def _is_date(s: str) -> bool:
 @click.option(
     "--out",
     "out",
-    type=click.Path(file_okay=False, path_type=Path),
+    type=OutPath(file_okay=False, path_type=Path),
     default=None,
     help="Where closure.json/closure.md/plots go [default: DIRECTORY/diagnose, so a "
     "--close-loop run's own reports are kept].",
@@ -595,7 +596,7 @@ def simulate() -> None:
 @click.option(
     "--out",
     "out",
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=OutPath(dir_okay=False, path_type=Path),
     required=True,
     help="Output ACC1B file (.asc/.txt, .gz to compress); truth goes to <out>.truth.json.",
 )

@@ -15,7 +15,14 @@ from pathlib import Path
 
 import click
 
-from accal._cliutil import alpha_option, check_number, check_seed, config_option, plots_option
+from accal._cliutil import (
+    OutPath,
+    alpha_option,
+    check_number,
+    check_seed,
+    config_option,
+    plots_option,
+)
 from accal._cliutil import err as _err
 from accal._cliutil import fail as _fail
 from accal._cliutil import fmt_number as _g
@@ -68,7 +75,7 @@ DEMOD_PSD_HELP = (
 @click.option("--mask", type=float, required=True, help="Nominal masking time TM per period [s].")
 @click.option(
     "--out",
-    type=click.Path(file_okay=False, path_type=Path),
+    type=OutPath(file_okay=False, path_type=Path),
     required=True,
     help="Output directory (created).",
 )
@@ -334,7 +341,7 @@ def _check_tau_vs_sampling(runs: tuple[Path, ...], opts: object) -> None:
 @click.option("--periods", type=click.IntRange(min=1), default=1, show_default=True)
 @click.option(
     "--out",
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=OutPath(dir_okay=False, path_type=Path),
     required=True,
     help="θ(t) table; .csv → CSV, else Parquet.",
 )
@@ -535,7 +542,7 @@ def _check_budget_size(
 @click.option("--fs", type=float, default=1.0, show_default=True, help="Sampling frequency [Hz].")
 @click.option(
     "--out",
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=OutPath(dir_okay=False, path_type=Path),
     required=True,
     help="Run file (.parquet or .csv); truth goes to <stem>.truth.<ext> next to it.",
 )

@@ -22,6 +22,10 @@ import numpy as np
 from accal.errors import check_option
 
 FORMATS = ("parquet", "csv")
+#: In the name of every temporary file accal writes (``.NAME.accal-XXXXXXXX.tmp``), so
+#: that the clean-up after a killed run removes accal's temporaries only (issue 23:
+#: every ``.*.tmp`` of the output directory went, other programs' too).
+TEMP_MARK = "accal-"
 
 
 @contextlib.contextmanager
@@ -41,7 +45,9 @@ def atomic_path(path: str | Path, *, sync: bool = True) -> Iterator[Path]:
     except FileExistsError:  # a component of the directory is a file
         raise NotADirectoryError(errno.ENOTDIR, "Not a directory", str(path.parent)) from None
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        fd, tmp = tempfile.mkstemp(
+            prefix=f".{path.name}.{TEMP_MARK}", suffix=".tmp", dir=path.parent
+        )
     except OSError as exc:  # name the file asked for, not the temporary's random name
         raise OSError(exc.errno, exc.strerror, str(path)) from None
     os.close(fd)
