@@ -785,3 +785,27 @@ def test_a_fault_in_a_tab_separated_file_is_named_at_its_line(samples, tmp_path)
     with pytest.raises(FormatError, match="lin_accl_y: ") as e:
         read_grace_acc1b(_write(tmp_path, "".join(head + data).encode()))
     assert e.value.line == 50
+
+
+def test_a_header_without_a_record_count_is_said(samples, tmp_path):
+    """Issue 23: a missing NUMBER OF DATA RECORDS skipped the count check silently."""
+    text = samples["grace_a"].read_text()
+    p = tmp_path / "ACC1B_2003-09-14_A_00.asc"
+    p.write_text("".join(ln for ln in text.splitlines(True) if "NUMBER OF DATA RECORDS" not in ln))
+    s = read_grace_acc1b(p)
+    assert any("gives no NUMBER OF DATA RECORDS" in w for w in s.report.warnings)
+    assert len(s) == len(read_grace_acc1b(samples["grace_a"]))
+
+
+def test_gracefo_header_without_platform_falls_back_to_the_records(samples, tmp_path):
+    """Issue 23: a YAML header without ``platform`` was refused ("platform is ''")."""
+    text = samples["gracefo_c"].read_text()
+    p = tmp_path / "ACT1B_2023-06-01_C_04.txt"
+    p.write_text("".join(ln for ln in text.splitlines(True) if "platform: GRACE" not in ln))
+    s = read_grace_acc1b(p)
+    assert s.satellite == read_grace_acc1b(samples["gracefo_c"]).satellite
+    assert any("the header names no satellite; the records' 'C'" in w for w in s.report.warnings)
+    # a wrong platform is still an error
+    p.write_text(text.replace("platform: GRACE C", "platform: GRACE A"))
+    with pytest.raises(FormatError, match="expected 'GRACE C' or 'GRACE D'"):
+        read_grace_acc1b(p)

@@ -415,7 +415,9 @@ def _interpret_gracefo(header: bytes, path: Path) -> dict[str, Any]:
         raise FormatError("YAML header: 'global_attributes' is not a mapping", path)
     platform = attrs.get("platform", "")
     letter = platform.split()[-1] if isinstance(platform, str) and platform.split() else ""
-    if letter not in ("C", "D"):
+    if platform is None or (isinstance(platform, str) and not platform.strip()):
+        letter = ""  # no platform: the records' GRACEFO_id, else the file name (issue 23)
+    elif letter not in ("C", "D"):
         raise FormatError(
             f"YAML header: platform is {_short(platform, 40)}, expected 'GRACE C' or 'GRACE D'",
             path,
@@ -812,6 +814,8 @@ def _check_ids(
     uniq = [chr(c) for c in np.flatnonzero(np.bincount(chars, minlength=256))]
     if len(uniq) > 1:
         raise FormatError(f"mixed satellite ids {uniq} in one file", path)
+    if uniq and not letter:
+        return [f"the header names no satellite; the records' {uniq[0]!r} is used"], uniq[0]
     if uniq and uniq[0] != letter:
         return [
             f"records carry satellite id {uniq[0]!r} but the header names {letter!r}; "
@@ -872,16 +876,27 @@ def _check_header_span(
     )
 
 
+def _name_letter(path: Path) -> str:
+    """The satellite letter of an L1B file name; FormatError when it has none."""
+    from accal.batch import name_key
+
+    key = name_key(path)
+    letter = key[0] if key else ""
+    if letter not in SATELLITES:
+        raise FormatError("no satellite: no platform in the header, no record, no L1B name", path)
+    return letter
+
+
 def _name_day(path: Path) -> tuple[float, float] | None:
     """(first, last) second of the GPS day an L1B file name gives, or None."""
-    from accal.batch import _L1B_NAME
+    from accal.batch import name_key
     from accal.timescale import gps_day_start
 
-    m = _L1B_NAME.search(path.name)
-    if m is None:
+    key = name_key(path)
+    if key is None:
         return None
     try:
-        t0 = gps_day_start(m["date"])
+        t0 = gps_day_start(key[1])
     except ValueError:  # a name like ACC1B_2003-02-30_A_02
         return None
     return t0, t0 + 86399.0
@@ -945,6 +960,9 @@ def read_grace_acc1b(path: str | Path, *, invalid_bits: int = DEFAULT_INVALID_BI
         else _parse_ascii(raw, data_start, first_line, path)
     )
     warn, letter = _check_ids(cols["GRACE_id"], info["letter"], path, cols["line_of"])
+    if not letter:  # no platform in the header and no record: the file name
+        letter = _name_letter(path)
+        warn.append(f"the header names no satellite; the file name's {letter!r} is used")
     warn = [*cols.get("warnings", ()), *warn]
     time = cols["gps_time"]
     warn += _check_header_span(time, info.get("span"), path, cols["line_of"])
@@ -954,7 +972,12 @@ def read_grace_acc1b(path: str | Path, *, invalid_bits: int = DEFAULT_INVALID_BI
     quality = t.arrays["quality"].astype(np.uint32)
     valid = (quality & np.uint32(invalid_bits)) == 0
     n_header = info["n_header"]
-    if n_header is not None and n_header != t.report["n_rows"]:
+    if n_header is None:  # said, as a missing first/last observation is (issue 23)
+        warn.append(
+            "the header gives no NUMBER OF DATA RECORDS: a truncated or padded file is "
+            "not detected by its record count"
+        )
+    elif n_header != t.report["n_rows"]:
         warn.append(f"header announces {n_header} data records, file has {t.report['n_rows']}")
     n_flagged = int(np.count_nonzero(~valid))
     if n_flagged:
