@@ -141,6 +141,12 @@ class Group(click.Group):
                 raise
             err(f"{_usage_message(exc)} (see '{_command_path(exc, ctx)} --help')")
             sys.exit(exc.exit_code)
+        except BrokenPipeError:  # `accal budget ... | head -1`: the reader is gone
+            # quiet, like other Unix tools (status 128 + SIGPIPE); stdout to /dev/null so
+            # that the interpreter's final flush does not fail again (Python docs, signal)
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())
+            sys.exit(141)
         except OSError as exc:
             if os.environ.get("ACCAL_DEBUG"):
                 raise
@@ -196,6 +202,21 @@ def usage_fail(msg: str) -> None:
     """Print the one-line error of a bad option value (a file it names) and exit with status 2."""
     err(msg)
     sys.exit(2)
+
+
+def check_files(**named: Path | None) -> None:
+    """Usage error (exit 2) for a file an option names that is not there.
+
+    ``named``: option name → path (None: not given).  QA (issue 23): a missing
+    ``--reference``/``--aux`` failed every input with exit 1, as if the inputs were bad.
+    """
+    for option, path in named.items():
+        if path is None:
+            continue
+        if not Path(path).exists():
+            usage_fail(f"{path}: no such file (--{option.replace('_', '-')})")
+        if Path(path).is_dir():
+            usage_fail(f"{path}: a directory, not a file (--{option.replace('_', '-')})")
 
 
 def fmt_number(value: float) -> str:

@@ -19,6 +19,7 @@ from accal._cliutil import (
     OutPath,
     alpha_option,
     aux_option,
+    check_files,
     check_number,
     check_seed,
     config_option,
@@ -260,6 +261,7 @@ def grace_bias(
         )
     except AccalError as exc:
         raise click.UsageError(str(exc)) from None
+    check_files(reference=reference, aux=aux, truth=truth)
     files, problems = discover(inputs, recursive=recursive, include=include or DEFAULT_INCLUDE)
     try:
         summary = run(

@@ -306,8 +306,15 @@ def read_input(path: Path, opts: GraceBiasOptions) -> AccSeries:
     if opts.columns and fmt == "table":  # --column maps table columns; L1B files have fixed ones
         kwargs["columns"] = dict(opts.columns)
     if opts.input_format is None:  # sniffed and checked above: call the reader directly
-        return FORMATS[fmt][1](path, **kwargs)
-    return read(path, format=fmt, **kwargs)
+        series = FORMATS[fmt][1](path, **kwargs)
+    else:
+        series = read(path, format=fmt, **kwargs)
+    if opts.columns and fmt != "table":  # QA (issue 23): silently ignored
+        cols = ", ".join(f"{a}={c}" for a, c in sorted(opts.columns.items()))
+        series = _with_warnings(
+            series, f"--column {cols} is for table inputs; this {fmt} file's columns are fixed"
+        )
+    return series
 
 
 #: Longest spacing of two reference samples that :func:`subtract_reference` interpolates

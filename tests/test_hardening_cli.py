@@ -1,0 +1,52 @@
+"""Issue 23 finding 10: exit codes and messages of the CLI."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from accal.cli import main
+
+SAMPLE = Path(__file__).resolve().parents[1] / "data" / "samples" / "ACC1B_2003-09-14_A_00.asc"
+
+
+def _run(*args):
+    res = CliRunner().invoke(main, [str(a) for a in args])
+    return res.exit_code, res.output
+
+
+@pytest.mark.parametrize("option", ["--reference", "--aux", "--truth"])
+def test_a_missing_file_named_by_an_option_is_a_usage_error(tmp_path, option):
+    missing = tmp_path / "nope.parquet"
+    out = tmp_path / "o"
+    code, msg = _run("grace-bias", SAMPLE, option, missing, "--out", out)
+    assert code == 2 and f"{missing}: no such file ({option})" in msg
+    assert not out.exists()  # nothing created for a run that cannot start
+
+
+def test_column_mapping_on_an_l1b_input_is_said(tmp_path):
+    code, msg = _run("grace-bias", SAMPLE, "--column", "x=nonexistent", "--out", tmp_path / "o")
+    assert code == 0
+    assert (
+        "--column x=nonexistent is for table inputs; this grace-l1b file's columns are fixed" in msg
+    )
+
+
+def test_a_closed_pipe_ends_quietly():
+    """``accal budget ... | head -1`` printed ``accal: accal: Broken pipe``, exit 2.
+
+    The reader is gone before accal writes (its start-up takes ~1 s), so the write
+    meets a pipe without readers, as after ``head -1``."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "accal", "budget", "--tau", "600", "--mask", "200"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    proc.stdout.close()
+    err = proc.stderr.read()
+    proc.wait(timeout=120)
+    assert err == b"" and proc.returncode == 141
