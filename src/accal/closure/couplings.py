@@ -60,9 +60,6 @@ ANGULAR_MAX_LAG = 10.0
 TAU_MIN_STEPS = 5.0
 #: How far beyond the largest grid time constant the refinement looks.
 TAU_BEYOND = 2.0
-#: A lag a whole ``lag_period`` away is an alias when it explains this share of the
-#: refined lag's power (:func:`_lag_aliases`).
-ALIAS_POWER = 0.98
 #: The grid's best coupling is refined only when its corrected p-value is below this
 #: (:func:`_worth_refining`).
 REFINE_GATE = 0.5
@@ -189,75 +186,38 @@ def _channels(ctx: Context) -> list[tuple[str, NDArray[np.float64]]]:
     return out
 
 
-def _lag_aliases(
-    ctx: Context, name: str, x, lag: float, tc: float, top: float
-) -> tuple[float, list[float]]:
-    """The shortest of ``lag ± k·period`` explaining ≥ 98 % of ``lag``'s power, and
-    every such lag (:data:`ALIAS_POWER`; ``lag`` itself first).
+def _shortest_lag(ctx: Context, name: str, x, lag: float, tc: float, top: float) -> float:
+    """The shortest of ``lag − k·period`` explaining ≥ 98 % of ``lag``'s power.
 
     With a per-period base (demodulation) a channel that repeats with the period (a
     platform temperature kicked by every rotation) couples the same at lags a period
-    apart: a 120 s lag came out as 720 s, with a line and a step beside it.  The
-    shortest is reported; the others are kept because the data cannot tell them apart
-    (QA: a 933 s lag came out as 329 s, powers 3e-4 apart, and the coefficient 3.1σ
-    low: the slow part of the channel couples differently at each).  A channel that
-    does not repeat keeps its lag and has no aliases.
+    apart: a 120 s lag came out as 720 s, with a line and a step beside it.  A channel
+    that does not repeat keeps its lag.
+
+    Tried and not kept (docs/closure.md): the alias explaining the most, each refined
+    (on a QA platform day 930.7 s for a 933 s lag where this rule gives 329.5 s, but
+    the coefficient 3.3 % low instead of 2.4 % and a_Y's error 1.8× the plain run's
+    instead of 0.3×: a_Y takes up the coupling's in-period part and moves with its
+    coefficient, which is biased low at every alias); reporting the aliases with the
+    coefficient's spread over them in its σ (the spread, 0.6 %, does not explain the
+    bias, and with the refined low-pass the aliases fell below 98 % of the power).
     """
     period = float(ctx.options.get("lag_period") or 0.0)
-    if period <= 0 or top < 0.5 * period:
-        return lag, [lag]
+    if period <= 0 or lag < 0.5 * period:
+        return lag
     here = _power_at(ctx, name, x, tc, lag)
-    powers = {lag: here}
-    k_lo, k_hi = -int(lag // period), int((top - lag) // period)
-    for k in [k for k in range(k_lo, k_hi + 1) if k != 0]:
-        cand = lag + k * period
+    for k in range(int(lag // period), 0, -1):  # shortest first
+        cand = lag - k * period
         lo, hi = max(0.0, cand - 0.25 * period), min(top, cand + 0.25 * period)
-        if hi <= lo or _power_at(ctx, name, x, tc, min(max(cand, lo), hi)) < 0.9 * here:
-            continue  # not near an alias: no refinement (each costs ~25 evaluations)
         res = minimize_scalar(
             lambda lg: -_power_at(ctx, name, x, tc, lg),
             bounds=(lo, hi),
             method="bounded",
             options={"xatol": 0.25 * ctx.grid.step, "maxiter": 25},
         )
-        powers[float(res.x)] = float(-res.fun)
-    # the refinement is local: an alias may fit better than the lag it started from
-    best = max(powers.values())
-    aliases = sorted(lg for lg, pw in powers.items() if pw >= ALIAS_POWER * best)
-    return aliases[0], aliases
-
-
-def _alias_spread(ctx: Context, name: str, x, tc: float, lag: float, aliases) -> float:
-    """RMS relative change of the coupling coefficient(s) from ``lag`` to its aliases.
-
-    Each data channel's coefficient ``z̃ᵀr / z̃ᵀz̃`` (the scan's projection, the
-    current design projected out) at every alias lag; the root mean square over the
-    aliases (``lag`` itself counting as one, at zero) of ``(c_alias − c_lag)/c_lag``,
-    the largest over the channels.  The lags are equally good fits, so the choice
-    among them is a model uncertainty the coefficient's σ must carry (Draper 1995,
-    "Assessment and propagation of model uncertainty", J. R. Stat. Soc. B 57, 45–97:
-    the spread over the models the data cannot rank adds to the within-model
-    variance).
-    """
-    if len(aliases) < 2:
-        return 0.0
-    coefs = []
-    for lg in aliases:
-        col = _column(ctx, name, x, tc, lg)[ctx.use]
-        col = col - float(np.mean(col))
-        row = []
-        for m in ctx.channel_masks():
-            z = (col * m)[:, None]
-            nrm = float(np.dot(z[:, 0], z[:, 0]) - ctx.basis.captured(z)[0])
-            row.append(float(z[:, 0] @ ctx.residual) / nrm if nrm > 0 else np.nan)
-        coefs.append(row)
-    c = np.asarray(coefs)
-    ref = c[0]
-    ok = np.isfinite(ref) & (np.abs(ref) > 0)
-    if not ok.any():
-        return 0.0
-    rel = (c[:, ok] - ref[ok]) / ref[ok]
-    return float(np.max(np.sqrt(np.nanmean(rel**2, axis=0))))
+        if -res.fun >= 0.98 * here:
+            return float(res.x)
+    return lag
 
 
 def _scan_fft(
@@ -434,9 +394,8 @@ def auxiliary(ctx: Context) -> list[Proposal]:
     if not _worth_refining(ctx, props):
         return props
     lag, tc, _ = _refine(ctx, name, x, lag, tc, lag_step, top)
-    lag, aliases = _lag_aliases(ctx, name, x, lag, tc, top)
-    spread = _alias_spread(ctx, name, x, tc, lag, sorted(aliases, key=lambda a: a != lag))
-    return _proposals(ctx, name, x, tc, lag, mult, aliases if spread > 0 else None, spread)
+    lag = _shortest_lag(ctx, name, x, lag, tc, top)
+    return _proposals(ctx, name, x, tc, lag, mult)
 
 
 def _worth_refining(ctx: Context, props: list[Proposal]) -> bool:
@@ -463,24 +422,9 @@ def _worth_refining(ctx: Context, props: list[Proposal]) -> bool:
     return False
 
 
-def _proposals(
-    ctx: Context,
-    name: str,
-    x,
-    tc: float,
-    lag: float,
-    mult: float,
-    aliases: list[float] | None = None,
-    spread: float = 0.0,
-) -> list[Proposal]:
+def _proposals(ctx: Context, name: str, x, tc: float, lag: float, mult: float) -> list[Proposal]:
     """The coupling to ``name`` at (``lag``, ``τ``) and, for a channel that is not an
-    angular acceleration or a square, the pair with the channel's square.
-
-    ``aliases``/``spread``: the lags a period apart that fit as well and the RMS
-    relative change of the coefficient among them (:func:`_alias_spread`), carried in
-    the proposals' parameters (``lag_aliases``, ``alias_spread``) for the reported σ.
-    """
-    alias = {"lag_aliases": list(aliases), "alias_spread": spread} if aliases else {}
+    angular acceleration or a square, the pair with the channel's square."""
     col = _column(ctx, name, x, tc, lag)
     cols, labs, axes = ctx.split(col[:, None], (f"aux:{name}",))
     out = [
@@ -490,7 +434,7 @@ def _proposals(
             cols,
             labs,
             mult,
-            {"lag": lag, "tau": tc, **alias},
+            {"lag": lag, "tau": tc},
             axes,
             jacobian=_jacobian(ctx, name, x, lag, tc),
         )
@@ -504,13 +448,10 @@ def _proposals(
         c2, l2, a2 = ctx.split(np.column_stack([col, sq]), (f"aux:{name}", f"aux:{name}{SQUARED}"))
         n_c = max(ctx.n_chan, 1)
         parts = [
-            ([2 * c for c in range(n_c)], {"lag": lag, "tau": tc, "channel": name, **alias}),
-            (
-                [2 * c + 1 for c in range(n_c)],
-                {"lag": lag, "tau": tc, "channel": name + SQUARED, **alias},
-            ),
+            ([2 * c for c in range(n_c)], {"lag": lag, "tau": tc, "channel": name}),
+            ([2 * c + 1 for c in range(n_c)], {"lag": lag, "tau": tc, "channel": name + SQUARED}),
         ]
-        params = {"lag": lag, "tau": tc, "pair": True, "parts": parts, **alias}
+        params = {"lag": lag, "tau": tc, "pair": True, "parts": parts}
         out.append(Proposal("auxiliary", name, c2, l2, 2.0 * mult, params, a2))
     return out
 

@@ -265,15 +265,6 @@ def describe(
             details.update({k: v for k, v in prop.params.items() if k != "jacobian"})
         if prop.params.get("jacobian"):
             _nonlinear(prop, c, cc, i, kw, details)
-        spread = float(prop.params.get("alias_spread") or 0.0)
-        if spread > 0:  # lags a period apart fit as well (couplings._alias_spread)
-            sig = float(np.hypot(sig, spread * coef))
-            for d in details.get("axes", {}).values():
-                d["sigma"] = float(np.hypot(d["sigma"], spread * d["coefficient"]))
-            # moved with the final fit's lag (its Gauss-Newton step, _nonlinear)
-            shift = float(kw.get("lag", prop.params["lag"])) - float(prop.params["lag"])
-            details["lag_aliases"] = [float(a) + shift for a in prop.params["lag_aliases"]]
-            details["alias_spread"] = spread
         known = prop.name in EFFECT_NAMES
         out.append(
             Effect(
