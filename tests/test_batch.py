@@ -862,6 +862,31 @@ def test_damaged_table_fails_every_run_not_only_when_work_is_due(archive, tmp_pa
     assert code == 1 and "damaged bias_drift table" in err and str(t) in err
 
 
+@pytest.mark.parametrize("damage", ["drop drift", "duplicate a row"])
+def test_table_with_a_damaged_schema_or_duplicate_rows_fails_every_run(archive, tmp_path, damage):
+    """Issue 23: a table with a column dropped was accepted (the next run wrote NaN
+    drifts for every untouched input, which stayed "current"); hand-injected duplicate
+    rows survived.  Both are the damaged-table error a truncated table gets."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    out = tmp_path / "o"
+    assert invoke("grace-bias", archive, "-r", "--out", out, "-q", "-j", "1")[0] == 0
+    t = out / "bias_drift.parquet"
+    tab = pq.read_table(t)
+    if damage == "drop drift":
+        tab = tab.drop_columns(["drift"])
+        says = "no drift column"
+    else:
+        tab = pa.concat_tables([tab, tab.slice(0, 1)])
+        says = "more than once"
+    pq.write_table(tab, t)
+    before = t.read_bytes()
+    code, _, err = invoke("grace-bias", archive, "-r", "--out", out, "-j", "1")
+    assert code == 1 and "damaged bias_drift table" in err and says in err and str(t) in err
+    assert t.read_bytes() == before  # left as it is, for the user to look at
+
+
 def test_date_is_the_day_of_a_file_that_starts_before_midnight(tmp_path):
     """QA: a 2005-01-01 file whose first record is 10 s before midnight was dated
     2004-12-31 (the day of t0), and ``--start 2005-01-01`` missed it."""

@@ -807,6 +807,12 @@ def _read_bias_drift_arrow(path: Path):
         ) from None
 
 
+#: Columns every ``bias_drift`` table has had since the first version: a table without
+#: one is damaged (issue 23: a dropped ``drift`` column was read as NaN for every row,
+#: which then stayed "current").  Columns added later may be absent (older tables).
+CORE_COLUMNS = tuple(BIAS_DRIFT_UNITS)[: tuple(BIAS_DRIFT_UNITS).index("accal_version") + 1]
+
+
 def _read_bias_drift_unchecked(path: Path):
     import pyarrow as pa
 
@@ -837,6 +843,16 @@ def _read_bias_drift_unchecked(path: Path):
         # no thread: the batch process must stay single-threaded for its workers to
         # be forked (accal.batch.start_method)
         table = pq.ParquetFile(path, pre_buffer=False).read(use_threads=False)
+    missing = [c for c in CORE_COLUMNS if c not in table.column_names]
+    if missing:
+        raise ValueError(f"no {', '.join(missing)} column")
+    keys = list(
+        zip(*(table.column(c).to_pylist() for c in ("source", "axis", "method")), strict=True)
+    )
+    if len(set(keys)) != len(keys):
+        seen: set = set()
+        dup = next(k for k in keys if k in seen or seen.add(k))
+        raise ValueError(f"row {'/'.join(map(str, dup))} more than once")
     cols = [
         table.column(f.name).cast(f.type)
         if f.name in table.column_names
