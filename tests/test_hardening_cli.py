@@ -50,3 +50,15 @@ def test_a_closed_pipe_ends_quietly():
     err = proc.stderr.read()
     proc.wait(timeout=120)
     assert err == b"" and proc.returncode == 141
+
+
+@pytest.mark.parametrize("cmd", [["grace-bias"], ["demod", "--tau", "600", "--mask", "200"]])
+def test_a_run_with_nothing_to_read_creates_no_output_directory(tmp_path, cmd):
+    """Issue 23: a failed ``accal demod run1.parquet`` left OUT with a lock and a log."""
+    out = tmp_path / "o"
+    code, msg = _run(*cmd[:1], tmp_path / "missing.parquet", *cmd[1:], "--out", out)
+    assert code == 1 and f"{tmp_path / 'missing.parquet'}: no such file" in msg
+    assert not out.exists()
+    out.mkdir()  # an existing directory (a cron archive) keeps the failure in its log
+    code, _ = _run(*cmd[:1], tmp_path / "missing.parquet", *cmd[1:], "--out", out)
+    assert code == 1 and "no such file" in (out / "accal.log").read_text()

@@ -1105,8 +1105,17 @@ def run(
 
     start = _time.perf_counter()
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
     paths = [Path(p) for p in paths]
+    if not out_dir.exists() and not any(os.path.lexists(p) for p in paths):
+        # nothing to read: each input fails without a new output directory, lock and log
+        # being created for it (issue 23: a failed run left them behind)
+        gone = [FileOutcome(Path(p), False, msg) for p, msg in unmatched]
+        gone += [
+            FileOutcome(p, False, failure_message(p, ValidationError("no such file")))
+            for p in paths
+        ]
+        return RunSummary(gone, None, _time.perf_counter() - start, n_inputs=len(gone))
+    out_dir.mkdir(parents=True, exist_ok=True)
     if fail_fast:
         workers, scheduler = 1, None
     other = "csv" if opts.fmt == "parquet" else "parquet"

@@ -1752,9 +1752,15 @@ def run_demod(
     check_output_format(out_dir, opts.fmt)
     if psd is None:
         psd = load_psd(opts.psd)
-    out_dir.mkdir(parents=True, exist_ok=True)
     outcomes: list[RunOutcome] = []
     pairs = list(zip(paths, targets, strict=True))
+    if not out_dir.exists() and not any(os.path.lexists(p) for p in paths):
+        # nothing to read: fail each without creating the output directory, its lock
+        # and log (issue 23: a failed `accal demod run1.parquet` left them behind)
+        missing = [RunOutcome(p, False, failure_message(p, ValidationError("no such file")))
+                   for p in paths]  # fmt: skip
+        return DemodRunSummary(missing, _time.perf_counter() - start)
+    out_dir.mkdir(parents=True, exist_ok=True)
     # one writer per output directory (the cumulative periods table); a killed
     # run's temporary files are removed under the lock
     with OutputLock(out_dir, "accal demod"):
