@@ -62,3 +62,28 @@ def test_a_run_with_nothing_to_read_creates_no_output_directory(tmp_path, cmd):
     out.mkdir()  # an existing directory (a cron archive) keeps the failure in its log
     code, _ = _run(*cmd[:1], tmp_path / "missing.parquet", *cmd[1:], "--out", out)
     assert code == 1 and "no such file" in (out / "accal.log").read_text()
+
+
+@pytest.mark.parametrize("cmd", [["grace-bias"], ["demod", "--tau", "600", "--mask", "200"]])
+def test_symlink_loops_and_broken_links_are_named_as_such(tmp_path, cmd):
+    """Issue 23: a symlink loop read "no such file" (and ``accal demod`` raised a
+    traceback resolving it)."""
+    (tmp_path / "a").symlink_to(tmp_path / "b")
+    (tmp_path / "b").symlink_to(tmp_path / "a")
+    (tmp_path / "gone").symlink_to(tmp_path / "nowhere")
+    code, msg = _run(cmd[0], tmp_path / "a", tmp_path / "gone", *cmd[1:], "--out", tmp_path / "o")
+    assert code == 1
+    assert f"{tmp_path / 'a'}: a symbolic link loop" in msg
+    assert f"{tmp_path / 'gone'}: a broken symbolic link (its target does not exist)" in msg
+    assert "Traceback" not in msg
+
+
+def test_log_lines_escape_control_characters_of_file_names(tmp_path):
+    """Issue 23: accal.log kept raw terminal escapes from file names."""
+    bad = tmp_path / "x\x1b[31mred\x1b[0m.asc"
+    bad.write_text("not an accelerometer file\n")
+    out = tmp_path / "o"
+    code, _ = _run("grace-bias", bad, "--out", out, "-q")
+    assert code == 1
+    log = (out / "accal.log").read_text()
+    assert "\x1b" not in log and "x\\x1b[31mred\\x1b[0m.asc" in log

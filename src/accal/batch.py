@@ -526,6 +526,10 @@ class Manifest:
             )
 
 
+#: C0 and C1 control characters (tab kept) and DEL.
+_CONTROL = re.compile(r"[\x00-\x08\x0a-\x1f\x7f-\x9f]")
+
+
 class RunLog:
     """Append-only text log ``OUT/accal.log`` (one timestamped line per event)."""
 
@@ -541,6 +545,9 @@ class RunLog:
     def __call__(self, msg: str) -> None:
         if self._fh is not None:
             stamp = _time.strftime("%Y-%m-%dT%H:%M:%S", _time.gmtime())
+            # control characters (a file name's terminal escapes, newlines) as \xNN: one
+            # line per event, and `cat accal.log` cannot drive the terminal (issue 23)
+            msg = _CONTROL.sub(lambda m: f"\\x{ord(m.group()):02x}", msg)
             self._fh.write(f"{stamp}Z [{os.getpid()}] {msg}\n")
             self._fh.flush()
 

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from accal.errors import FormatError, check_option
-from accal.io._common import GZIP_MAGIC, peek, read_bytes
+from accal.io._common import GZIP_MAGIC, missing, peek, read_bytes
 from accal.io.grace_l1b import read_grace_acc1b, sniff_grace_acc1b, write_grace_acc1b
 from accal.io.tables import read_table_series, sniff_table, write_series
 from accal.series import AccSeries
@@ -28,7 +28,7 @@ def _check_path(path: Path) -> None:
     if path.is_dir():
         raise FormatError("is a directory, not a file", path)
     if not path.exists():
-        raise FormatError("no such file", path)
+        raise FormatError(missing(path), path)
     try:
         with open(path, "rb") as fh:
             fh.read(1)

@@ -8,7 +8,9 @@ handled and counted the same way for every format).
 
 from __future__ import annotations
 
+import errno
 import gzip
+import os
 import zlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -64,6 +66,19 @@ def implausible_message(name: str, value: float, unit: str = "m/s²") -> str:
     )
 
 
+def missing(path: str | Path) -> str:
+    """Why an input that cannot be opened is not there: ``no such file``, ``a broken
+    symbolic link`` or ``a symbolic link loop`` (issue 23: a loop read "no such file")."""
+    try:
+        os.stat(path)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            return "a symbolic link loop"
+        if os.path.islink(path):
+            return "a broken symbolic link (its target does not exist)"
+    return "no such file"
+
+
 def read_bytes(path: str | Path) -> bytes:
     """Return the (decompressed) content of ``path``, without a leading UTF-8 BOM.
 
@@ -90,10 +105,12 @@ def read_bytes(path: str | Path) -> bytes:
                 fh.seek(0)
             raw = fh.readall()
     except FileNotFoundError:
-        raise FormatError("no such file", p) from None
+        raise FormatError(missing(p), p) from None
     except PermissionError:
         raise FormatError("permission denied (file not readable)", p) from None
     except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise FormatError(missing(p), p) from None
         raise FormatError(f"cannot read file: {exc.strerror or exc}", p) from None
     if raw[:2] == GZIP_MAGIC:
         raw = gunzip(raw, p)

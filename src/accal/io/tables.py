@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import errno
 import gzip
 import io
 import json
@@ -43,6 +44,7 @@ from accal.io._common import (
     csv_read_options,
     implausible,
     implausible_message,
+    missing,
     one_line,
     peek,
     read_bytes,
@@ -1122,10 +1124,12 @@ def _open_binary(path: Path) -> Any:
     try:
         fh = open(path, "rb")  # noqa: SIM115 (returned to the caller, who closes it)
     except FileNotFoundError:
-        raise FormatError("no such file", path) from None
+        raise FormatError(missing(path), path) from None
     except PermissionError:
         raise FormatError("permission denied (file not readable)", path) from None
     except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise FormatError(missing(path), path) from None
         raise FormatError(f"cannot read file: {exc.strerror or exc}", path) from None
     try:
         magic = fh.read(2)
