@@ -64,3 +64,22 @@ def test_cleanup_removes_accal_temporaries_only(tmp_path):
     assert remove_stale_temporaries(tmp_path) == 1
     assert not kept.exists()
     assert all(p.read_text() == "not accal's" for p in other)
+
+
+def test_a_manifest_that_is_a_directory_stops_the_run_before_any_output(tmp_path):
+    """Issue 23: ``manifest.json`` as a directory failed the run after its outputs were
+    written, and the message named a temporary file."""
+    out = tmp_path / "out"
+    (out / "manifest.json").mkdir(parents=True)
+    code, msg = _run("grace-bias", SAMPLE, "--out", out, "-q")
+    assert code == 2 and f"{out / 'manifest.json'}: " in msg and ".tmp" not in msg
+    assert "not a regular file, not accal's own manifest: remove it" in msg
+    assert not list(out.glob("*.calibrated.*")) and not list(out.glob("bias_drift.*"))
+
+
+def test_a_failed_rename_names_the_target_not_the_temporary(tmp_path):
+    (tmp_path / "t.json").mkdir()
+    with pytest.raises(OSError) as exc, atomic_path(tmp_path / "t.json") as tmp:
+        tmp.write_text("{}")
+    assert exc.value.filename == str(tmp_path / "t.json")
+    assert not [p for p in tmp_path.iterdir() if p.name.endswith(".tmp")]

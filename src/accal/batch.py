@@ -425,6 +425,12 @@ class Manifest:
     def load(cls, out_dir: Path) -> Manifest:
         """Read ``OUT/manifest.json`` (an unreadable manifest means: redo everything)."""
         path = Path(out_dir) / MANIFEST
+        if os.path.lexists(path) and not path.is_file() or path.is_symlink():
+            # found before any input is processed (issue 23: a manifest.json directory
+            # failed the run after the outputs, naming a temporary file)
+            raise OSError(
+                errno.EEXIST, "not a regular file, not accal's own manifest: remove it", str(path)
+            )
         try:
             data = json.loads(path.read_text())
             entries = data["entries"] if isinstance(data, dict) else {}

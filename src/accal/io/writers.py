@@ -60,7 +60,10 @@ def atomic_path(path: str | Path, *, sync: bool = True) -> Iterator[Path]:
         if sync:
             with open(tmp_path, "rb+") as fh:
                 os.fsync(fh.fileno())
-        os.replace(tmp_path, path)
+        try:
+            os.replace(tmp_path, path)
+        except OSError as exc:  # name the file asked for, not the temporary (issue 23)
+            raise OSError(exc.errno, exc.strerror, str(path)) from None
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
             tmp_path.unlink()
