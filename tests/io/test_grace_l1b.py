@@ -639,8 +639,13 @@ def test_record_far_outside_the_header_span_is_damage(samples, tmp_path):
     )
     wrong_header = wrong_header.replace("TIME LAST OBS(SEC PAST EPOCH) : 116769659",
                                         "TIME LAST OBS(SEC PAST EPOCH) : 216769659")  # fmt: skip
-    s = read_grace_acc1b(_write(tmp_path, (wrong_header + "".join(data)).encode()))
-    assert len(s) == 60 and any("does not cover any record" in w for w in s.report.warnings)
+    # header and records a whole day (or more) apart: which is right cannot be told
+    # (issue 23: a warning, and the row dated by the records)
+    with pytest.raises(FormatError, match=r"does not cover any record .*\+?-1157\.\d+ days off"):
+        read_grace_acc1b(_write(tmp_path, (wrong_header + "".join(data)).encode()))
+    shifted = [ln.replace("11676", "11685", 1) for ln in data]  # every record +1 day (ish)
+    with pytest.raises(FormatError, match="disagrees with itself on its day"):
+        read_grace_acc1b(_write(tmp_path, "".join(head + shifted).encode()))
     near = data[:]  # within the tolerance (1 h): a small header/data disagreement is read
     near[-1] = near[-1].replace("116769659 ", f"{116769659 + 1800} ", 1)
     assert len(read_grace_acc1b(_write(tmp_path, "".join(head + near).encode()))) == 60

@@ -842,8 +842,9 @@ def _check_header_span(
     observation (``span``); a header without them is checked against the day its
     L1B file name gives (``ACC1B_2003-09-14_A_02.asc``), and only if neither is
     known are the records not checked (a warning says so).  Tolerance:
-    :data:`HEADER_SPAN_TOLERANCE`.  A header whose span covers no record at all is
-    itself wrong: a warning (returned).
+    :data:`HEADER_SPAN_TOLERANCE`.  A header whose span covers no record at all (every
+    record shifted by a day, or the header) is an error too: which one is right cannot be
+    told (issue 23: it was a warning, and the row was dated by the records).
     """
     if time.size == 0:
         return []
@@ -860,11 +861,14 @@ def _check_header_span(
     if time.min() >= lo and time.max() <= hi:
         return []
     outside = (time < lo) | (time > hi)
-    if outside.all():  # the header (or name), not a record, is off: nothing to single out
-        return [
-            f"{what} {span[0]:.9g} ... {span[1]:.9g} s does not "
-            f"cover any record ({time.min():.9g} ... {time.max():.9g} s)"
-        ]
+    if outside.all():  # every record shifted (or the header): which is right is unknown
+        off = (float(np.median(time)) - 0.5 * (span[0] + span[1])) / 86400.0
+        raise FormatError(
+            f"{what} {span[0]:.9g} ... {span[1]:.9g} s does not cover any record "
+            f"({time.min():.9g} ... {time.max():.9g} s, {off:+.2f} days off): the file "
+            "disagrees with itself on its day",
+            path,
+        )
     i = int(np.flatnonzero(outside)[0])
     where = f"record {i + 1}: " if line_of is None else ""
     raise FormatError(
