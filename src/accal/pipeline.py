@@ -31,6 +31,7 @@ from accal.batch import (
     write_error_message,
 )
 from accal.errors import AccalError, ValidationError, check_option
+from accal.plausibility import flag_wild_samples
 from accal.series import AccSeries
 
 #: Columns of ``bias_drift.<fmt>`` and their units (written into the file metadata).
@@ -548,7 +549,8 @@ def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutco
     series = read_input(path, opts)
     if len(series) == 0:
         raise ValidationError("no data records")
-    series = _with_warnings(series, *name_mismatch(path, series))
+    series, wild = flag_wild_samples(series)
+    series = _with_warnings(series, *name_mismatch(path, series), *wild)
     fit_series = series
     ref_series = None
     if opts.reference is not None:
