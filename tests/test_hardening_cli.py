@@ -87,3 +87,33 @@ def test_log_lines_escape_control_characters_of_file_names(tmp_path):
     assert code == 1
     log = (out / "accal.log").read_text()
     assert "\x1b" not in log and "x\\x1b[31mred\\x1b[0m.asc" in log
+
+
+@pytest.mark.parametrize("sig", ["SIGINT", "SIGTERM"])
+def test_demod_interrupted_says_so_and_exits_130(tmp_path, sig):
+    """Issue 23 finding 5: SIGINT/SIGTERM during ``accal demod`` printed Click's
+    ``Aborted!`` (exit 1); now ``accal: interrupted``, exit 130, as grace-bias, and no
+    temporary file is left."""
+    import signal
+    import time
+
+    from tests.indep import platform_run, write_platform_run
+
+    run = write_platform_run(platform_run(3, days=2.0), tmp_path / "run.parquet")
+    out = tmp_path / "o"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "accal", "demod", str(run), "--tau", "600", "--mask", "200",
+         "--close-loop", "--out", str(out), "-q"],
+        stderr=subprocess.PIPE,
+        text=True,
+    )  # fmt: skip
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and not (out / "accal.log").exists():
+        time.sleep(0.05)  # the run has started (past the imports)
+    time.sleep(0.5)
+    assert proc.poll() is None, "the run finished before it could be interrupted"
+    proc.send_signal(getattr(signal, sig))
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines()[-1] == "accal: interrupted" and "Traceback" not in err
+    assert not [p for p in out.iterdir() if ".tmp" in p.name]

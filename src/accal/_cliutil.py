@@ -141,6 +141,12 @@ class Group(click.Group):
                 raise
             err(f"{_usage_message(exc)} (see '{_command_path(exc, ctx)} --help')")
             sys.exit(exc.exit_code)
+        except KeyboardInterrupt:  # Ctrl-C or SIGTERM (accal.__main__) in any command
+            # one line and 130, as grace-bias's batch says it (issue 23: accal demod printed
+            # Click's "Aborted!" with status 1); files being written were removed by
+            # accal.io.writers.atomic_path on the way out
+            err("interrupted")
+            sys.exit(130)
         except BrokenPipeError:  # `accal budget ... | head -1`: the reader is gone
             # quiet, like other Unix tools (status 128 + SIGPIPE); stdout to /dev/null so
             # that the interpreter's final flush does not fail again (Python docs, signal)
