@@ -117,3 +117,22 @@ def test_demod_interrupted_says_so_and_exits_130(tmp_path, sig):
     assert proc.returncode == 130, err
     assert err.strip().splitlines()[-1] == "accal: interrupted" and "Traceback" not in err
     assert not [p for p in out.iterdir() if ".tmp" in p.name]
+
+
+def test_zero_filled_inputs_fail_at_once(tmp_path):
+    """Issue 23 finding 9: a 2 GB sparse ``.asc`` (format forced) or a small ``.gz`` of
+    gigabytes of zeros reached 4.3 GB of memory and 30 s before failing."""
+    import gzip
+
+    sparse = tmp_path / "ACC1B_2005-01-01_A_02.asc"
+    with open(sparse, "wb") as fh:
+        fh.truncate(1 << 31)  # sparse: no disk used
+    bomb = tmp_path / "ACC1B_2005-01-02_A_02.asc.gz"
+    with gzip.open(bomb, "wb", compresslevel=9) as fh:
+        for _ in range(8):
+            fh.write(bytes(1 << 24))  # 128 MiB of zeros, ~130 kB compressed
+    code, msg = _run("grace-bias", sparse, bomb, "--input-format", "grace-l1b",
+                     "--out", tmp_path / "o", "-q")  # fmt: skip
+    assert code == 1
+    assert f"{sparse}: the first 65,536 bytes are NUL" in msg
+    assert f"{bomb}: the first 65,536 bytes after gunzip are NUL" in msg
