@@ -101,11 +101,21 @@ def test_demod_interrupted_says_so_and_exits_130(tmp_path, sig):
 
     run = write_platform_run(platform_run(3, days=2.0), tmp_path / "run.parquet")
     out = tmp_path / "o"
+
+    def terminal_signals() -> None:
+        # in the child: SIGINT/SIGTERM as a terminal gives them; an ignored disposition
+        # is inherited across exec (a test run started in the background ignores SIGINT:
+        # the demod then never saw it; tests/test_batch.py's _terminal_signals likewise)
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT, signal.SIGTERM})
+        signal.signal(signal.SIGINT, signal.SIG_DFL)
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
     proc = subprocess.Popen(
         [sys.executable, "-m", "accal", "demod", str(run), "--tau", "600", "--mask", "200",
          "--close-loop", "--out", str(out), "-q"],
         stderr=subprocess.PIPE,
         text=True,
+        preexec_fn=terminal_signals,
     )  # fmt: skip
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline and not (out / "accal.log").exists():
