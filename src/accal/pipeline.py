@@ -848,12 +848,11 @@ def _read_bias_drift_unchecked(path: Path):
     missing = [c for c in CORE_COLUMNS if c not in table.column_names]
     if missing:
         raise ValueError(f"no {', '.join(missing)} column")
-    keys = list(
+    keys = collections.Counter(
         zip(*(table.column(c).to_pylist() for c in ("source", "axis", "method")), strict=True)
     )
-    if len(set(keys)) != len(keys):
-        seen: set = set()
-        dup = next(k for k in keys if k in seen or seen.add(k))
+    dup = next((k for k, n in keys.items() if n > 1), None)
+    if dup is not None:
         raise ValueError(f"row {'/'.join(map(str, dup))} more than once")
     cols = [
         table.column(f.name).cast(f.type)

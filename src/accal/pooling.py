@@ -9,8 +9,9 @@ order (within ``pool_days`` calendar days); ``sigma_model`` says which model (or
 ``day`` when the day's own estimate stays: no neighbours, too short a record, or a
 spectrum the model does not fit).  The model is of noise: a residual that holds the
 orbit's non-gravitational signal (no ``--reference``) has spectral lines, and its
-day keeps its own σ, which counts the signal as noise.  Days processed by earlier runs in the same output
-directory take part, so a daily cron job pools with the days before.
+day keeps its own σ, which counts the signal as noise.  Days processed by earlier
+runs in the same output directory take part, so a daily cron job pools with the days
+before.
 """
 
 from __future__ import annotations
