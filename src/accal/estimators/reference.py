@@ -1,0 +1,400 @@
+"""Calibration against a reference acceleration: bias on a temporal basis and scales.
+
+The observation model is the one of GROOPS's
+``InstrumentAccelerometerEstimateBiasScale`` and of the CSR/JPL/TU Delft
+calibrations of GRACE against POD-derived or modelled non-gravitational
+accelerations, in accal's TN-02 sign convention (:mod:`accal.calibration`)::
+
+    a_ref(t) = S · (a_raw(t) − b(t)) + e(t)                                   (1)
+
+with ``S`` a diagonal (``scale="fit"``) or full 3×3 (``"fit-matrix"``) scale
+matrix, or fixed (``"fixed"``: the a-priori diagonal), and ``b(t)`` on a temporal
+basis (:mod:`accal.estimators.refbasis`).  The reference is the observation: its
+error ``e`` (a POD-derived reference is noisy at high frequency) then does not
+enter the regressors, so the scales are not attenuated (errors in variables,
+e.g. Fuller, *Measurement Error Models*, 1987, §1.1).  Writing ``d = −S b``
+makes (1) linear, row by row::
+
+    a_ref,i = Σ_j S_ij a_raw,j + Σ_k d_ik φ_k(t) + e_i                        (2)
+
+Each row is a separate least-squares problem, weighted by an AR model of its own
+residual (exact prewhitening, :mod:`accal.estimators.arnoise`), iterated: OLS,
+then the AR model of the residual, then GLS, then the AR model again (the
+iteration GROOPS makes with variance-component estimation of the noise PSD).
+``B = −S⁻¹ D`` and its covariance follow by the exact Jacobian of that
+reparametrisation (the Gauss–Newton covariance of (1) at the optimum).
+
+A scale that is not identifiable (the reference barely varies over the arc, so
+scale and bias cannot be told apart: see ``max_scale_sigma``) is not returned:
+it is fixed at its a-priori value and the axis is refitted, with a note saying so.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import linalg, stats
+
+from accal.errors import ValidationError, check_option
+from accal.estimators.arnoise import ArModel, fit_ar, segment_positions
+from accal.estimators.refbasis import BiasBasis
+
+__all__ = ["SCALE_MODES", "ReferenceFit", "fit_reference"]
+
+SCALE_MODES = ("fixed", "fit", "fit-matrix")
+
+
+@dataclass(frozen=True)
+class ReferenceFit:
+    """Result of :func:`fit_reference` (all three axes of an arc).
+
+    Attributes
+    ----------
+    basis : BiasBasis
+    scale : ndarray, shape (3, 3)
+        ``S`` of eq. (1) [1]; fixed entries hold their a-priori value.
+    scale_cov : ndarray, shape (9, 9)
+        Covariance of ``scale.ravel()`` (zero rows for fixed entries).
+    bias_coef : ndarray, shape (3, K)
+        ``b_i(t) = Σ_k bias_coef[i, k] φ_k(t)`` [m/s²].
+    bias_cov : ndarray, shape (3K, 3K)
+        Covariance of ``bias_coef.ravel()``, scale uncertainty included.
+    modes : tuple of str
+        Scale model used per axis (``fit-matrix``, ``fit`` or ``fixed``).
+    notes : tuple of str
+        What was decided and why (identifiability, fall-backs).
+    noise : tuple of ArModel
+        Whitening model per axis (of the reference residual).
+    sigma0 : ndarray, shape (3,)
+        √(whitened RSS / dof) per axis (≈ 1 when the AR model fits).
+    rms : ndarray, shape (3,)
+        RMS of the residual ``a_ref − S(a_raw − b)`` over the used samples [m/s²].
+    n_used : int
+    crosstalk_test : dict
+        χ² test of the full matrix against the diagonal one: ``chi2``, ``dof``, ``p``.
+    """
+
+    basis: BiasBasis
+    scale: NDArray[np.float64]
+    scale_cov: NDArray[np.float64]
+    bias_coef: NDArray[np.float64]
+    bias_cov: NDArray[np.float64]
+    modes: tuple[str, ...]
+    notes: tuple[str, ...]
+    noise: tuple[ArModel, ...]
+    sigma0: NDArray[np.float64]
+    rms: NDArray[np.float64]
+    n_used: int
+    crosstalk_test: dict = field(default_factory=dict)
+
+    @property
+    def scale_sigma(self) -> NDArray[np.float64]:
+        """1σ of each entry of ``scale`` (0 for fixed entries), shape (3, 3)."""
+        return np.sqrt(np.clip(np.diag(self.scale_cov), 0, None)).reshape(3, 3)
+
+    def bias(self, t: NDArray[np.float64], deriv: int = 0) -> tuple[NDArray, NDArray]:
+        """Bias (or its rate, ``deriv=1``) at times ``t`` and its 1σ, each shape (n, 3).
+
+        Units m/s² (m/s³ for the rate); σ includes the scales' uncertainty.
+        """
+        t = np.asarray(t, dtype=np.float64)
+        k = self.basis.size
+        val = np.empty((t.size, 3))
+        sig = np.empty((t.size, 3))
+        cols, first = self.basis.design(t, deriv)
+        sl = slice(first, first + cols.shape[1])
+        for i in range(3):
+            val[:, i] = cols @ self.bias_coef[i, sl]
+            c = self.bias_cov[i * k : (i + 1) * k, i * k : (i + 1) * k][sl, sl]
+            sig[:, i] = np.sqrt(np.clip(np.einsum("ij,jk,ik->i", cols, c, cols), 0, None))
+        return val, sig
+
+    def calibrate(self, t: NDArray[np.float64], raw: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``a_cal = S · (a_raw − b(t))`` (eq. 1), shape (n, 3) [m/s²]."""
+        b, _ = self.bias(t)
+        return (np.asarray(raw, dtype=np.float64) - b) @ self.scale.T
+
+
+def _chunks(n: int, breaks: NDArray[np.bool_], size: int) -> list[tuple[int, int]]:
+    """Index ranges of at most ``size`` samples, split at ``breaks`` where possible."""
+    starts = [0]
+    cand = np.flatnonzero(breaks)
+    while starts[-1] + size < n:
+        s = starts[-1]
+        inside = cand[(cand > s) & (cand <= s + size)]
+        starts.append(int(inside[-1]) if inside.size else s + size)
+    return list(zip(starts, starts[1:] + [n], strict=True))
+
+
+class _Axis:
+    """Normal equations of one row of eq. (2), accumulated chunk by chunk."""
+
+    def __init__(self, t, raw, y, pos, basis, chunks):
+        self.t, self.raw, self.y, self.pos = t, raw, y, pos
+        self.basis, self.chunks = basis, chunks
+        self.k = basis.size
+        self._cols = [basis.design(t[a:b]) for a, b in chunks]
+
+    def normal(self, ar: ArModel) -> NDArray[np.float64]:
+        """``[X y]ᵀ W [X y]`` with X = [a_raw (3 columns), φ (K columns)]."""
+        m = 3 + self.k
+        out = np.zeros((m + 1, m + 1))
+        for (a, b), (cols, first) in zip(self.chunks, self._cols, strict=True):
+            block = np.column_stack([self.raw[a:b], cols, self.y[a:b]])
+            w = ar.whiten(block, self.pos[a:b])
+            idx = np.r_[0:3, 3 + first : 3 + first + cols.shape[1], m]
+            out[np.ix_(idx, idx)] += w.T @ w
+        return out
+
+    def residual(self, theta: NDArray[np.float64], ar: ArModel) -> tuple[NDArray, float, NDArray]:
+        """Residual ``y − Xθ``, its whitened sum of squares and ``XᵀW r``."""
+        r = np.empty(self.y.size)
+        grad = np.zeros(3 + self.k)
+        rss = 0.0
+        for (a, b), (cols, first) in zip(self.chunks, self._cols, strict=True):
+            sl = slice(3 + first, 3 + first + cols.shape[1])
+            r[a:b] = self.y[a:b] - self.raw[a:b] @ theta[:3] - cols @ theta[sl]
+            wr = ar.whiten(r[a:b], self.pos[a:b])
+            rss += float(wr @ wr)
+            wx = ar.whiten(np.column_stack([self.raw[a:b], cols]), self.pos[a:b])
+            g = wx.T @ wr
+            grad[:3] += g[:3]
+            grad[sl] += g[3:]
+        return r, rss, grad
+
+
+def _solve(mat: NDArray, free: NDArray[np.bool_], fixed_theta: NDArray) -> tuple[NDArray, NDArray]:
+    """Solve the normal equations for the ``free`` parameters, the others held at ``fixed_theta``.
+
+    Returns θ (all parameters) and the inverse normal matrix of the free ones (equilibrated
+    Cholesky; raises ValidationError if singular).
+    """
+    m = free.size
+    n_mat = mat[:m, :m]
+    rhs = mat[:m, m] - n_mat[:, ~free] @ fixed_theta[~free]
+    nf = n_mat[np.ix_(free, free)]
+    d = np.sqrt(np.diag(nf))
+    if not np.all(d > 0):
+        raise ValidationError(
+            "reference fit: a parameter has no data (a basis function over a gap?)"
+        )
+    try:
+        c = linalg.cho_factor(nf / np.outer(d, d))
+    except linalg.LinAlgError:
+        raise ValidationError("reference fit: the normal equations are singular") from None
+    theta = fixed_theta.copy()
+    theta[free] = linalg.cho_solve(c, rhs[free] / d) / d
+    inv = linalg.cho_solve(c, np.eye(d.size)) / np.outer(d, d)
+    return theta, inv
+
+
+def _refine(ax: _Axis, theta, free, inv, ar):
+    """One step of iterative refinement on the exact residual; returns θ, r, whitened RSS."""
+    _, _, grad = ax.residual(theta, ar)
+    theta = theta.copy()
+    theta[free] += inv @ grad[free]
+    r, rss, _ = ax.residual(theta, ar)
+    return theta, r, rss
+
+
+def _unidentifiable(cov, theta, free, axis, max_rel_sigma) -> str:
+    """Why the scales of one row are not identifiable ("" if they are).
+
+    A free scale S_ij whose σ relative to |S_ii| exceeds ``max_rel_sigma`` says
+    nothing about the instrument (TN-02's scales differ from 1 by 2–5 %).  Such a σ
+    comes from a reference that barely varies over the arc beyond what the bias
+    basis takes up.  (A variance-inflation test is no use here: the raw column
+    carries the bias itself, so it is always nearly collinear with the basis.)
+    """
+    n_scale = int(free[:3].sum())
+    if n_scale == 0:
+        return ""
+    rel = np.sqrt(np.diag(cov)[:n_scale]) / max(abs(theta[axis]), 1e-300)
+    if np.any(rel > max_rel_sigma):
+        return (
+            f"relative σ up to {rel.max():.3g} > {max_rel_sigma:g}: the reference varies "
+            "too little over the arc to tell scale from bias"
+        )
+    return ""
+
+
+def _rss_from_normal(mat: NDArray, theta: NDArray) -> float:
+    m = theta.size
+    return float(mat[m, m] - 2 * theta @ mat[:m, m] + theta @ mat[:m, :m] @ theta)
+
+
+def fit_reference(
+    time: NDArray[np.float64],
+    raw: NDArray[np.float64],
+    reference: NDArray[np.float64],
+    valid: NDArray[np.bool_],
+    basis: BiasBasis,
+    *,
+    scale: str = "fit",
+    apriori: tuple[float, float, float] = (1.0, 1.0, 1.0),
+    breaks: NDArray[np.bool_] | None = None,
+    max_order: int = 20,
+    iterations: int = 2,
+    max_scale_sigma: float = 0.05,
+    chunk: int = 86_400,
+) -> ReferenceFit:
+    """Fit eq. (1) to an arc by iterated AR-weighted least squares.
+
+    Parameters
+    ----------
+    time : ndarray, shape (n,)
+        GPS seconds, increasing.
+    raw, reference : ndarray, shape (n, 3)
+        Raw accelerometer data and reference acceleration in the SRF [m/s²].
+    valid : ndarray of bool, shape (n,)
+        Samples to use (flags, thruster firings and reference holes excluded).
+    basis : BiasBasis
+        Temporal basis of the bias over the arc.
+    scale : {"fixed", "fit", "fit-matrix"}
+        Scale model.
+    apriori : tuple of 3 float
+        Diagonal scales used where a scale is fixed [1].
+    breaks : ndarray of bool, shape (n,), optional
+        Samples that start a new noise segment (e.g. each day's first sample).
+    max_order : int
+        Largest AR order of the noise model.
+    iterations : int
+        GLS iterations after the first (ordinary) least squares.
+    max_scale_sigma : float
+        A scale whose σ relative to the row's diagonal scale is larger is not
+        identifiable: the row falls back from ``fit-matrix`` to ``fit``, from
+        ``fit`` to ``fixed`` at ``apriori``.
+    chunk : int
+        Samples per accumulation block (memory, not results).
+    """
+    check_option("scale", scale, SCALE_MODES)
+    t_all = np.asarray(time, dtype=np.float64)
+    use = np.asarray(valid, dtype=bool) & np.isfinite(raw).all(1) & np.isfinite(reference).all(1)
+    t = t_all[use]
+    n = t.size
+    k = basis.size
+    if n < 3 * (3 + k):
+        raise ValidationError(
+            f"reference fit: {n} usable samples for {3 + k} parameters per axis "
+            f"(basis {basis.name()}, scale {scale})"
+        )
+    brk = None if breaks is None else np.asarray(breaks, dtype=bool)[use]
+    pos = segment_positions(t, brk)
+    chunks = _chunks(n, pos == 0, chunk)
+    a = np.asarray(raw, dtype=np.float64)[use]
+    y_all = np.asarray(reference, dtype=np.float64)[use]
+    thetas, invs, frees, models, notes, rss_d, ars = [], [], [], [], [], [], []
+    sigma0, rms = np.empty(3), np.empty(3)
+    chi2_total, chi2_dof = 0.0, 0
+    for i, name in enumerate("xyz"):
+        ax = _Axis(t, a, y_all[:, i], pos, basis, chunks)
+        mode = scale
+        while True:
+            free = np.ones(3 + k, dtype=bool)
+            fixed = np.zeros(3 + k)
+            if mode != "fit-matrix":
+                free[:3] = False
+            if mode == "fit":
+                free[i] = True
+            if mode == "fixed":
+                fixed[i] = apriori[i]
+            try:
+                ar = ArModel.white(1.0)
+                for _ in range(iterations + 1):
+                    mat = ax.normal(ar)
+                    theta, inv = _solve(mat, free, fixed)
+                    r, _, _ = ax.residual(theta, ar)
+                    ar = fit_ar(r, t, max_order)
+                mat = ax.normal(ar)
+                theta, inv = _solve(mat, free, fixed)
+                theta, r, rss = _refine(ax, theta, free, inv, ar)
+            except ValidationError as exc:
+                if mode == "fixed":
+                    raise
+                why = str(exc).removeprefix("reference fit: ")
+            else:
+                dof = n - int(free.sum())
+                s0 = np.sqrt(rss / dof)
+                cov = inv * s0**2
+                why = _unidentifiable(cov, theta, free, i, max_scale_sigma)
+                if mode == "fixed" or not why:
+                    break
+            fallback = "fit" if mode == "fit-matrix" else "fixed"
+            notes.append(
+                f"{name}: scale not identifiable in mode {mode} ({why}); refitted with {fallback}"
+                + (f" at {apriori[i]:g}" if fallback == "fixed" else "")
+            )
+            mode = fallback
+        # cross-talk test: the full row against the diagonal one, same weights (eq. 2)
+        full = np.ones(3 + k, dtype=bool)
+        diag = full.copy()
+        diag[[j for j in range(3) if j != i]] = False
+        try:
+            th_f, _ = _solve(mat, full, np.zeros(3 + k))
+            th_d, _ = _solve(mat, diag, np.zeros(3 + k))
+            chi2_total += (_rss_from_normal(mat, th_d) - _rss_from_normal(mat, th_f)) / s0**2
+            chi2_dof += 2
+        except ValidationError:
+            pass
+        thetas.append(theta)
+        invs.append(cov)
+        frees.append(free)
+        models.append(mode)
+        ars.append(ar)
+        rss_d.append(rss)
+        sigma0[i] = s0
+        rms[i] = float(np.sqrt(np.mean(r * r)))
+    s_mat, s_cov, b_coef, b_cov = _transform(thetas, invs, frees, apriori, k)
+    test = {}
+    if chi2_dof:
+        test = {
+            "chi2": chi2_total,
+            "dof": chi2_dof,
+            "p": float(stats.chi2.sf(chi2_total, chi2_dof)),
+        }
+    return ReferenceFit(
+        basis=basis,
+        scale=s_mat,
+        scale_cov=s_cov,
+        bias_coef=b_coef,
+        bias_cov=b_cov,
+        modes=tuple(models),
+        notes=tuple(notes),
+        noise=tuple(ars),
+        sigma0=sigma0,
+        rms=rms,
+        n_used=n,
+        crosstalk_test=test,
+    )
+
+
+def _transform(thetas, covs, frees, apriori, k):
+    """(S, D) of eq. (2) with their covariance → (S, B = −S⁻¹D) with theirs (exact Jacobian).
+
+    ``dB = −S⁻¹ dD − S⁻¹ dS B``, i.e. ∂B_ij/∂D_kl = −(S⁻¹)_ik δ_jl and
+    ∂B_ij/∂S_kl = −(S⁻¹)_ik B_lj.
+    """
+    s = np.zeros((3, 3))
+    d = np.zeros((3, k))
+    npar = 9 + 3 * k
+    cov = np.zeros((npar, npar))
+    for i in range(3):
+        th, free = thetas[i], frees[i]
+        s[i] = th[:3]
+        if not free[i]:
+            s[i, i] = apriori[i] if th[i] == 0 else th[i]
+        d[i] = th[3:]
+        idx = np.r_[3 * i : 3 * i + 3, 9 + k * i : 9 + k * (i + 1)][free]
+        cov[np.ix_(idx, idx)] = covs[i]
+    s_inv = np.linalg.inv(s)
+    b = -s_inv @ d
+    jac = np.zeros((3 * k, npar))
+    for i in range(3):
+        for kk in range(3):
+            jac[i * k : (i + 1) * k, 9 + kk * k : 9 + (kk + 1) * k] = -s_inv[i, kk] * np.eye(k)
+            for m in range(3):
+                jac[i * k : (i + 1) * k, 3 * kk + m] = -s_inv[i, kk] * b[m]
+    b_cov = jac @ cov @ jac.T
+    return s, cov[:9, :9], b, b_cov
