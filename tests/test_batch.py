@@ -567,7 +567,7 @@ def _row(source: str, date: str, ax: str, m: str, bias: float = 1e-6) -> dict:
         source=source, satellite="GRACE-A", date=date, axis=ax, frame="SRF", method=m,
         order=1, bias=bias, n=86400, n_total=86400, n_flagged=0, n_duplicates=0,
         n_out_of_order=0, n_gaps=0, accal_version="0", model="poly1", sigma_model="day",
-        sigma_days=1,
+        sigma_days=1, n_thruster=0,
     )  # fmt: skip
     return row
 

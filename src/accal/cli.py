@@ -64,6 +64,20 @@ def main(debug: bool) -> None:
         usage_fail(str(exc))
 
 
+def _margins(text: str) -> tuple[float, float] | None:
+    """``--thruster-margins``: ``BEFORE,AFTER`` seconds or ``off``."""
+    if text.strip().lower() == "off":
+        return None
+    try:
+        before, after = (float(v) for v in text.split(","))
+    except ValueError:
+        raise click.BadParameter(
+            f"expected BEFORE,AFTER in seconds or 'off', got {text!r}",
+            param_hint="--thruster-margins",
+        ) from None
+    return before, after
+
+
 @main.command("grace-bias")
 @click.argument("inputs", nargs=-1, required=True, type=click.Path(path_type=Path))
 @click.option(
@@ -99,13 +113,50 @@ def main(debug: bool) -> None:
     "--scale",
     default=None,
     help="Scale applied to the calibrated series: 'tn02' (GRACE TN-02 a-priori) or "
-    "'sx,sy,sz'; a_cal = scale*(a_raw - trend).",
+    "'sx,sy,sz'; a_cal = scale*(a_raw - trend).  With --reference also 'fit' (one scale "
+    "per axis) or 'fit-matrix' (3x3 scale matrix), estimated with the bias.",
 )
 @click.option(
     "--reference",
     type=click.Path(dir_okay=False, path_type=Path),
     default=None,
     help="Reference accelerations (table or L1B); the fit uses raw - reference.",
+)
+@click.option(
+    "--bias-basis",
+    default=None,
+    metavar="BASIS",
+    help="With --reference: fit a_ref = S (a_raw - b(t)) by AR-weighted least squares, "
+    "the bias b on poly0|poly1|poly2|spline:STEP (e.g. spline:6h); method 'reference' "
+    "(default poly1 when only --scale fit is given).",
+)
+@click.option(
+    "--reference-frame",
+    type=click.Choice(["srf", "inertial"]),
+    default="srf",
+    show_default=True,
+    help="Frame of --reference; 'inertial' is rotated into the SRF with the SCA1B "
+    "attitude (--attitude, or the SCA1B file beside the input).",
+)
+@click.option(
+    "--attitude",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="SCA1B star-camera file for --reference-frame inertial.",
+)
+@click.option(
+    "--thrusters",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="THR1B file whose firings the reference fit leaves out (default: the THR1B "
+    "file beside the input, if any).",
+)
+@click.option(
+    "--thruster-margins",
+    default="0.1,0.7",
+    show_default=True,
+    metavar="BEFORE,AFTER",
+    help="Seconds left out before and after each firing (GROOPS's values), or 'off'.",
 )
 @click.option(
     "--column",
@@ -200,6 +251,11 @@ def grace_bias(
     order: str,
     scale: str | None,
     reference: Path | None,
+    bias_basis: str | None,
+    reference_frame: str,
+    attitude: Path | None,
+    thrusters: Path | None,
+    thruster_margins: str,
     columns: tuple[str, ...],
     input_format: str | None,
     keep_flagged: bool,
@@ -258,10 +314,15 @@ def grace_bias(
             plots=plots,
             degraded_days=degraded_days,
             pool_days=pool_days,
+            bias_basis=bias_basis,
+            reference_frame=reference_frame,
+            attitude=attitude,
+            thrusters=thrusters,
+            thruster_margins=_margins(thruster_margins),
         )
     except AccalError as exc:
         raise click.UsageError(str(exc)) from None
-    check_files(reference=reference, aux=aux, truth=truth)
+    check_files(reference=reference, aux=aux, truth=truth, attitude=attitude, thrusters=thrusters)
     files, problems = discover(inputs, recursive=recursive, include=include or DEFAULT_INCLUDE)
     try:
         summary = run(

@@ -34,6 +34,23 @@ from accal.errors import AccalError, ValidationError, check_option
 from accal.plausibility import flag_wild_samples
 from accal.series import AccSeries
 
+#: Columns the reference fit adds to ``bias_drift`` (NaN/"" for the wavelet/lsq methods;
+#: :mod:`accal.pipeline_reference`).
+REFERENCE_UNITS = {
+    "scale_x": "1 (row of the scale matrix S for this axis: a_cal_axis = sum_j S_axis,j "
+    "(a_raw_j - bias_j); the diagonal entry equals 'scale'; NaN unless --bias-basis/--scale fit)",
+    "scale_y": "1 (see scale_x)",
+    "scale_z": "1 (see scale_x)",
+    "scale_x_sigma": "1 (1 sigma; 0 where fixed)",
+    "scale_y_sigma": "1 (1 sigma; 0 where fixed)",
+    "scale_z_sigma": "1 (1 sigma; 0 where fixed)",
+    "scale_mode": "given (a-priori --scale) | fit | fit-matrix | fixed (not identifiable, "
+    "a-priori kept)",
+    "bias_basis": "temporal basis of the bias (poly<d> or spline:<node step>s); empty for "
+    "the wavelet/lsq methods",
+    "n_thruster": "samples excluded as within a thruster firing (with its margins)",
+}
+
 #: Columns of ``bias_drift.<fmt>`` and their units (written into the file metadata).
 BIAS_DRIFT_UNITS = {
     "source": "input file name",
@@ -41,7 +58,7 @@ BIAS_DRIFT_UNITS = {
     "date": "GPS-calendar date of the record's midpoint (YYYY-MM-DD; the L1B file day)",
     "axis": "accelerometer axis (x|y|z), frame in 'frame'",
     "frame": "reference frame of the axes",
-    "method": "estimator (wavelet|lsq)",
+    "method": "estimator (wavelet|lsq|reference: AR-weighted LS against --reference)",
     "order": "polynomial order of the trend",
     "bias": "m/s^2 (trend value at t0, raw-data sign: a_raw = s*a + bias + drift*(t-t0))",
     "drift": "m/s^3",
@@ -76,6 +93,7 @@ BIAS_DRIFT_UNITS = {
     "or 'pooled: <model>' (--pool-days: white + power-law/AR(1) noise fitted to adjacent days, "
     "accal.estimators.lowfreq)",
     "sigma_days": "days whose residual spectra the sigmas rest on",
+    **REFERENCE_UNITS,
 }
 
 CALIBRATED_UNITS = {
@@ -135,6 +153,21 @@ class GraceBiasOptions:
         ``>= 2``: the σ of the ``bias_drift`` table come from a noise model fitted to
         this many adjacent days together (:mod:`accal.pooling`); ``0``: each day's
         own estimate.
+    bias_basis : str or None
+        With ``reference``: fit the bias on this temporal basis (``poly0``,
+        ``poly1``, ``poly2``, ``spline:6h``, ...) by AR-weighted least squares
+        against the reference (:mod:`accal.estimators.reference`).  ``scale`` may
+        then also be ``"fit"`` (a scale per axis) or ``"fit-matrix"`` (3×3).
+    thrusters : Path or None
+        THR1B file whose firings the reference fit leaves out (default: the THR1B
+        file beside the input, if any).
+    thruster_margins : tuple of 2 float or None
+        Seconds left out before and after each firing (GROOPS: 0.1, 0.7); ``None``:
+        no thruster screening.
+    reference_frame : str
+        ``"srf"`` or ``"inertial"`` (rotated into the SRF with the SCA1B attitude).
+    attitude : Path or None
+        SCA1B file for ``reference_frame="inertial"`` (default: the one beside the input).
     """
 
     methods: tuple[str, ...] = ("wavelet",)
@@ -153,6 +186,16 @@ class GraceBiasOptions:
     plots: bool = False
     degraded_days: Path | None = None
     pool_days: int = 0
+    bias_basis: str | None = None
+    thrusters: Path | None = None
+    thruster_margins: tuple[float, float] | None = (0.1, 0.7)
+    reference_frame: str = "srf"
+    attitude: Path | None = None
+
+    @property
+    def reference_fit(self) -> bool:
+        """True when the bias is fitted against the reference with a basis and/or scales."""
+        return self.bias_basis is not None or self.scale in ("fit", "fit-matrix")
 
     def __post_init__(self) -> None:
         from accal.estimators.trend import METHODS
@@ -163,7 +206,19 @@ class GraceBiasOptions:
         check_option("format", self.fmt, ("parquet", "csv"))
         if not (isinstance(self.pool_days, int) and (self.pool_days == 0 or self.pool_days >= 2)):
             raise ValidationError(f"pool_days must be 0 (off) or >= 2, got {self.pool_days!r}")
-        if self.scale is not None and str(self.scale).lower() != "tn02":
+        check_option("reference_frame", self.reference_frame, ("srf", "inertial"))
+        if self.attitude is not None and self.reference_frame != "inertial":
+            raise ValidationError(
+                "--attitude rotates an inertial reference: add --reference-frame inertial"
+            )
+        if self.reference_fit:
+            self._check_reference_fit()
+        elif self.reference_frame != "srf" or self.attitude is not None:
+            raise ValidationError(
+                "--reference-frame inertial / --attitude are used by the reference fit: "
+                "add --bias-basis or --scale fit"
+            )
+        elif self.scale is not None and str(self.scale).lower() != "tn02":
             from accal.calibration import parse_scale
 
             parse_scale(self.scale, "")  # a numeric --scale is checked once, up front
@@ -171,6 +226,28 @@ class GraceBiasOptions:
             from accal.degraded import load_periods
 
             load_periods(self.degraded_days)  # a malformed table: a usage error, up front
+
+    def _check_reference_fit(self) -> None:
+        """Usage errors of ``--bias-basis`` / ``--scale fit|fit-matrix``, up front."""
+        from accal.estimators.refbasis import parse_bias_basis
+
+        what = f"--bias-basis {self.bias_basis}" if self.bias_basis else f"--scale {self.scale}"
+        if self.reference is None:
+            raise ValidationError(f"{what} fits against a reference: give --reference REF")
+        if self.close_loop:
+            raise ValidationError(f"--close-loop is not available with {what} yet")
+        if self.pool_days:
+            raise ValidationError(f"--pool-days applies to the wavelet/lsq fits, not to {what}")
+        if self.bias_basis is not None:
+            parse_bias_basis(self.bias_basis, 0.0, 1.0)
+        if self.scale not in ("fit", "fit-matrix") and self.scale is not None:
+            from accal.calibration import parse_scale
+
+            if str(self.scale).lower() != "tn02":
+                parse_scale(self.scale, "")
+        m = self.thruster_margins
+        if m is not None and not (len(m) == 2 and all(np.isfinite(v) and v >= 0 for v in m)):
+            raise ValidationError(f"thruster margins must be two seconds >= 0, got {m!r}")
 
 
 @dataclass(frozen=True)
@@ -472,7 +549,6 @@ def table_rows(
     from accal.degraded import classify_day, load_periods
     from accal.timescale import gps_to_date
 
-    rep = series.report
     periods = load_periods(opts.degraded_days) if opts.degraded_days else None
     status: dict[str, tuple[str, str]] = {}
     rows = []
@@ -488,11 +564,7 @@ def table_rows(
         denom = np.sqrt(cov[0, 0] * cov[1, 1])
         rows.append(
             {
-                "source": path.name,
-                "satellite": series.satellite,
-                "date": date or gps_to_date(fit.t0),
-                "axis": ax,
-                "frame": series.frame,
+                **_row_source(path, series, opts, date or gps_to_date(fit.t0), ax),
                 "method": m,
                 "order": fit.order,
                 "bias": fit.bias,
@@ -507,15 +579,7 @@ def table_rows(
                 "rms": fit.rms,
                 "scale": s,
                 "bias_correction": -s * fit.bias,
-                "n_total": len(series),
-                "n_flagged": 0 if opts.keep_flagged else int((~series.valid).sum()),
-                "n_duplicates": rep.n_duplicates,
-                "n_out_of_order": rep.n_out_of_order,
-                "n_gaps": rep.n_gaps,
-                "gap_seconds": rep.gap_seconds,
-                "accal_version": __version__,
                 "sigma_model": "day",  # accal.pooling.DAY_MODEL (imported with scipy)
-                "sigma_days": 1,
             }
         )
         day = rows[-1]["date"]
@@ -523,6 +587,113 @@ def table_rows(
             status[day] = classify_day(series.satellite, day, series.meta, periods=periods)
         rows[-1]["day_status"], rows[-1]["day_status_reason"] = status[day]
     return rows
+
+
+def _row_source(
+    path: Path, series: AccSeries, opts: GraceBiasOptions, date: str, ax: str
+) -> dict[str, Any]:
+    """The ``bias_drift`` entries that describe the input, not the fit."""
+    rep = series.report
+    return {
+        "source": path.name,
+        "satellite": series.satellite,
+        "date": date,
+        "axis": ax,
+        "frame": series.frame,
+        "n_total": len(series),
+        "n_flagged": 0 if opts.keep_flagged else int((~series.valid).sum()),
+        "n_duplicates": rep.n_duplicates,
+        "n_out_of_order": rep.n_out_of_order,
+        "n_gaps": rep.n_gaps,
+        "gap_seconds": rep.gap_seconds,
+        "accal_version": __version__,
+        "sigma_days": 1,
+    }
+
+
+def _reference_outputs(
+    path: Path,
+    out_dir: Path,
+    opts: GraceBiasOptions,
+    series: AccSeries,
+    minus_ref: AccSeries,
+    day: Any,
+    arc: dict[str, Any] | None = None,
+) -> FileOutcome:
+    """Write the outputs of one input's reference fit (``--bias-basis``, ``--scale fit``).
+
+    ``day`` is its :class:`accal.pipeline_reference.ReferenceDay`; ``arc`` describes the
+    arc it was fitted in (sources, parameter table), None for a day fitted alone.
+    """
+    from accal.degraded import classify_day, load_periods
+    from accal.io.writers import write_table
+    from accal.pipeline_reference import PARAMETER_UNITS, parameter_table, report_entry, row_fields
+    from accal.timescale import gps_to_date
+
+    stem = output_stem(path)
+    series = _with_warnings(series, *day.warnings)
+    t = series.time
+    date = gps_to_date(0.5 * (float(t[0]) + float(t[-1])))
+    periods = load_periods(opts.degraded_days) if opts.degraded_days else None
+    status = classify_day(series.satellite, date, series.meta, periods=periods)
+    rows = []
+    for ax in series.axes:
+        row = {**_row_source(path, series, opts, date, ax), **row_fields(day, ax, t, opts.scale)}
+        row.update(signal_share(series, minus_ref, ax, day.use))
+        row["day_status"], row["day_status_reason"] = status
+        rows.append(row)
+    meta = {
+        "source": path.name,
+        "satellite": series.satellite,
+        "frame": series.frame,
+        "method": "reference",
+        "bias_basis": day.fit.basis.name(),
+        "history": list(day.calibrated.history),
+        "input_meta": series.meta,
+    }
+    cal_path = write_table(
+        calibrated_frame(day.calibrated, day.use),
+        out_dir / f"{stem}.calibrated.{opts.fmt}",
+        fmt=opts.fmt,
+        units=CALIBRATED_UNITS,
+        meta=meta,
+        sync=False,
+        required=True,
+    )
+    if arc is None:
+        par_path = write_table(
+            parameter_table(day.fit),
+            out_dir / f"{stem}.bias_basis.{opts.fmt}",
+            fmt=opts.fmt,
+            units=PARAMETER_UNITS,
+            meta={"source": path.name, **report_entry(day)},
+            sync=False,
+            required=True,
+        )
+    else:
+        par_path = out_dir / arc["parameters"]
+    report = {
+        "source": str(path),
+        "accal_version": __version__,
+        "satellite": series.satellite,
+        "read_report": series.report.as_dict(),
+        "fits": rows,
+        "reference_fit": report_entry(day),
+        "history": list(day.calibrated.history),
+    }
+    if arc is not None:
+        report["reference_fit"]["arc"] = arc
+    rep_path = out_dir / f"{stem}.report.json"
+    _write_json(rep_path, report, sync=False)
+    return FileOutcome(
+        path,
+        True,
+        rows=rows,
+        n_samples=len(series),
+        outputs=(cal_path, par_path, rep_path),
+        n_bytes=_size(path),
+        warnings=tuple(report["read_report"]["warnings"]),
+    )
 
 
 def calibrated_frame(series: AccSeries, use: np.ndarray) -> dict[str, np.ndarray]:
@@ -533,6 +704,26 @@ def calibrated_frame(series: AccSeries, use: np.ndarray) -> dict[str, np.ndarray
     data["valid"] = use
     data["qualflg"] = series.quality
     return data
+
+
+def _read_with_reference(
+    path: Path, opts: GraceBiasOptions, reference: AccSeries | None = None
+) -> tuple[AccSeries, AccSeries, AccSeries | None]:
+    """Read one input: (series, series to fit, ``series − reference`` or None).
+
+    ``reference``: the reference already read (an arc reads it once for all inputs).
+    """
+    series = read_input(path, opts)
+    if len(series) == 0:
+        raise ValidationError("no data records")
+    series, wild = flag_wild_samples(series)
+    series = _with_warnings(series, *name_mismatch(path, series), *wild)
+    if opts.reference is None:
+        return series, series, None
+    if reference is None:
+        reference = read_input(opts.reference, GraceBiasOptions(columns=opts.columns))
+    minus_ref = subtract_reference(series, reference, opts.reference)
+    return series.replace(report=minus_ref.report), minus_ref, minus_ref
 
 
 def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutcome:
@@ -546,20 +737,16 @@ def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutco
     from accal.calibration import parse_scale
     from accal.io.writers import write_table
 
-    series = read_input(path, opts)
-    if len(series) == 0:
-        raise ValidationError("no data records")
-    series, wild = flag_wild_samples(series)
-    series = _with_warnings(series, *name_mismatch(path, series), *wild)
-    fit_series = series
-    ref_series = None
-    if opts.reference is not None:
-        ref = read_input(opts.reference, GraceBiasOptions(columns=opts.columns))
-        fit_series = ref_series = subtract_reference(series, ref, opts.reference)
-        series = series.replace(report=fit_series.report)  # with the reference's warnings
+    series, fit_series, ref_series = _read_with_reference(path, opts)
+    stem = output_stem(path)
+    if opts.reference_fit:
+        # imported here: the reference fit's modules import scipy (~0.3 s of start-up)
+        from accal.pipeline_reference import fit_day
+
+        day = fit_day(path, series, ref_series, opts)
+        return _reference_outputs(path, out_dir, opts, series, ref_series, day)
     scale = parse_scale(opts.scale, series.satellite)
     use = np.ones(len(series), bool) if opts.keep_flagged else fit_series.valid
-    stem = output_stem(path)
     closure: dict[str, Any] = {}
     extra_outputs: list[Path] = []
     close_loop = opts.close_loop
@@ -749,6 +936,8 @@ def _nan_to_none(obj: Any) -> Any:
 
 
 _NP_TYPES = {"string": object, "int64": np.int64, "double": np.float64}
+#: Value of a column a row does not have (a column added later, or another method's).
+_MISSING = {"string": "", "int64": 0, "double": float("nan")}
 
 
 def _bias_drift_schema():
@@ -767,6 +956,8 @@ def _bias_drift_schema():
         "day_status_reason",
         "bias_includes",
         "sigma_model",
+        "scale_mode",
+        "bias_basis",
     }
     ints = {
         "order",
@@ -777,6 +968,7 @@ def _bias_drift_schema():
         "n_out_of_order",
         "n_gaps",
         "sigma_days",
+        "n_thruster",
     }
     return pa.schema(
         [
@@ -885,7 +1077,11 @@ def merge_bias_drift(
     schema = _bias_drift_schema()
     new = pa.Table.from_arrays(
         [
-            arrow_column(np.array([r[f.name] for r in rows], dtype=_NP_TYPES[str(f.type)]))
+            arrow_column(
+                np.array(
+                    [r.get(f.name, _MISSING[str(f.type)]) for r in rows], _NP_TYPES[str(f.type)]
+                )
+            )
             for f in schema
         ],
         schema=schema,
@@ -981,6 +1177,9 @@ def options_key(opts: GraceBiasOptions) -> dict[str, Any]:
     # is redone over the whole table after every run
     if d.pop("pool_days"):
         d["noise_spectra"] = True
+    if not opts.reference_fit:  # settings of the reference fit alone change nothing without it
+        for k in ("bias_basis", "thrusters", "thruster_margins", "reference_frame", "attitude"):
+            d.pop(k)
     if not opts.close_loop:  # settings of the closure alone change nothing without it
         for k in ("alpha", "orbit_period", "plots"):
             d.pop(k)
