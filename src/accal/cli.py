@@ -145,6 +145,15 @@ def _margins(text: str) -> tuple[float, float] | None:
     help="SCA1B star-camera file for --reference-frame inertial.",
 )
 @click.option(
+    "--arc",
+    default="day",
+    show_default=True,
+    metavar="day|Nd|month",
+    help="With the reference fit: fit up to N consecutive days (e.g. 30d) or a calendar "
+    "month of one satellite together (one bias spline across the days, one scale); "
+    "a missing day starts a new arc.",
+)
+@click.option(
     "--thrusters",
     type=click.Path(dir_okay=False, path_type=Path),
     default=None,
@@ -254,6 +263,7 @@ def grace_bias(
     bias_basis: str | None,
     reference_frame: str,
     attitude: Path | None,
+    arc: str,
     thrusters: Path | None,
     thruster_margins: str,
     columns: tuple[str, ...],
@@ -317,6 +327,7 @@ def grace_bias(
             bias_basis=bias_basis,
             reference_frame=reference_frame,
             attitude=attitude,
+            arc=arc,
             thrusters=thrusters,
             thruster_margins=_margins(thruster_margins),
         )

@@ -168,6 +168,9 @@ class GraceBiasOptions:
         ``"srf"`` or ``"inertial"`` (rotated into the SRF with the SCA1B attitude).
     attitude : Path or None
         SCA1B file for ``reference_frame="inertial"`` (default: the one beside the input).
+    arc : str
+        ``"day"`` (each input alone), ``"<N>d"`` (up to N consecutive days of one
+        satellite in one reference fit) or ``"month"`` (the days of a calendar month).
     """
 
     methods: tuple[str, ...] = ("wavelet",)
@@ -191,6 +194,7 @@ class GraceBiasOptions:
     thruster_margins: tuple[float, float] | None = (0.1, 0.7)
     reference_frame: str = "srf"
     attitude: Path | None = None
+    arc: str = "day"
 
     @property
     def reference_fit(self) -> bool:
@@ -207,6 +211,15 @@ class GraceBiasOptions:
         if not (isinstance(self.pool_days, int) and (self.pool_days == 0 or self.pool_days >= 2)):
             raise ValidationError(f"pool_days must be 0 (off) or >= 2, got {self.pool_days!r}")
         check_option("reference_frame", self.reference_frame, ("srf", "inertial"))
+        if self.arc != "day":
+            from accal.pipeline_reference import parse_arc
+
+            parse_arc(self.arc)
+            if not self.reference_fit:
+                raise ValidationError(
+                    f"--arc {self.arc} groups days into one reference fit: add --bias-basis "
+                    "or --scale fit"
+                )
         if self.attitude is not None and self.reference_frame != "inertial":
             raise ValidationError(
                 "--attitude rotates an inertial reference: add --reference-frame inertial"
@@ -671,7 +684,7 @@ def _reference_outputs(
             required=True,
         )
     else:
-        par_path = out_dir / arc["parameters"]
+        par_path = None
     report = {
         "source": str(path),
         "accal_version": __version__,
@@ -690,7 +703,8 @@ def _reference_outputs(
         True,
         rows=rows,
         n_samples=len(series),
-        outputs=(cal_path, par_path, rep_path),
+        # an arc's parameter table is shared by its days: not one input's output
+        outputs=(cal_path, rep_path) if arc is not None else (cal_path, par_path, rep_path),
         n_bytes=_size(path),
         warnings=tuple(report["read_report"]["warnings"]),
     )
@@ -1178,7 +1192,14 @@ def options_key(opts: GraceBiasOptions) -> dict[str, Any]:
     if d.pop("pool_days"):
         d["noise_spectra"] = True
     if not opts.reference_fit:  # settings of the reference fit alone change nothing without it
-        for k in ("bias_basis", "thrusters", "thruster_margins", "reference_frame", "attitude"):
+        for k in (
+            "bias_basis",
+            "thrusters",
+            "thruster_margins",
+            "reference_frame",
+            "attitude",
+            "arc",
+        ):
             d.pop(k)
     if not opts.close_loop:  # settings of the closure alone change nothing without it
         for k in ("alpha", "orbit_period", "plots"):
@@ -1375,14 +1396,19 @@ def run(
             task = functools.partial(process_one, out_dir=out_dir, opts=opts)
             pending: list[FileOutcome] = []
             last = _time.monotonic()
-            gen = execute(
-                task,
-                [paths[i] for i in todo],
-                workers=workers,
-                scheduler=scheduler,
-                on_error=_internal_error,
-                on_note=rlog,
-            )
+            if opts.arc != "day":
+                if todo:  # an arc is fitted whole: any input to redo redoes all of them
+                    todo = _redo_all(todo, results, paths)
+                gen = _arc_outcomes([paths[i] for i in todo], out_dir, opts)
+            else:
+                gen = execute(
+                    task,
+                    [paths[i] for i in todo],
+                    workers=workers,
+                    scheduler=scheduler,
+                    on_error=_internal_error,
+                    on_note=rlog,
+                )
             done = gen if progress is None else progress(gen, total=len(todo))
             interrupted = False
             try:
@@ -1428,7 +1454,11 @@ def run(
                 _time.perf_counter() - start,
                 n_inputs=len(paths) + len(unmatched),
                 log_path=rlog.path if log else None,
-                workers=max(1, min(workers, len(todo))) if scheduler is None else workers,
+                workers=1
+                if opts.arc != "day"
+                else max(1, min(workers, len(todo)))
+                if scheduler is None
+                else workers,
             )
             rlog(summary.line())
             if interrupted:
@@ -1438,6 +1468,97 @@ def run(
             return summary
         finally:
             rlog.close()
+
+
+def _redo_all(todo: list[int], results: dict[int, FileOutcome], paths: list[Path]) -> list[int]:
+    """``todo`` plus the inputs skipped as current (an arc is refitted whole)."""
+    for i, out in list(results.items()):
+        if i >= 0 and out.skipped:
+            del results[i]
+    return sorted(set(todo) | {i for i in range(len(paths)) if i not in results})
+
+
+def _arc_outcomes(
+    paths: list[Path], out_dir: Path, opts: GraceBiasOptions
+) -> Iterable[tuple[int, FileOutcome]]:
+    """Fit the inputs in arcs (``--arc``), in this process; yield ``(index, outcome)``.
+
+    Every input is read (a bad one fails alone), the good ones are grouped by
+    :func:`accal.pipeline_reference.group_arcs` and each arc is fitted at once
+    (:func:`accal.pipeline_reference.fit_arc`); a failed fit fails the inputs of its
+    arc with one message.  The arc's coefficients go to
+    ``arc_<satellite>_<first date>_<last date>.bias_basis.<fmt>``.
+    """
+    from accal.io.writers import write_table
+    from accal.pipeline_reference import (
+        PARAMETER_UNITS,
+        fit_arc,
+        group_arcs,
+        parameter_table,
+        report_entry,
+    )
+    from accal.timescale import gps_to_date
+
+    reference = None
+    try:
+        reference = read_input(opts.reference, GraceBiasOptions(columns=opts.columns))
+    except AccalError as exc:
+        for j, p in enumerate(paths):
+            yield j, FileOutcome(p, False, failure_message(p, exc))
+        return
+    loaded: dict[int, tuple[AccSeries, AccSeries, Any]] = {}
+    for j, p in enumerate(paths):
+        try:
+            check_input(p)
+            before = file_signature(p)
+            series, _, minus_ref = _read_with_reference(p, opts, reference)
+            loaded[j] = (series, minus_ref, before)
+        except AccalError as exc:
+            yield j, FileOutcome(p, False, failure_message(p, exc))
+        except OSError as exc:
+            yield j, FileOutcome(p, False, write_error_message(p, exc))
+    good = sorted(loaded)
+    keys = [(loaded[j][0].satellite, float(loaded[j][0].time[0]), float(loaded[j][0].time[-1]))
+            for j in good]  # fmt: skip
+    arcs, notes = group_arcs(keys, opts.arc)
+    for arc in arcs:
+        js = [good[k] for k in arc]
+        names = [paths[j].name for j in js]
+        try:
+            days = fit_arc(
+                [paths[j] for j in js],
+                [loaded[j][0] for j in js],
+                [loaded[j][1] for j in js],
+                opts,
+            )
+            first, last = (
+                gps_to_date(float(loaded[j][0].time[k])) for j, k in ((js[0], 0), (js[-1], -1))
+            )
+            who = loaded[js[0]][0].satellite or output_stem(paths[js[0]])
+            par_name = f"arc_{who}_{first}_{last}.bias_basis.{opts.fmt}"
+            info = {"sources": names, "parameters": par_name, "first": first, "last": last}
+            write_table(
+                parameter_table(days[0].fit),
+                out_dir / par_name,
+                fmt=opts.fmt,
+                units=PARAMETER_UNITS,
+                meta={"sources": names, **report_entry(days[0])},
+            )
+            for j, day in zip(js, days, strict=True):
+                series, minus_ref, before = loaded[j]
+                series = _with_warnings(series, *(n for n in notes if first in n))
+                out = _reference_outputs(paths[j], out_dir, opts, series, minus_ref, day, info)
+                yield j, dataclasses.replace(out, peak_rss=_peak_rss_mb(), signature=before)
+        except AccalError as exc:
+            for j in js:
+                msg = f"arc of {len(js)} inputs ({names[0]} .. {names[-1]}): {exc}"
+                yield (
+                    j,
+                    FileOutcome(paths[j], False, failure_message(paths[j], ValidationError(msg))),
+                )
+        except OSError as exc:
+            for j in js:
+                yield j, FileOutcome(paths[j], False, write_error_message(paths[j], exc))
 
 
 def _table_if_exists(out_dir: Path, fmt: str) -> Path | None:

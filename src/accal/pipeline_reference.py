@@ -278,3 +278,67 @@ def report_entry(day: ReferenceDay) -> dict[str, Any]:
         "thrusters": day.thrusters,
         "convention": "a_ref = S (a_raw - b(t)) + e; a_cal = S (a_raw - b(t))",
     }
+
+
+def parse_arc(spec: str) -> tuple[str, int]:
+    """``--arc``: ``day`` → ("days", 1), ``30d`` → ("days", 30), ``month`` → ("month", 0)."""
+    s = spec.strip().lower()
+    if s == "day":
+        return "days", 1
+    if s == "month":
+        return "month", 0
+    if s.endswith("d") and s[:-1].isdigit() and int(s[:-1]) >= 1:
+        return "days", int(s[:-1])
+    raise ValidationError(f"--arc {spec!r}: expected day, <N>d (e.g. 30d) or month")
+
+
+def group_arcs(
+    inputs: list[tuple[str, float, float]], spec: str
+) -> tuple[list[list[int]], list[str]]:
+    """Group inputs into arcs.
+
+    Parameters
+    ----------
+    inputs : list of (satellite, first time, last time)
+        One entry per input (GPS seconds).
+    spec : str
+        ``--arc`` value.
+
+    Returns
+    -------
+    arcs : list of list of int
+        Input indices per arc, in time order: one satellite per arc, at most N
+        calendar days (or one month), consecutive: a whole day without data
+        between two inputs starts a new arc.
+    notes : list of str
+        Where an arc was cut short by a missing day.
+    """
+    from accal.timescale import gps_to_date
+
+    kind, n_days = parse_arc(spec)
+    order = sorted(range(len(inputs)), key=lambda i: (inputs[i][0], inputs[i][1]))
+    arcs: list[list[int]] = []
+    notes: list[str] = []
+    first_day = 0.0
+    for i in order:
+        sat, t0, t1 = inputs[i]
+        day = np.floor((t0 + 43200.0) / 86400.0)  # GPS day number (GPS epoch is noon)
+        if arcs:
+            prev = inputs[arcs[-1][-1]]
+            same = prev[0] == sat
+            if kind == "days":
+                fits = day - first_day < n_days
+            else:
+                fits = gps_to_date(t0)[:7] == gps_to_date(inputs[arcs[-1][0]][1])[:7]
+            gap = t0 - prev[2]
+            if same and fits and gap > 86400.0:
+                notes.append(
+                    f"{sat}: {gap / 86400.0:.1f} days without data after "
+                    f"{gps_to_date(prev[2])}: a new arc starts on {gps_to_date(t0)}"
+                )
+            elif same and fits:
+                arcs[-1].append(i)
+                continue
+        arcs.append([i])
+        first_day = day
+    return arcs, notes
