@@ -8,6 +8,7 @@ the inertial-to-SRF rotation.
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -207,3 +208,91 @@ def test_no_sca1b_beside_a_table_input_is_a_clear_error(tmp_path):
         "--reference-frame", "inertial", "--out", out, "-q",
     )  # fmt: skip
     assert code == 1 and "give --attitude" in msg
+
+
+# ----------------------------------------------------------------------------- arcs
+
+
+def _arc_days(tmp_path: Path, days=(0, 1, 2), hours: float = 24.0, seed: int = 8):
+    """Days of 1 Hz data (tables) with one reference over all; bias: a slow sinusoid."""
+    rng = np.random.default_rng(seed)
+    n = int(max(days) + 1) * 86400
+    t = T_DAY + np.arange(n, dtype=float)
+    true = _signal(t, rng)
+    bias = BIAS + 2e-8 * np.sin(2 * np.pi * (t - t[0]) / (3 * 86400))[:, None]
+    raw = true / SCALE + bias + 1e-10 * rng.normal(size=(n, 3))
+    ref = true + signal.lfilter([1, -1], [1], 3e-9 * rng.normal(size=(n, 3)), axis=0)
+    paths = []
+    for d in days:
+        sl = slice(d * 86400, d * 86400 + int(hours * 3600))
+        paths.append(_write(tmp_path / f"day{d}.csv", t[sl], raw[sl]))
+    return t, bias, paths, _write(tmp_path / "ref.csv", t, ref)
+
+
+def test_an_arc_of_three_days_has_one_scale_and_a_continuous_spline(tmp_path):
+    t, bias, paths, ref = _arc_days(tmp_path)
+    out = tmp_path / "out"
+    args = ("--reference", ref, "--scale", "fit", "--bias-basis", "spline:6h", "-q")
+    code, msg = _run(*paths, *args, "--arc", "3d", "--out", out)
+    assert code == 0, msg
+    tab = read_bias_drift(out / "bias_drift.parquet")
+    assert len(tab) == 9
+    x = tab[tab["axis"] == "x"]
+    assert x["scale"].nunique() == 1  # one scale for the arc
+    assert abs(x["scale"].iloc[0] - SCALE[0]) < 4 * x["scale_x_sigma"].iloc[0]
+    for _, row in tab.iterrows():
+        i = "xyz".index(row["axis"])
+        k = int(row["t0"] - T_DAY)
+        assert abs(row["bias"] - bias[k, i]) < 5 * row["bias_sigma"] + 1e-12
+    par = pd.read_parquet(out / "arc_day0_2003-09-14_2003-09-16.bias_basis.parquet")
+    assert len(par) == 3 * (12 + 3)  # 12 intervals of 6 h over 3 days, cubic
+    rep = json.loads((out / "day1.report.json").read_text())["reference_fit"]
+    assert rep["arc"]["sources"] == ["day0.csv", "day1.csv", "day2.csv"]
+    # a re-run skips all; a changed day redoes its whole arc
+    before = (out / "day0.calibrated.parquet").stat().st_mtime_ns
+    code, msg = _run(*paths, *args, "--arc", "3d", "--out", out)
+    assert code == 0, msg
+    assert (out / "day0.calibrated.parquet").stat().st_mtime_ns == before
+    st = paths[2].stat()
+    os.utime(paths[2], ns=(st.st_atime_ns, st.st_mtime_ns + 10**9))
+    code, msg = _run(*paths, *args, "--arc", "3d", "--out", out)
+    assert code == 0, msg
+    assert (out / "day0.calibrated.parquet").stat().st_mtime_ns > before
+    assert len(read_bias_drift(out / "bias_drift.parquet")) == 9
+
+
+def test_a_missing_day_starts_a_new_arc_and_a_bad_day_fails_alone(tmp_path):
+    _, _, paths, ref = _arc_days(tmp_path, days=(0, 1, 3), hours=12.0, seed=9)
+    bad = tmp_path / "bad.csv"
+    bad.write_text("gps_time,lin_accl_x\n1,oops\n")
+    out = tmp_path / "out"
+    code, msg = _run(
+        *paths, bad, "--reference", ref, "--scale", "fit", "--bias-basis", "poly1",
+        "--arc", "30d", "--out", out, "-q",
+    )  # fmt: skip
+    assert code == 1 and "bad.csv" in msg
+    tab = read_bias_drift(out / "bias_drift.parquet")
+    assert sorted(set(tab["source"])) == ["day0.csv", "day1.csv", "day3.csv"]
+    reps = {p.name: json.loads((out / f"{p.stem}.report.json").read_text()) for p in paths}
+    assert reps["day0.csv"]["reference_fit"]["arc"]["sources"] == ["day0.csv", "day1.csv"]
+    assert reps["day3.csv"]["reference_fit"]["arc"]["sources"] == ["day3.csv"]
+    assert any("new arc" in w for w in reps["day3.csv"]["read_report"]["warnings"])
+
+
+def test_group_arcs_by_satellite_length_and_month():
+    from accal.pipeline_reference import group_arcs
+
+    day = 86400.0
+    t0 = 157809600.0  # 2005-01-01 00:00 GPS
+    inputs = [("GRACE-A", t0 + d * day, t0 + d * day + day - 1) for d in range(5)]
+    inputs += [("GRACE-B", t0 + d * day, t0 + d * day + day - 1) for d in range(2)]
+    arcs, notes = group_arcs(inputs, "2d")
+    assert arcs == [[0, 1], [2, 3], [4], [5, 6]] and not notes
+    arcs, _ = group_arcs(inputs[::-1], "day")
+    assert len(arcs) == 7
+    # 2005-01-30 .. 2005-02-02 by month
+    late = [("GRACE-A", t0 + d * day, t0 + d * day + day - 1) for d in range(29, 33)]
+    arcs, _ = group_arcs(late, "month")
+    assert arcs == [[0, 1], [2, 3]]  # January 30-31, February 1-2
+    with pytest.raises(Exception, match="--arc"):
+        group_arcs(late, "week")

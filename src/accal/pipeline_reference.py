@@ -169,12 +169,11 @@ def fit_arc(
             acc=fit.calibrate(s.time, s.acc),
             history=(
                 *s.history,
-                f"calibrate(reference fit{arc}: basis {basis.name()}, scale "
-                f"{'/'.join(fit.modes)})",
+                f"calibrate(reference fit{arc}: basis {basis.name()}, scale {'/'.join(fit.modes)})",
             ),
         )
         notes = [*parts[k][3], *(f"reference fit: {n}" for n in fit.notes)]
-        days.append(ReferenceDay(fit, use[sl], cal, parts[k][2], tuple(notes)))
+        days.append(ReferenceDay(fit, fit.used[sl], cal, parts[k][2], tuple(notes)))
     return days
 
 

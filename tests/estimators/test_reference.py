@@ -287,3 +287,19 @@ def test_scale_and_shift_equivariance(c, shift, seed):
     b0, _ = base.bias(t[:1])
     b1, _ = shifted.bias(t[:1])
     np.testing.assert_allclose(b1 - b0, shift, rtol=1e-7, atol=1e-14)
+
+
+def test_a_gap_longer_than_the_node_step_leaves_its_coefficients_unestimated():
+    rng = np.random.default_rng(9)
+    t, raw, ref, basis, coef = _case(rng, 70_000, "spline:2h", S_DIAG, noise=False)
+    valid = np.ones(t.size, bool)
+    valid[15_000:51_000] = False  # 10 h without data: B-splines (8 h wide) inside it
+    fit = fit_reference(t, raw, ref, valid, basis, scale="fit")
+    assert fit.unsupported.any() and "not estimated" in fit.notes[0]
+    assert np.isnan(fit.bias_coef[:, fit.unsupported]).all()
+    ok = ~fit.unsupported
+    np.testing.assert_allclose(fit.bias_coef[:, ok], coef[:, ok], atol=1e-10 * np.abs(coef).max())
+    b, sb = fit.bias(t)
+    assert np.isnan(b[30_000]).all() and np.isfinite(b[fit.used]).all()
+    assert not fit.used[valid & np.isnan(b).any(1)].any()
+    np.testing.assert_allclose(fit.calibrate(t[fit.used], raw[fit.used]), ref[fit.used], atol=1e-15)

@@ -74,6 +74,11 @@ class ReferenceFit:
     n_used : int
     crosstalk_test : dict
         χ² test of the full matrix against the diagonal one: ``chi2``, ``dof``, ``p``.
+    unsupported : ndarray of bool, shape (K,)
+        Basis coefficients without data under them (NaN in ``bias_coef``).
+    used : ndarray of bool, shape (n,)
+        The samples the fit used (``valid`` less non-finite values and the samples
+        next to a gap that only unsupported coefficients could describe).
     """
 
     basis: BiasBasis
@@ -88,6 +93,8 @@ class ReferenceFit:
     rms: NDArray[np.float64]
     n_used: int
     crosstalk_test: dict = field(default_factory=dict)
+    unsupported: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, bool))
+    used: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, bool))
 
     @property
     def scale_sigma(self) -> NDArray[np.float64]:
@@ -105,10 +112,18 @@ class ReferenceFit:
         sig = np.empty((t.size, 3))
         cols, first = self.basis.design(t, deriv)
         sl = slice(first, first + cols.shape[1])
+        coef = np.nan_to_num(self.bias_coef[:, sl])  # unsupported: NaN, masked below
         for i in range(3):
-            val[:, i] = cols @ self.bias_coef[i, sl]
+            val[:, i] = cols @ coef[i]
             c = self.bias_cov[i * k : (i + 1) * k, i * k : (i + 1) * k][sl, sl]
             sig[:, i] = np.sqrt(np.clip(np.einsum("ij,jk,ik->i", cols, c, cols), 0, None))
+        if self.unsupported.any():
+            # no estimate where a coefficient without data acts
+            basis_vals, f0 = self.basis.design(t)
+            bad = self.unsupported[f0 : f0 + basis_vals.shape[1]]
+            hole = (basis_vals[:, bad] > 0).any(1) if bad.any() else np.zeros(t.size, bool)
+            val[hole] = np.nan
+            sig[hole] = np.nan
         return val, sig
 
     def calibrate(self, t: NDArray[np.float64], raw: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -280,12 +295,17 @@ def fit_reference(
             f"reference fit: {n} usable samples for {3 + k} parameters per axis "
             f"(basis {basis.name()}, scale {scale})"
         )
+    unsupported, use, hole_note = _support(t_all, use, basis, chunk)
+    t = t_all[use]
+    n = t.size
     brk = None if breaks is None else np.asarray(breaks, dtype=bool)[use]
     pos = segment_positions(t, brk)
     chunks = _chunks(n, pos == 0, chunk)
     a = np.asarray(raw, dtype=np.float64)[use]
     y_all = np.asarray(reference, dtype=np.float64)[use]
     thetas, invs, frees, models, notes, rss_d, ars = [], [], [], [], [], [], []
+    if hole_note:
+        notes.append(hole_note)
     sigma0, rms = np.empty(3), np.empty(3)
     chi2_total, chi2_dof = 0.0, 0
     for i, name in enumerate("xyz"):
@@ -293,6 +313,7 @@ def fit_reference(
         mode = scale
         while True:
             free = np.ones(3 + k, dtype=bool)
+            free[3:] = ~unsupported
             fixed = np.zeros(3 + k)
             if mode != "fit-matrix":
                 free[:3] = False
@@ -329,6 +350,7 @@ def fit_reference(
             mode = fallback
         # cross-talk test: the full row against the diagonal one, same weights (eq. 2)
         full = np.ones(3 + k, dtype=bool)
+        full[3:] = ~unsupported
         diag = full.copy()
         diag[[j for j in range(3) if j != i]] = False
         try:
@@ -347,6 +369,7 @@ def fit_reference(
         sigma0[i] = s0
         rms[i] = float(np.sqrt(np.mean(r * r)))
     s_mat, s_cov, b_coef, b_cov = _transform(thetas, invs, frees, apriori, k)
+    b_coef[:, unsupported] = np.nan
     test = {}
     if chi2_dof:
         test = {
@@ -367,7 +390,42 @@ def fit_reference(
         rms=rms,
         n_used=n,
         crosstalk_test=test,
+        unsupported=unsupported,
+        used=use,
     )
+
+
+def _support(t: NDArray, use: NDArray, basis: BiasBasis, chunk: int):
+    """Coefficients without data under them, and the samples they would decide.
+
+    A basis function whose summed weight over the used samples is below 1 % of the
+    best-supported one's (a gap longer than a spline's node step) is not estimated:
+    its coefficient is NaN and the few samples it acts on are left out, so no
+    bias is extrapolated across the gap.
+    """
+    k = basis.size
+    if basis.kind != "spline":  # a polynomial acts everywhere
+        return np.zeros(k, bool), use, ""
+    idx = np.flatnonzero(use)
+    weight = np.zeros(k)
+    for a in range(0, idx.size, chunk):
+        cols, first = basis.design(t[idx[a : a + chunk]])
+        weight[first : first + cols.shape[1]] += cols.sum(0)
+    bad = weight < 0.01 * weight.max(initial=0.0)
+    if not bad.any():
+        return bad, use, ""
+    use = use.copy()
+    for a in range(0, idx.size, chunk):
+        sel = idx[a : a + chunk]
+        cols, first = basis.design(t[sel])
+        hit = (cols[:, bad[first : first + cols.shape[1]]] > 0).any(1)
+        use[sel[hit]] = False
+    note = (
+        f"bias not estimated under {int(bad.sum())} of {k} basis coefficients (no data "
+        f"there: a gap longer than the node step); {int(use[idx].size - use[idx].sum())} "
+        "samples next to the gap left out"
+    )
+    return bad, use, note
 
 
 def _transform(thetas, covs, frees, apriori, k):
