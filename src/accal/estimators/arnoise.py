@@ -30,6 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import signal
 
 from accal.errors import ValidationError
 
@@ -131,10 +132,8 @@ class ArModel:
         """
         x = np.asarray(x, dtype=np.float64)
         p = self.order
-        phi_p = self.phi[p]
-        out = x.copy()
-        for j in range(1, p + 1):
-            out[j:] -= phi_p[j - 1] * x[:-j]
+        # the order-p prediction-error filter (FIR); its first p outputs are redone below
+        out = signal.lfilter(np.r_[1.0, -self.phi[p]], [1.0], x, axis=0) if p else x.copy()
         out /= np.sqrt(self.v[p])
         for m in range(min(p, int(pos.max(initial=0)) + 1)):
             idx = np.flatnonzero(pos == m)

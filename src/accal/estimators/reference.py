@@ -146,38 +146,56 @@ def _chunks(n: int, breaks: NDArray[np.bool_], size: int) -> list[tuple[int, int
 class _Axis:
     """Normal equations of one row of eq. (2), accumulated chunk by chunk."""
 
-    def __init__(self, t, raw, y, pos, basis, chunks):
-        self.t, self.raw, self.y, self.pos = t, raw, y, pos
+    def __init__(self, raw, y, pos, basis, chunks, cols):
+        self.raw, self.y, self.pos = raw, y, pos
         self.basis, self.chunks = basis, chunks
         self.k = basis.size
-        self._cols = [basis.design(t[a:b]) for a, b in chunks]
+        self._cols = cols  # basis.design of each chunk (shared by the three axes)
 
-    def normal(self, ar: ArModel) -> NDArray[np.float64]:
-        """``[X y]ᵀ W [X y]`` with X = [a_raw (3 columns), φ (K columns)]."""
+    def normal(self, ar: ArModel, keep: bool = False) -> NDArray[np.float64]:
+        """``[X y]ᵀ W [X y]`` with X = [a_raw (3 columns), φ (K columns)].
+
+        ``keep``: also keep the whitened blocks for :meth:`refine_step` (memory:
+        n × (4 + local columns) floats).
+        """
         m = 3 + self.k
         out = np.zeros((m + 1, m + 1))
+        self._white = []
         for (a, b), (cols, first) in zip(self.chunks, self._cols, strict=True):
             block = np.column_stack([self.raw[a:b], cols, self.y[a:b]])
             w = ar.whiten(block, self.pos[a:b])
             idx = np.r_[0:3, 3 + first : 3 + first + cols.shape[1], m]
             out[np.ix_(idx, idx)] += w.T @ w
+            if keep:
+                self._white.append(w)
         return out
 
-    def residual(self, theta: NDArray[np.float64], ar: ArModel) -> tuple[NDArray, float, NDArray]:
-        """Residual ``y − Xθ``, its whitened sum of squares and ``XᵀW r``."""
+    def residual(self, theta: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Residual ``y − Xθ`` (not whitened), sample by sample."""
         r = np.empty(self.y.size)
-        grad = np.zeros(3 + self.k)
-        rss = 0.0
         for (a, b), (cols, first) in zip(self.chunks, self._cols, strict=True):
             sl = slice(3 + first, 3 + first + cols.shape[1])
             r[a:b] = self.y[a:b] - self.raw[a:b] @ theta[:3] - cols @ theta[sl]
-            wr = ar.whiten(r[a:b], self.pos[a:b])
+        return r
+
+    def refine_step(self, theta: NDArray[np.float64]) -> tuple[float, NDArray]:
+        """Whitened RSS and ``XᵀW r`` at ``theta``, from the blocks kept by :meth:`normal`.
+
+        ``W r = W y − (W X) θ`` is formed sample by sample, so the gradient has no
+        cancellation of normal-equation sums (iterative refinement, Björck,
+        *Numerical Methods for Least Squares Problems*, 1996, §2.9).
+        """
+        grad = np.zeros(3 + self.k)
+        rss = 0.0
+        for w, (cols, first) in zip(self._white, self._cols, strict=True):
+            sl = slice(3 + first, 3 + first + cols.shape[1])
+            th = np.concatenate([theta[:3], theta[sl]])
+            wr = w[:, -1] - w[:, :-1] @ th
             rss += float(wr @ wr)
-            wx = ar.whiten(np.column_stack([self.raw[a:b], cols]), self.pos[a:b])
-            g = wx.T @ wr
+            g = w[:, :-1].T @ wr
             grad[:3] += g[:3]
             grad[sl] += g[3:]
-        return r, rss, grad
+        return rss, grad
 
 
 def _solve(mat: NDArray, free: NDArray[np.bool_], fixed_theta: NDArray) -> tuple[NDArray, NDArray]:
@@ -205,13 +223,13 @@ def _solve(mat: NDArray, free: NDArray[np.bool_], fixed_theta: NDArray) -> tuple
     return theta, inv
 
 
-def _refine(ax: _Axis, theta, free, inv, ar):
-    """One step of iterative refinement on the exact residual; returns θ, r, whitened RSS."""
-    _, _, grad = ax.residual(theta, ar)
+def _refine(ax: _Axis, theta, free, inv):
+    """One step of iterative refinement; returns θ and the whitened RSS at it."""
+    _, grad = ax.refine_step(theta)
     theta = theta.copy()
     theta[free] += inv @ grad[free]
-    r, rss, _ = ax.residual(theta, ar)
-    return theta, r, rss
+    rss, _ = ax.refine_step(theta)
+    return theta, rss
 
 
 def _unidentifiable(cov, theta, free, axis, max_rel_sigma) -> str:
@@ -301,6 +319,7 @@ def fit_reference(
     brk = None if breaks is None else np.asarray(breaks, dtype=bool)[use]
     pos = segment_positions(t, brk)
     chunks = _chunks(n, pos == 0, chunk)
+    designs = [basis.design(t[c0:c1]) for c0, c1 in chunks]
     a = np.asarray(raw, dtype=np.float64)[use]
     y_all = np.asarray(reference, dtype=np.float64)[use]
     thetas, invs, frees, models, notes, rss_d, ars = [], [], [], [], [], [], []
@@ -309,7 +328,7 @@ def fit_reference(
     sigma0, rms = np.empty(3), np.empty(3)
     chi2_total, chi2_dof = 0.0, 0
     for i, name in enumerate("xyz"):
-        ax = _Axis(t, a, y_all[:, i], pos, basis, chunks)
+        ax = _Axis(a, y_all[:, i], pos, basis, chunks, designs)
         mode = scale
         while True:
             free = np.ones(3 + k, dtype=bool)
@@ -326,11 +345,11 @@ def fit_reference(
                 for _ in range(iterations + 1):
                     mat = ax.normal(ar)
                     theta, inv = _solve(mat, free, fixed)
-                    r, _, _ = ax.residual(theta, ar)
-                    ar = fit_ar(r, t, max_order)
-                mat = ax.normal(ar)
+                    ar = fit_ar(ax.residual(theta), t, max_order)
+                mat = ax.normal(ar, keep=True)
                 theta, inv = _solve(mat, free, fixed)
-                theta, r, rss = _refine(ax, theta, free, inv, ar)
+                theta, rss = _refine(ax, theta, free, inv)
+                r = ax.residual(theta)
             except ValidationError as exc:
                 if mode == "fixed":
                     raise
