@@ -296,3 +296,43 @@ def test_group_arcs_by_satellite_length_and_month():
     assert arcs == [[0, 1], [2, 3]]  # January 30-31, February 1-2
     with pytest.raises(Exception, match="--arc"):
         group_arcs(late, "week")
+
+
+def test_a_reference_in_another_unit_is_converted_or_refused(tmp_path):
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    _, _, day, ref = _day(tmp_path, 20_000, 10)
+    base = pd.read_csv(ref)
+    res = {}
+    for unit in ("m/s^2", "nm/s^2", "furlong/fortnight^2"):
+        scale = 1e9 if unit == "nm/s^2" else 1.0
+        cols = {c: base[c].to_numpy() * (scale if c != "gps_time" else 1.0) for c in base}
+        units = {"gps_time": "s", **{c: unit for c in base if c != "gps_time"}}
+        table = pa.table(cols).replace_schema_metadata({"accal.units": json.dumps(units)})
+        path = tmp_path / f"ref_{len(res)}.parquet"
+        pq.write_table(table, path)
+        out = tmp_path / f"out{len(res)}"
+        code, msg = _run(day, "--reference", path, "--scale", "fit", "--out", out, "-q")
+        res[unit] = (code, msg, out)
+    assert res["m/s^2"][0] == 0 and res["nm/s^2"][0] == 0
+    a, b = (read_bias_drift(res[u][2] / "bias_drift.parquet") for u in ("m/s^2", "nm/s^2"))
+    np.testing.assert_allclose(b["bias"], a["bias"], rtol=1e-9)
+    rep = json.loads((res["nm/s^2"][2] / "day.report.json").read_text())
+    assert any("converted to m/s^2" in w for w in rep["read_report"]["warnings"])
+    code, msg, _ = res["furlong/fortnight^2"]
+    assert code == 1 and "not an acceleration unit" in msg and "ref_2.parquet" in msg
+
+
+def test_a_sparser_reference_is_interpolated_and_said(tmp_path):
+    t, _, day, ref = _day(tmp_path, 20_000, 11)
+    full = pd.read_csv(ref)
+    sparse = full.iloc[np.r_[0 : len(full) : 10, len(full) - 1]]
+    sparse.to_csv(ref, index=False, float_format="%.17g")
+    out = tmp_path / "out"
+    code, msg = _run(day, "--reference", ref, "--scale", "fit", "--out", out, "-q")
+    assert code == 0, msg
+    rep = json.loads((out / "day.report.json").read_text())
+    assert any("interpolated linearly" in w for w in rep["read_report"]["warnings"])
+    x = read_bias_drift(out / "bias_drift.parquet").set_index("axis").loc["x"]
+    assert abs(x["scale"] - SCALE[0]) < 5 * x["scale_x_sigma"] + 1e-3

@@ -32,7 +32,7 @@ from accal.batch import (
 )
 from accal.errors import AccalError, ValidationError, check_option
 from accal.plausibility import flag_wild_samples
-from accal.series import AccSeries
+from accal.series import ACC_UNIT_FACTORS, AccSeries, acceleration_factor
 
 #: Columns the reference fit adds to ``bias_drift`` (NaN/"" for the wavelet/lsq methods;
 #: :mod:`accal.pipeline_reference`).
@@ -436,17 +436,26 @@ def subtract_reference(series: AccSeries, reference: AccSeries, ref_path: Path) 
             f"{ref_path}: reference covers [{tr[0] if tr.size else 'nan'}, "
             f"{tr[-1] if tr.size else 'nan'}] s, the data [{t[0]}, {t[-1]}] s"
         )
+    unit = reference.units.get("acc")
+    factor = acceleration_factor(unit)
+    if factor is None:
+        raise ValidationError(
+            f"{ref_path}: reference unit {unit!r} is not an acceleration unit accal knows "
+            f"({', '.join(sorted({k for k in ACC_UNIT_FACTORS if k.isascii()}))})"
+        )
     cols = []
     for ax in series.axes:
         if ax not in reference.axes:
             raise ValidationError(f"{ref_path}: reference has no axis {ax!r}")
-        cols.append(series.axis(ax) - np.interp(t, tr, reference.axis(ax)))
+        cols.append(series.axis(ax) - factor * np.interp(t, tr, reference.axis(ax)))
     valid = series.valid & (np.interp(t, tr, reference.valid.astype(float)) > 0.999)
     step = float(np.median(np.diff(tr)))
     j = np.clip(np.searchsorted(tr, t, side="right"), 1, tr.size - 1)
     lo, hi = tr[j - 1], tr[j]
     hole = (hi - lo > REFERENCE_MAX_BRIDGE * step) & (t != lo) & (t != hi)
     warnings = []
+    if factor != 1.0:
+        warnings.append(f"--reference {ref_path.name} is in {unit}: converted to m/s^2")
     step_data = float(np.median(np.diff(t))) if t.size > 1 else step
     if step > REFERENCE_MAX_BRIDGE * step_data:
         # too few reference samples to tell a hole from its sampling: say how it is used

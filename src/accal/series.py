@@ -171,3 +171,39 @@ class AccSeries:
     def with_history(self, entry: str) -> AccSeries:
         """Return a copy with ``entry`` appended to the history."""
         return dataclasses.replace(self, history=(*self.history, entry))
+
+
+#: Acceleration units accal converts to m/s² (factor), case-insensitive, first word.
+ACC_UNIT_FACTORS = {
+    "m/s^2": 1.0,
+    "m/s2": 1.0,
+    "m/s**2": 1.0,
+    "m.s-2": 1.0,
+    "m s-2": 1.0,
+    "mm/s^2": 1e-3,
+    "mm/s2": 1e-3,
+    "um/s^2": 1e-6,
+    "µm/s^2": 1e-6,
+    "μm/s^2": 1e-6,
+    "um/s2": 1e-6,
+    "nm/s^2": 1e-9,
+    "nm/s2": 1e-9,
+    "gal": 1e-2,
+    "mgal": 1e-5,
+    "ugal": 1e-8,
+    "µgal": 1e-8,
+}
+
+
+def acceleration_factor(unit: str | None) -> float | None:
+    """Factor from ``unit`` to m/s² (None if ``unit`` is not an acceleration unit known here).
+
+    The unit is the first word of the string (accal writes ``"m/s^2 (trend removed)"``);
+    a missing unit or ``"unknown"`` is taken as m/s² (what accal's readers assume).
+    """
+    if unit is None:
+        return 1.0
+    word = unit.strip().split(" (")[0].strip().lower()
+    if word in ("", "unknown"):
+        return 1.0
+    return ACC_UNIT_FACTORS.get(word)

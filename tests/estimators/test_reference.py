@@ -303,3 +303,20 @@ def test_a_gap_longer_than_the_node_step_leaves_its_coefficients_unestimated():
     assert np.isnan(b[30_000]).all() and np.isfinite(b[fit.used]).all()
     assert not fit.used[valid & np.isnan(b).any(1)].any()
     np.testing.assert_allclose(fit.calibrate(t[fit.used], raw[fit.used]), ref[fit.used], atol=1e-15)
+
+
+def test_a_smooth_reference_and_noisy_raw_data_do_not_shrink_the_scale():
+    """Errors in variables: the weights favour frequencies where the raw data hold only
+    noise (the reference is smooth there); without the correction the scale came out
+    10 % low at 28σ (a 10× sparser reference, interpolated)."""
+    z = []
+    for rep in range(8):
+        rng = np.random.default_rng(200 + rep)
+        t, true = _arc(rng, 40_000)
+        basis = parse_bias_basis("poly1", t[0], t[-1])
+        raw = true @ np.linalg.inv(S_DIAG).T + 1e-6 + 1e-9 * rng.normal(size=(t.size, 3))
+        fit = fit_reference(
+            t, raw, true, np.ones(t.size, bool), basis, scale="fit", max_scale_sigma=np.inf
+        )
+        z.append((fit.scale[0, 0] - S_DIAG[0, 0]) / fit.scale_sigma[0, 0])
+    assert abs(np.mean(z)) < 1.5 and 0.5 < np.std(z) < 1.6, z

@@ -198,14 +198,20 @@ class _Axis:
         return rss, grad
 
 
-def _solve(mat: NDArray, free: NDArray[np.bool_], fixed_theta: NDArray) -> tuple[NDArray, NDArray]:
+def _solve(
+    mat: NDArray, free: NDArray[np.bool_], fixed_theta: NDArray, eiv: NDArray | None = None
+) -> tuple[NDArray, NDArray]:
     """Solve the normal equations for the ``free`` parameters, the others held at ``fixed_theta``.
 
-    Returns θ (all parameters) and the inverse normal matrix of the free ones (equilibrated
+    ``eiv``: expected whitened noise power of the three raw columns, subtracted from
+    their diagonal (errors in variables, :func:`_eiv_power`).  Returns θ (all
+    parameters) and the inverse normal matrix of the free ones (equilibrated
     Cholesky; raises ValidationError if singular).
     """
     m = free.size
-    n_mat = mat[:m, :m]
+    n_mat = mat[:m, :m].copy()
+    if eiv is not None:
+        n_mat[np.arange(3), np.arange(3)] -= eiv
     rhs = mat[:m, m] - n_mat[:, ~free] @ fixed_theta[~free]
     nf = n_mat[np.ix_(free, free)]
     d = np.sqrt(np.diag(nf))
@@ -223,13 +229,57 @@ def _solve(mat: NDArray, free: NDArray[np.bool_], fixed_theta: NDArray) -> tuple
     return theta, inv
 
 
-def _refine(ax: _Axis, theta, free, inv):
-    """One step of iterative refinement; returns θ and the whitened RSS at it."""
+def _refine(ax: _Axis, theta, free, inv, eiv):
+    """One step of iterative refinement; returns θ and the whitened RSS at it.
+
+    The corrected normal equations (XᵀWX − Σ)θ = XᵀWy have the residual
+    XᵀW(y − Xθ) + Σθ_scale, Σ = diag(``eiv``) on the raw columns.
+    """
     _, grad = ax.refine_step(theta)
+    grad[:3] += eiv * theta[:3]
     theta = theta.copy()
     theta[free] += inv @ grad[free]
     rss, _ = ax.refine_step(theta)
     return theta, rss
+
+
+def _raw_noise(a: NDArray, pos: NDArray) -> NDArray:
+    """Variance of white noise in each raw axis, from robust second differences.
+
+    Δ²x_t = x_t − 2x_{t−1} + x_{t−2} within segments: var(Δ²n) = 6σ² for white n,
+    while a signal smooth over seconds contributes nothing; σ from the MAD
+    (1.4826·MAD, Huber 1981) so thruster spikes do not count.  Band-limited raw
+    data (GRACE's CRN filter) give ~0: no errors-in-variables correction then.
+    """
+    ok = pos[2:] >= 2
+    d2 = a[2:] - 2 * a[1:-1] + a[:-2]
+    d2 = d2[ok]
+    if d2.shape[0] < 10:
+        return np.zeros(a.shape[1])
+    mad = np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0)
+    return (1.4826 * mad) ** 2 / 6.0
+
+
+def _eiv_power(ar: ArModel, pos: NDArray, var: float, axis: int) -> NDArray:
+    """E‖W n_i‖² of white noise of variance ``var`` in raw column ``axis`` under ``ar``.
+
+    Returned as the (3,) correction of the raw columns (zero but for ``axis``: a
+    cross term's own errors-in-variables bias is its relative one times |S_ij| ≪ 1).
+
+    Each whitened sample is Σ_k h_k n_{t−k} / √v with h = (1, −φ_m): its variance is
+    σ²(1 + ‖φ_m‖²)/v_m, m = min(pos_t, p).  Subtracting the sum from the raw
+    columns' normal-matrix diagonal is the corrected least squares of a regression
+    with noisy regressors (Fuller, *Measurement Error Models*, 1987, §2.2): the
+    whitening gives most weight where the residual is smallest, which for a smooth
+    (modelled, or sparser and interpolated) reference is where the raw data hold
+    noise and no signal, and there the plain estimate shrinks the scale.
+    """
+    p = ar.order
+    m = np.minimum(pos, p)
+    gain = np.array([(1.0 + ar.phi[k] @ ar.phi[k]) / ar.v[k] for k in range(p + 1)])
+    out = np.zeros(3)
+    out[axis] = var * float(np.bincount(m, minlength=p + 1) @ gain)
+    return out
 
 
 def _unidentifiable(cov, theta, free, axis, max_rel_sigma) -> str:
@@ -321,6 +371,7 @@ def fit_reference(
     chunks = _chunks(n, pos == 0, chunk)
     designs = [basis.design(t[c0:c1]) for c0, c1 in chunks]
     a = np.asarray(raw, dtype=np.float64)[use]
+    noise_var = _raw_noise(a, pos)
     y_all = np.asarray(reference, dtype=np.float64)[use]
     thetas, invs, frees, models, notes, rss_d, ars = [], [], [], [], [], [], []
     if hole_note:
@@ -342,13 +393,18 @@ def fit_reference(
                 fixed[i] = apriori[i]
             try:
                 ar = ArModel.white(1.0)
+                var_n = 0.0  # white noise of the raw column i (errors in variables)
                 for _ in range(iterations + 1):
                     mat = ax.normal(ar)
-                    theta, inv = _solve(mat, free, fixed)
-                    ar = fit_ar(ax.residual(theta), t, max_order)
+                    theta, inv = _solve(mat, free, fixed, _eiv_power(ar, pos, var_n, i))
+                    r = ax.residual(theta)
+                    ar = fit_ar(r, t, max_order)
+                    if free[i]:  # bounded by what the residual holds: −S_ii n_i is in it
+                        var_n = min(noise_var[i], _raw_noise(r[:, None], pos)[0] / theta[i] ** 2)
                 mat = ax.normal(ar, keep=True)
-                theta, inv = _solve(mat, free, fixed)
-                theta, rss = _refine(ax, theta, free, inv)
+                eiv = _eiv_power(ar, pos, var_n, i)
+                theta, inv = _solve(mat, free, fixed, eiv)
+                theta, rss = _refine(ax, theta, free, inv, eiv)
                 r = ax.residual(theta)
             except ValidationError as exc:
                 if mode == "fixed":
@@ -373,8 +429,8 @@ def fit_reference(
         diag = full.copy()
         diag[[j for j in range(3) if j != i]] = False
         try:
-            th_f, _ = _solve(mat, full, np.zeros(3 + k))
-            th_d, _ = _solve(mat, diag, np.zeros(3 + k))
+            th_f, _ = _solve(mat, full, np.zeros(3 + k), eiv)
+            th_d, _ = _solve(mat, diag, np.zeros(3 + k), eiv)
             chi2_total += (_rss_from_normal(mat, th_d) - _rss_from_normal(mat, th_f)) / s0**2
             chi2_dof += 2
         except ValidationError:
