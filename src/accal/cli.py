@@ -703,7 +703,8 @@ def simulate() -> None:
 @click.option(
     "--thrusters",
     is_flag=True,
-    help="Add thruster pulses (1e-8-1e-7 m/s^2, a few s, a few per hour) to the true signal.",
+    help="Add thruster pulses (1e-8-1e-7 m/s^2, a few s, a few per hour) to the true signal "
+    "and write them as a THR1B file beside --out.",
 )
 @click.option(
     "--effect",
@@ -718,8 +719,28 @@ def simulate() -> None:
     "reference_out",
     type=click.Path(dir_okay=False, path_type=Path),
     default=None,
-    help="Also write the true non-gravitational acceleration s*a_true as a table "
-    "(for grace-bias --reference; .csv or Parquet).",
+    help="Also write the reference: the true non-gravitational acceleration s*a_true plus "
+    "the reference noise, as a table (for grace-bias --reference; .csv or Parquet).",
+)
+@click.option(
+    "--reference-noise",
+    "reference_noise",
+    type=float,
+    default=1e-9,
+    show_default=True,
+    metavar="LEVEL",
+    help="Noise of the --reference-out table [m/s^2]: its RMS at orbit scales (periods over "
+    "1000 s); it rises at high frequency like a POD-derived acceleration (at 1e-9: ASD "
+    "3.2e-8 m/s^2/sqrt(Hz) up to 0.1 Hz, 1.4e-7 at 0.5 Hz). 0: a noise-free reference.",
+)
+@click.option(
+    "--days",
+    type=int,
+    default=1,
+    show_default=True,
+    help="Simulate N consecutive days from --date as one arc (--out must contain the date, "
+    "replaced by each day's; --seed S gives day k the seed S+k); the bias continues across "
+    "the days and --reference-out gets one table covering all of them (for grace-bias --arc).",
 )
 @config_option
 def simulate_grace(
@@ -735,6 +756,8 @@ def simulate_grace(
     thrusters: bool,
     effects: tuple[str, ...],
     reference_out: Path | None,
+    reference_noise: float,
+    days: int,
 ) -> None:
     """Write a real-like synthetic GRACE/GRACE-FO ACC1B day file and its truth JSON.
 
@@ -748,14 +771,22 @@ def simulate_grace(
       coupling:axis=y,channel=temperature,coef=3e-9[,lag=600][,tau=300][,tau2=100]
       quadratic:axis=z,coef=1e-18               (m/s^4, about the start)
       scale:axis=x,factor=1.02                  (raw = s*factor*a_true + ...)
+      scalematrix:xx=0.98,xy=1e-3,zx=-2e-3      (S of a_ref = S (a_raw - b); others of I)
+      splinebias:axis=x,step=21600,amp=1e-9[,seed=0]   (cubic B-spline, nodes k*step GPS s)
+      splinebias:axis=x,step=21600,coefs=1e-9;0;-2e-9;...   (nodes t0-step, t0, ...)
       sawtooth:axis=y,period=3000,amp=1e-9[,phase=0]
       growing:axis=y,period=2000,amp0=1e-9,amp1=3e-9[,phase=0]
       exponential:axis=x,amp=3e-9,tau=3000
     A coupling's channel (K) goes to <out>.aux.parquet, for grace-bias --aux.
+    --thrusters also writes the pulses as a THR1B file beside <out>
+    (THR1B_<date>_<sat>_<rel>.asc/.txt for an ACC1B/ACT1B name), which grace-bias
+    finds and uses to leave the firings out.  With --reference-out the truth has
+    "reference": "scale" (the 3x3 S that grace-bias --scale fit-matrix should find;
+    row i = scale_x, scale_y, scale_z of axis i) and "noise" (model and level).
     """
     from accal.errors import AccalError
     from accal.simulate.effects import parse_effect
-    from accal.simulate.grace import write_simulated_grace
+    from accal.simulate.grace import write_simulated_arc
 
     if not _is_date(date) or not "1980-01-06" <= date < "2100-01-01":
         raise click.BadParameter(
@@ -777,6 +808,13 @@ def simulate_grace(
     check_number("--gaps", gaps, low=0, high=MAX_SAMPLES)
     check_number("--flagged", flagged, low=0, high=1, high_open=True, what="fraction")
     check_number("--noise", noise, low=0, unit=" m/s^2/sqrt(Hz)")
+    check_number("--reference-noise", reference_noise, low=0, unit=" m/s^2")
+    check_number("--days", days, low=1, high=366, what="number of days")
+    if days > 1 and date not in out.name:
+        usage_fail(
+            f"--days {days}: the --out name must contain the date {date} (replaced by each "
+            f"day's date), got {out.name!r}"
+        )
     parsed = []
     for spec in effects:
         try:
@@ -785,9 +823,11 @@ def simulate_grace(
             usage_fail(f"--effect {spec!r}: {exc}")
 
     try:
-        truth_path = write_simulated_grace(
+        truth_paths = write_simulated_arc(
             out,
+            days=days,
             reference_out=reference_out,
+            reference_noise=reference_noise,
             date=date,
             satellite=satellite,
             seed=seed,
@@ -802,14 +842,20 @@ def simulate_grace(
     except AccalError as exc:
         _err(str(exc))
         sys.exit(1)
-    from accal.simulate.grace import aux_path
+    from accal.simulate.grace import arc_paths, aux_path
+    from accal.simulate.thr1b import thruster_path
 
-    written = [str(out)]
-    if aux_path(out).exists() and any(e.name == "coupling" for e in parsed):
-        written.append(str(aux_path(out)))
+    written = []
+    for path in arc_paths(out, date, days):
+        written.append(str(path))
+        if aux_path(path).exists() and any(e.name == "coupling" for e in parsed):
+            written.append(str(aux_path(path)))
+        if thrusters:
+            written.append(str(thruster_path(path, satellite)))
     if reference_out is not None:
         written.append(str(reference_out))
-    click.echo(f"wrote {', '.join(written)} and {truth_path}", err=True)
+    truths = ", ".join(str(p) for p in truth_paths)
+    click.echo(f"wrote {', '.join(written)} and {truths}", err=True)
 
 
 from accal.cli_demod import budget, demod, design, simulate_gap  # noqa: E402

@@ -1018,6 +1018,24 @@ def _calendar(t: float) -> str:
     return f"{date} {clock[:11]}"
 
 
+def calendar_text(t: float) -> str:
+    """GPS calendar time of ``t`` [s GPS] as L1B headers write it: ``YYYY-MM-DD HH:MM:SS.ff``."""
+    return _calendar(t)
+
+
+def yaml_header_lines(header: dict[str, Any]) -> list[str]:
+    """A GRACE-FO YAML header ``{"header": header}`` as text lines, with the end marker.
+
+    Written with the reader's own dumper (strings plain where YAML allows, as the
+    real files), so :func:`read_grace_l1b`-style readers read it back unchanged.
+    """
+    yaml, _, dumper = _yaml()
+    text = yaml.dump(
+        {"header": header}, Dumper=dumper, sort_keys=False, allow_unicode=True, width=1 << 16
+    )
+    return [*text.rstrip("\n").split("\n"), "# End of YAML header"]
+
+
 def _grace_header(series: AccSeries, letter: str) -> list[str]:
     n = len(series)
     t0, t1 = (float(series.time[0]), float(series.time[-1])) if n else (0.0, 0.0)

@@ -47,11 +47,19 @@ the noise's rise ``f_r`` and the CRN-like filter are chosen to give 2.7e-11 and
 
 Random draws come from one seed, split into independent streams (:data:`STREAMS`):
 the instrument drift, the orbit and forces, the noise, the angular and residual
-columns, the gaps and flags, the storm, the thrusters and each auxiliary channel
-have their own, so that adding a storm, thrusters or an effect changes nothing
-else of the day.  Without an explicit seed it is :func:`default_seed` of the date
-and satellite, so different days and satellites differ while every run of the same
-day gives the same file; an explicit seed is used as given.
+columns, the gaps and flags, the storm, the thrusters, the reference noise, the
+THR1B counters and each auxiliary channel have their own, so that adding a storm,
+thrusters, a reference or an effect changes nothing else of the day.  Without an
+explicit seed it is :func:`default_seed` of the date and satellite, so different
+days and satellites differ while every run of the same day gives the same file; an
+explicit seed is used as given.
+
+Besides the ACC1B file (:func:`write_simulated_grace`): a reference table
+(``s·a_true`` plus a POD-like reference noise, :func:`reference_noise`) for
+``accal grace-bias --reference``, with the scale matrix to expect in the truth; a
+THR1B file of the thruster pulses (:func:`accal.simulate.thr1b.write_simulated_thr1b`); and arcs of
+consecutive days with a continuous bias and one reference table
+(:func:`write_simulated_arc`).
 
 References
 ----------
@@ -59,6 +67,16 @@ References
    Level-1B ACC data (version 2), GRACE TN-02 (``shared/data/REFERENCE_VALUES.md``).
 .. [2] Case, K., Kruizinga, G., Wu, S.-C. (2010). GRACE Level 1B Data Product User
    Handbook, JPL D-22027 (ACC1B columns; the CRN filter of the Level-1B processing).
+.. [3] Bezděk, A. (2010). Calibration of accelerometers aboard GRACE satellites by
+   comparison with POD-based nongravitational accelerations. J. Geodyn. 50(5),
+   410–423.
+.. [4] Calabia, A., Jin, S. (2015). GPS-based non-gravitational accelerations and
+   accelerometer calibration. In: Satellite Positioning (ed. S. Jin), InTech,
+   doi:10.5772/59975.
+.. [5] van den IJssel, J., Visser, P. (2007). Performance of GPS-based accelerometry:
+   CHAMP and GRACE. Adv. Space Res. 39(10), 1597–1603.
+.. [6] Ren, L., Schön, S. (2018). PPP-based Swarm kinematic orbit determination.
+   Ann. Geophys. 36, 1227, doi:10.5194/angeo-36-1227-2018.
 """
 
 from __future__ import annotations
@@ -76,15 +94,20 @@ from numpy.typing import NDArray
 from accal.errors import ValidationError
 from accal.simulate.effects import (
     CHANNEL_PREROLL,
+    EXTRA_PARAMETER_UNITS,
     PARAMETER_UNITS,
+    VECTOR_EFFECTS,
     Effect,
     channel_seed,
     effect_term,
     effect_truth,
     first_order_recursion,
     parse_effect,
+    reference_scale,
     temperature_channel,
+    vector_term,
 )
+from accal.simulate.thr1b import thruster_path, write_simulated_thr1b
 
 #: Nominal orbital period [s] (the simulated day draws its own, see ``orbit_period``
 #: in the truth and :data:`accal.simulate.orbit_signal.ORBIT_PERIOD_RANGE`).
@@ -145,7 +168,17 @@ STREAMS = {
     "gaps": 5,
     "storm": 6,
     "thrusters": 7,
+    "reference": 8,
+    "thr1b": 9,
 }
+
+#: Reference noise (``--reference-noise``): default level [m/s²], the RMS of the
+#: noise at orbit scales, i.e. below :data:`REFERENCE_BAND` [Hz].
+REFERENCE_NOISE, REFERENCE_BAND = 1e-9, 1e-3
+#: Reference noise shape: the f⁴ rise of the PSD equals the white floor at
+#: :data:`REFERENCE_CORNER` [Hz] and is band-limited (levels off) above
+#: :data:`REFERENCE_LIMIT` [Hz] (:func:`reference_noise_psd`).
+REFERENCE_CORNER, REFERENCE_LIMIT = 0.2, 0.5
 
 
 def default_seed(date: str, satellite: str) -> int:
@@ -294,6 +327,72 @@ def instrument_noise(n: int, dt: float, level: float, rng: np.random.Generator) 
     return crn_lowpass(x, dt).T.copy()
 
 
+def reference_noise_psd(f: NDArray[np.float64], level: float) -> NDArray[np.float64]:
+    """One-sided PSD of the reference noise [m² s⁻⁴ Hz⁻¹] at frequencies ``f`` [Hz].
+
+    ``W²·(1 + (f/f_c)⁴ / (1 + (f/f_l)⁴))`` with ``W² = level²/REFERENCE_BAND``,
+    ``f_c`` = :data:`REFERENCE_CORNER`, ``f_l`` = :data:`REFERENCE_LIMIT`: a white floor
+    ``W`` plus the f⁴ rise of a twice-differentiated white position noise, levelling
+    off above ``f_l``.  ``level`` is the RMS below ``REFERENCE_BAND`` (the rise adds
+    1e-10 relative there).  See :func:`reference_noise`.
+    """
+    f = np.abs(np.asarray(f, dtype=np.float64))
+    rise = (f / REFERENCE_CORNER) ** 4 / (1.0 + (f / REFERENCE_LIMIT) ** 4)
+    return level**2 / REFERENCE_BAND * (1.0 + rise)
+
+
+def reference_noise(n: int, dt: float, level: float, rng: np.random.Generator) -> NDArray:
+    """Noise of a POD-derived reference acceleration [m/s²], shape (n, 3).
+
+    A reference derived from precise orbit determination (POD) is the second time
+    derivative of the GPS orbit minus modelled gravitational accelerations
+    (Bezděk 2010; Calabia & Jin 2015; see the module's References): differentiating
+    twice multiplies the position noise's PSD by ``(2πf)⁴``, so the reference is good
+    over long periods and poor at high frequency; GPS-based accelerometry recovers
+    "predominantly the longer wavelengths" (van den IJssel & Visser 2007).  Kinematic positions
+    carry 1.5–2.5 cm of noise per axis (Swarm: Ren & Schön 2018): differentiated as
+    they are (2 cm every 10 s) they would give an ASD of 1.1e-7 m/s²/√Hz at the orbit
+    frequency and 3.5e-6 at 1 mHz, which is why calibrations use smoothed,
+    reduced-dynamic or long-averaged POD accelerations.  The model here stands for
+    such a smoothed reference; its numbers are a choice (no published spectrum of a
+    POD-derived acceleration was at hand), set so that the errors are ~1e-9 m/s² at
+    orbit scales (1 % of a 1e-7 drag signal) and rise over 0.1–0.5 Hz:
+
+    * one-sided PSD :func:`reference_noise_psd`, ``W²·(1 + (f/f_c)⁴/(1 + (f/f_l)⁴))``,
+      ``W = level/sqrt(1 mHz)``, ``f_c`` = 0.2 Hz, ``f_l`` = 0.5 Hz;
+    * at the default ``level`` of 1e-9 m/s² (the RMS below 1 mHz, periods over
+      1000 s): ASD 3.2e-8 m/s²/√Hz up to 0.1 Hz, 4.4e-8 at 0.2 Hz, 1.4e-7 at 0.5 Hz,
+      2.0e-7 above; the 1 Hz samples have an RMS of 5.6e-8 m/s² (4.2e-7 at 10 Hz);
+    * drawn by FFT shaping of white samples (:func:`accal.simulate.noise.coloured_noise`,
+      padded to twice the length so that the ends are independent), the three axes
+      independent; the record mean is not removed exactly (padding).
+
+    Parameters
+    ----------
+    n : int
+        Samples.
+    dt : float
+        Sampling interval [s].
+    level : float
+        RMS at orbit scales [m/s²] (0: no noise).
+    rng : numpy.random.Generator
+        Random source (the day's ``"reference"`` stream).
+
+    Returns
+    -------
+    ndarray, shape (n, 3)
+        [m/s²].
+    """
+    from accal.simulate.noise import coloured_noise as shaped
+
+    if level == 0:
+        return np.zeros((n, 3))
+    x = shaped(
+        n, lambda f: 0.5 * reference_noise_psd(f, level), 1.0 / dt, rng, size=3, white="time"
+    )
+    return x.T.copy()
+
+
 def _check(satellite: str, duration: float, dt: float, n_gaps: int, seed: int | None) -> None:
     if satellite not in ("A", "B", "C", "D"):
         raise ValidationError(f"satellite must be A, B, C or D, got {satellite!r}")
@@ -409,6 +508,7 @@ def simulate_grace_day(
     storm: bool = False,
     thrusters: bool = False,
     effects: Sequence[str | Effect] = (),
+    bias: Sequence[float] | None = None,
 ) -> SimulatedDay:
     """Simulate one day of raw ACC1B data.
 
@@ -439,6 +539,11 @@ def simulate_grace_day(
     effects : sequence of str or Effect
         Instrument effects (``"step:axis=x,epoch=43200,size=3e-9"``, see
         :mod:`accal.simulate.effects`).
+    bias : sequence of 3 float, optional
+        Eq. 9 bias ``b`` at the first sample [m/s²] instead of the satellite's
+        a-priori value (TN-02 for GRACE A/B, :data:`GRACEFO_OFFSETS`); a multi-day
+        arc passes the previous day's bias continued by its drift
+        (:func:`write_simulated_arc`).
 
     Returns
     -------
@@ -474,9 +579,12 @@ def simulate_grace_day(
         duration=span,
     )
     true = env.linear
-    s, scale, bias = _offsets(satellite, t0)
+    s, scale, prior_bias = _offsets(satellite, t0)
+    bias = prior_bias if bias is None else np.asarray(bias, dtype=np.float64).reshape(3)
     tc, channels, channel_params = _channels(parsed, t0, n, dt, seed, env.truth["orbit_period"])
-    instrument = _effects(parsed, tau, span, s * true, {k: (tc, v) for k, v in channels.items()})
+    instrument = _effects(
+        parsed, tau, span, s * true, {k: (tc, v) for k, v in channels.items()}, t0
+    )
     raw = (
         s * true
         + bias
@@ -508,11 +616,14 @@ def simulate_grace_day(
         "n_gaps_requested": n_gaps,
         **env.truth,
         **_model_truth(satellite),
-        "effects": [effect_truth(e, t0, float(s[e.index])) for e in parsed],
+        "effects": [_effect_truth(e, t0, s, span) for e in parsed],
         "channels": channel_params,
     }
     if parsed:
         truth["effects_trend"] = _trend(t, instrument, valid)
+    if any(e.name in ("scalematrix", "splinebias") for e in parsed):
+        units = {**PARAMETER_UNITS, **EXTRA_PARAMETER_UNITS}
+        truth["units"] = {**truth["units"], "effects": units}
     return SimulatedDay(t, raw, true, valid, truth, aux, instrument, t0 + tc, channels)
 
 
@@ -538,15 +649,25 @@ def _effects(
     span: float,
     scaled_true: NDArray,
     channels: dict[str, tuple[NDArray, NDArray]],
+    t0: float,
 ) -> NDArray[np.float64]:
     """The sum of the effects' terms per axis [m/s²], shape (n, 3)."""
     out = np.zeros((tau.size, 3))
     for e in effects:
+        if e.name in VECTOR_EFFECTS:
+            out += vector_term(e, scaled_true)
+            continue
         i = e.index
         out[:, i] += effect_term(
-            e, tau, duration=span, scaled_true=scaled_true[:, i], channels=channels
+            e, tau, duration=span, scaled_true=scaled_true[:, i], channels=channels, t0=t0
         )
     return out
+
+
+def _effect_truth(e: Effect, t0: float, s: NDArray, span: float) -> dict[str, Any]:
+    if e.name in VECTOR_EFFECTS:
+        return effect_truth(e, t0, 1.0)
+    return effect_truth(e, t0, float(s[e.index]), duration=span)
 
 
 def _model_truth(satellite: str) -> dict[str, Any]:
@@ -592,38 +713,64 @@ def aux_path(out: str | Path) -> Path:
     return out.with_name(out.name + ".aux.parquet")
 
 
-def write_simulated_grace(
-    out: str | Path, *, reference_out: str | Path | None = None, **kwargs: Any
-) -> Path:
-    """Simulate a day and write it as an ACC1B file plus ``<out>.truth.json``.
+def _reference(
+    day: SimulatedDay, level: float, dt: float, n: int, effects: Sequence[Effect]
+) -> tuple[NDArray, dict[str, Any]]:
+    """``s·a_true`` plus reference noise on the day's epochs, and its truth entry."""
+    seed = int(day.truth["seed"])
+    idx = np.rint((day.time - day.truth["t0"]) / dt).astype(np.int64)
+    noise = reference_noise(n, dt, level, stream(seed, "reference"))[idx]
+    ref = np.asarray(day.truth["scale_s"]) * day.true
+    if level > 0:  # 0: exactly s·a_true (no −0.0 + 0.0 turned into +0.0)
+        ref = ref + noise
+    info = {
+        "content": "s*a_true (nominal scale_s, thrusters included) + reference noise [m/s^2]",
+        "scale": reference_scale(list(effects)).tolist(),
+        "scale_meaning": "S of a_ref = S (a_raw - b(t) - other effects - instrument noise) + "
+        "reference noise; row i = scale_x, scale_y, scale_z of the grace-bias row of axis i "
+        "(identity without scale effects)",
+        "noise": {
+            "level": level,
+            "level_meaning": "RMS of the noise below band_hz [m/s^2]",
+            "band_hz": REFERENCE_BAND,
+            "floor_asd": level / np.sqrt(REFERENCE_BAND),
+            "corner_hz": REFERENCE_CORNER,
+            "limit_hz": REFERENCE_LIMIT,
+            "psd": "one-sided floor_asd^2 (1 + (f/corner_hz)^4 / (1 + (f/limit_hz)^4)) "
+            "[m^2/s^4/Hz], axes independent",
+            "stream": "reference",
+            "rms": np.sqrt(np.mean(noise**2, axis=0)).tolist(),
+        },
+    }
+    return ref, info
 
-    Keyword arguments go to :func:`simulate_grace_day`.  GRACE A/B days are
-    written in the GRACE RL02 ASCII layout, C/D in the GRACE-FO RL04 YAML layout,
-    with all 12 columns.  A day with couplings also gets its channels in
-    ``<out>.aux.parquet`` (:func:`aux_path`; columns ``gps_time`` [s] and one per
-    channel, units in the Parquet metadata, readable by ``accal grace-bias --aux``).
 
-    Parameters
-    ----------
-    out : str or Path
-        The ACC1B file.
-    reference_out : str or Path, optional
-        Also write the true non-gravitational acceleration ``s·a_true`` (nominal
-        scale, thrusters included, scale errors of ``--effect scale`` not) at the
-        data epochs, as a table (``gps_time``, ``lin_accl_x/y/z``; CSV for a
-        ``.csv`` name, else Parquet) readable by ``accal grace-bias --reference``.
+def _write_reference(path: str | Path, time: NDArray, ref: NDArray, meta: dict[str, Any]) -> None:
+    from accal.io.writers import write_table
 
-    Returns
-    -------
-    Path
-        The truth file.
-    """
+    write_table(
+        {"gps_time": time, **{f"lin_accl_{a}": ref[:, i] for i, a in enumerate("xyz")}},
+        path,
+        units={"gps_time": "s", **{f"lin_accl_{a}": "m/s^2" for a in "xyz"}},
+        meta=meta,
+    )
+
+
+def _parsed(kwargs: dict[str, Any]) -> list[Effect]:
+    """The effects of a simulation's keyword arguments, parsed as simulate_grace_day does."""
+    span = int(round(kwargs.get("duration", 86400.0) / kwargs.get("dt", 1.0))) * kwargs.get(
+        "dt", 1.0
+    )
+    effects = kwargs.get("effects", ())
+    return [e if isinstance(e, Effect) else parse_effect(e, duration=span) for e in effects]
+
+
+def _write_day(out: Path, day: SimulatedDay, thrusters: bool) -> Path:
+    """Write a simulated day's side files, then its ACC1B file and truth; the truth path."""
     from accal.io.grace_l1b import DEFAULT_INVALID_BITS, write_grace_acc1b
     from accal.io.writers import atomic_path, write_table
     from accal.series import AccSeries
 
-    out = Path(out)
-    day = simulate_grace_day(**kwargs)
     sat = day.truth["satellite"]
     # flagged samples get the lowest bit that the reader treats as invalid (bit 0: Vp)
     flag = DEFAULT_INVALID_BITS & -DEFAULT_INVALID_BITS
@@ -646,13 +793,13 @@ def write_simulated_grace(
             units=units,
             meta={**source, "channels": day.truth["channels"]},
         )
-    if reference_out is not None:
-        ref = np.asarray(day.truth["scale_s"]) * day.true
-        write_table(
-            {"gps_time": day.time, **{f"lin_accl_{a}": ref[:, i] for i, a in enumerate("xyz")}},
-            reference_out,
-            units={"gps_time": "s", **{f"lin_accl_{a}": "m/s^2" for a in "xyz"}},
-            meta={**source, "content": "s * a_true (nominal scale_s of the truth)"},
+    if thrusters:
+        write_simulated_thr1b(
+            thruster_path(out, sat),
+            day.truth["thrusters"],
+            sat,
+            day.truth["t0"],
+            stream(int(day.truth["seed"]), "thr1b"),
         )
     # the data file and its truth last: a side file that cannot be written leaves no day
     write_grace_acc1b(series, out, flavour="grace" if sat in "AB" else "gracefo")
@@ -660,3 +807,190 @@ def write_simulated_grace(
     with atomic_path(truth_path) as tmp:
         tmp.write_text(json.dumps(day.truth, indent=2) + "\n")
     return truth_path
+
+
+def write_simulated_grace(
+    out: str | Path,
+    *,
+    reference_out: str | Path | None = None,
+    reference_noise: float = REFERENCE_NOISE,
+    **kwargs: Any,
+) -> Path:
+    """Simulate a day and write it as an ACC1B file plus ``<out>.truth.json``.
+
+    Keyword arguments go to :func:`simulate_grace_day`.  GRACE A/B days are
+    written in the GRACE RL02 ASCII layout, C/D in the GRACE-FO RL04 YAML layout,
+    with all 12 columns.  A day with couplings also gets its channels in
+    ``<out>.aux.parquet`` (:func:`aux_path`; columns ``gps_time`` [s] and one per
+    channel, units in the Parquet metadata, readable by ``accal grace-bias --aux``).
+    A day with ``thrusters=True`` also gets its pulses as a THR1B file
+    (:func:`thruster_path`, :func:`accal.simulate.thr1b.write_simulated_thr1b`), which ``accal
+    grace-bias`` finds beside the data and uses to leave the firings out.
+
+    Parameters
+    ----------
+    out : str or Path
+        The ACC1B file.
+    reference_out : str or Path, optional
+        Also write the reference acceleration: the true non-gravitational
+        acceleration ``s·a_true`` (nominal scale, thrusters included, the scale
+        errors of ``scale``/``scalematrix`` effects not) plus the reference noise
+        of :func:`reference_noise`, at the data epochs, as a table (``gps_time``,
+        ``lin_accl_x/y/z``; CSV for a ``.csv`` name, else Parquet) readable by
+        ``accal grace-bias --reference``.  The truth gets ``reference``: ``scale``
+        (the 3×3 ``S`` of ``a_ref = S·(a_raw − b(t))`` to compare with the fit,
+        :func:`accal.simulate.effects.reference_scale`) and ``noise`` (model,
+        level and the drawn RMS per axis).
+    reference_noise : float
+        Reference noise level [m/s²]: the RMS at orbit scales (below
+        :data:`REFERENCE_BAND`); 0 writes ``s·a_true`` alone (the reference of
+        earlier versions, same values and metadata).  Drawn from the day's
+        ``"reference"`` stream: the other outputs of a seed do not change.
+
+    Returns
+    -------
+    Path
+        The truth file.
+    """
+    out = Path(out)
+    day = simulate_grace_day(**kwargs)
+    if reference_out is not None:
+        dt = float(kwargs.get("dt", 1.0))
+        n = int(round(float(kwargs.get("duration", 86400.0)) / dt))
+        ref, info = _reference(day, reference_noise, dt, n, _parsed(kwargs))
+        day.truth["reference"] = {"file": Path(reference_out).name, **info}
+        source = {"source": f"accal simulate grace ({out.name})", "seed": day.truth["seed"]}
+        content = "s * a_true (nominal scale_s of the truth)"
+        if reference_noise > 0:
+            content += f" + reference noise (truth['reference']['noise'] of {out.name})"
+        _write_reference(reference_out, day.time, ref, {**source, "content": content})
+    return _write_day(out, day, bool(kwargs.get("thrusters", False)))
+
+
+def arc_paths(out: str | Path, date: str, days: int) -> list[Path]:
+    """The data files of a multi-day simulation: ``out`` with ``date`` replaced by each day's.
+
+    Raises
+    ------
+    ValidationError
+        ``days > 1`` and the name of ``out`` does not contain ``date``.
+    """
+    out = Path(out)
+    if days > 1 and date not in out.name:
+        raise ValidationError(
+            f"simulating {days} days needs the date {date} in the output name (it is replaced "
+            f"by each day's date), got {out.name!r}"
+        )
+    start = np.datetime64(date, "D")
+    return [out.with_name(out.name.replace(date, str(start + k))) for k in range(days)]
+
+
+def write_simulated_arc(
+    out: str | Path,
+    *,
+    days: int,
+    date: str = "2005-01-01",
+    seed: int | None = None,
+    reference_out: str | Path | None = None,
+    reference_noise: float = REFERENCE_NOISE,
+    **kwargs: Any,
+) -> list[Path]:
+    """Simulate ``days`` consecutive days as one arc: a data file per day, one reference.
+
+    Each day is :func:`simulate_grace_day` of its date (seed: ``seed + k`` for day
+    ``k``, or the day's :func:`default_seed`), written as by
+    :func:`write_simulated_grace` to :func:`arc_paths` (``out`` with the date
+    replaced); with ``days = 1`` it is exactly :func:`write_simulated_grace`.  What
+    makes the days one arc:
+
+    * the eq. 9 bias is continuous: day ``k`` starts at the bias of day ``k − 1``
+      continued by its drift, ``b_k = b_{k−1} + d_{k−1}·(t0_k − t0_{k−1})`` (each day
+      keeps its own random drift, so the bias is piecewise linear); the truth of
+      every day has its ``bias`` at its ``t0``;
+    * ``splinebias`` effects with random coefficients have their nodes in GPS time,
+      so the spline is continuous across the days; ``scale`` and ``scalematrix``
+      effects are the same every day.  The other effects restart each day (epochs
+      from each day's start);
+    * ``reference_out`` gets one table covering all days (concatenated), for
+      ``accal grace-bias --reference REF --arc Nd``; the reference noise is drawn
+      per day (POD arcs are usually daily).
+
+    Every truth gets ``arc``: ``days``, ``index``, ``first_date`` and the data files.
+
+    Parameters
+    ----------
+    out : str or Path
+        The first day's ACC1B file; its name must contain ``date`` when ``days > 1``.
+    days : int
+        Number of days (>= 1).
+    date : str
+        First day, ``YYYY-MM-DD``.
+    seed : int, optional
+        Seed of the first day; day ``k`` uses ``seed + k``.
+    reference_out, reference_noise
+        As in :func:`write_simulated_grace`.
+    **kwargs
+        Passed to :func:`simulate_grace_day` for every day.
+
+    Returns
+    -------
+    list of Path
+        The truth files, one per day.
+    """
+    from accal.timescale import gps_day_start
+
+    if days < 1:
+        raise ValidationError(f"days must be >= 1, got {days}")
+    if days == 1:
+        truth = write_simulated_grace(
+            out,
+            reference_out=reference_out,
+            reference_noise=reference_noise,
+            date=date,
+            seed=seed,
+            **kwargs,
+        )
+        return [truth]
+    paths = arc_paths(out, date, days)
+    start = np.datetime64(date, "D")
+    dt = float(kwargs.get("dt", 1.0))
+    n = int(round(float(kwargs.get("duration", 86400.0)) / dt))
+    effects = _parsed(kwargs)
+    kwargs = {**kwargs, "effects": effects}
+    times, refs, seeds, truths = [], [], [], []
+    prev: dict[str, Any] | None = None
+    for k, path in enumerate(paths):
+        day_date = str(start + k)
+        bias = None
+        if prev is not None:
+            step = gps_day_start(day_date) - prev["t0"]
+            bias = np.asarray(prev["bias"]) + np.asarray(prev["drift"]) * step
+        day = simulate_grace_day(
+            date=day_date, seed=None if seed is None else seed + k, bias=bias, **kwargs
+        )
+        day.truth["arc"] = {
+            "days": days,
+            "index": k,
+            "first_date": date,
+            "files": [p.name for p in paths],
+            "bias": "continued from the previous day: b_k = b_(k-1) + d_(k-1) (t0_k - t0_(k-1))",
+        }
+        if reference_out is not None:
+            ref, info = _reference(day, reference_noise, dt, n, effects)
+            day.truth["reference"] = {"file": Path(reference_out).name, **info}
+            times.append(day.time)
+            refs.append(ref)
+        seeds.append(day.truth["seed"])
+        truths.append(_write_day(path, day, bool(kwargs.get("thrusters", False))))
+        prev = day.truth
+    if reference_out is not None:
+        content = "s * a_true (nominal scale_s of the truths)"
+        if reference_noise > 0:
+            content += " + reference noise (truth['reference']['noise'] of each day)"
+        meta = {
+            "source": f"accal simulate grace ({paths[0].name} .. {paths[-1].name})",
+            "seed": seeds,
+            "content": content,
+        }
+        _write_reference(reference_out, np.concatenate(times), np.concatenate(refs), meta)
+    return truths
