@@ -89,6 +89,13 @@ def test_scale_fit_recovers_scales_and_bias_and_writes_every_product(tmp_path):
     rep = json.loads((out / "day.report.json").read_text())["reference_fit"]
     assert rep["crosstalk_test"]["dof"] == 6 and 0 <= rep["crosstalk_test"]["p"] <= 1
     assert rep["thrusters"]["file"] is None
+    # the full covariance: its diagonal is the table's scale sigma
+    with np.load(out / "day.reference_cov.npz") as npz:
+        cov, scale = npz["cov"], npz["scale"]
+        assert cov.shape == (9 + 3 * 2, 9 + 3 * 2) and str(npz["basis"]) == "poly1"
+    assert scale[0, 0] == tab.loc["x", "scale"]
+    assert np.sqrt(cov[0, 0]) == pytest.approx(tab.loc["x", "scale_x_sigma"], rel=1e-12)
+    np.testing.assert_allclose(cov, cov.T, rtol=0, atol=1e-12 * np.abs(cov).max())
 
 
 def test_scale_matrix_and_spline_basis_through_the_cli(tmp_path):
@@ -248,6 +255,8 @@ def test_an_arc_of_three_days_has_one_scale_and_a_continuous_spline(tmp_path):
     assert len(par) == 3 * (12 + 3)  # 12 intervals of 6 h over 3 days, cubic
     rep = json.loads((out / "day1.report.json").read_text())["reference_fit"]
     assert rep["arc"]["sources"] == ["day0.csv", "day1.csv", "day2.csv"]
+    with np.load(out / "arc_day0_2003-09-14_2003-09-16.reference_cov.npz") as npz:
+        assert npz["cov"].shape == (9 + 3 * 15, 9 + 3 * 15)
     # a re-run skips all; a changed day redoes its whole arc
     before = (out / "day0.calibrated.parquet").stat().st_mtime_ns
     code, msg = _run(*paths, *args, "--arc", "3d", "--out", out)

@@ -649,7 +649,13 @@ def _reference_outputs(
     """
     from accal.degraded import classify_day, load_periods
     from accal.io.writers import write_table
-    from accal.pipeline_reference import PARAMETER_UNITS, parameter_table, report_entry, row_fields
+    from accal.pipeline_reference import (
+        PARAMETER_UNITS,
+        parameter_table,
+        report_entry,
+        row_fields,
+        write_covariance,
+    )
     from accal.timescale import gps_to_date
 
     stem = output_stem(path)
@@ -692,8 +698,9 @@ def _reference_outputs(
             sync=False,
             required=True,
         )
+        cov_path = write_covariance(out_dir / f"{stem}.reference_cov.npz", day.fit)
     else:
-        par_path = None
+        par_path = cov_path = None
     report = {
         "source": str(path),
         "accal_version": __version__,
@@ -713,7 +720,9 @@ def _reference_outputs(
         rows=rows,
         n_samples=len(series),
         # an arc's parameter table is shared by its days: not one input's output
-        outputs=(cal_path, rep_path) if arc is not None else (cal_path, par_path, rep_path),
+        outputs=(cal_path, rep_path)
+        if arc is not None
+        else (cal_path, par_path, cov_path, rep_path),
         n_bytes=_size(path),
         warnings=tuple(report["read_report"]["warnings"]),
     )
@@ -1505,6 +1514,7 @@ def _arc_outcomes(
         group_arcs,
         parameter_table,
         report_entry,
+        write_covariance,
     )
     from accal.timescale import gps_to_date
 
@@ -1553,6 +1563,7 @@ def _arc_outcomes(
                 units=PARAMETER_UNITS,
                 meta={"sources": names, **report_entry(days[0])},
             )
+            write_covariance(out_dir / f"arc_{who}_{first}_{last}.reference_cov.npz", days[0].fit)
             for j, day in zip(js, days, strict=True):
                 series, minus_ref, before = loaded[j]
                 series = _with_warnings(series, *(n for n in notes if first in n))

@@ -22,6 +22,7 @@ from accal.estimators.refbasis import parse_bias_basis
 from accal.estimators.reference import ReferenceFit, fit_reference
 from accal.io.attitude import find_attitude_file, read_attitude, rotate_to_srf
 from accal.io.thrusters import find_thruster_file, firing_mask, read_thrusters
+from accal.io.writers import atomic_path
 from accal.series import AccSeries
 
 __all__ = [
@@ -33,6 +34,7 @@ __all__ = [
     "parameter_table",
     "report_entry",
     "row_fields",
+    "write_covariance",
 ]
 
 
@@ -257,6 +259,25 @@ PARAMETER_UNITS = {
     "coef": "m/s^2 (bias basis coefficient; Legendre on the arc mapped to [-1, 1] for poly)",
     "coef_sigma": "m/s^2 (1 sigma, scale uncertainty included)",
 }
+
+
+def write_covariance(path: Path, fit: ReferenceFit) -> Path:
+    """Write the fit's full covariance and parameters to ``path`` (``.npz``), atomically.
+
+    Arrays: ``scale`` (3, 3), ``bias_coef`` (3, K), ``cov`` (9 + 3K square: the
+    covariance of ``scale.ravel()`` then ``bias_coef.ravel()``, SI units squared),
+    ``knots`` (spline knot vector [s GPS], empty for poly) and ``basis`` (its name).
+    """
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+        np.savez(
+            fh,
+            scale=fit.scale,
+            bias_coef=fit.bias_coef,
+            cov=fit.cov,
+            knots=fit.basis.knots,
+            basis=np.array(fit.basis.name()),
+        )
+    return path
 
 
 def report_entry(day: ReferenceDay) -> dict[str, Any]:

@@ -76,6 +76,9 @@ class ReferenceFit:
         χ² test of the full matrix against the diagonal one: ``chi2``, ``dof``, ``p``.
     unsupported : ndarray of bool, shape (K,)
         Basis coefficients without data under them (NaN in ``bias_coef``).
+    cov : ndarray, shape (9 + 3K, 9 + 3K)
+        Full covariance of ``(scale.ravel(), bias_coef.ravel())`` (the two blocks
+        above are its diagonal blocks; the scale–bias correlation is off-diagonal).
     used : ndarray of bool, shape (n,)
         The samples the fit used (``valid`` less non-finite values and the samples
         next to a gap that only unsupported coefficients could describe).
@@ -95,6 +98,7 @@ class ReferenceFit:
     crosstalk_test: dict = field(default_factory=dict)
     unsupported: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, bool))
     used: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, bool))
+    cov: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 0)))
 
     @property
     def scale_sigma(self) -> NDArray[np.float64]:
@@ -443,7 +447,8 @@ def fit_reference(
         rss_d.append(rss)
         sigma0[i] = s0
         rms[i] = float(np.sqrt(np.mean(r * r)))
-    s_mat, s_cov, b_coef, b_cov = _transform(thetas, invs, frees, apriori, k)
+    s_mat, b_coef, cov = _transform(thetas, invs, frees, apriori, k)
+    s_cov, b_cov = cov[:9, :9], cov[9:, 9:]
     b_coef[:, unsupported] = np.nan
     test = {}
     if chi2_dof:
@@ -467,6 +472,7 @@ def fit_reference(
         crosstalk_test=test,
         unsupported=unsupported,
         used=use,
+        cov=cov,
     )
 
 
@@ -529,5 +535,7 @@ def _transform(thetas, covs, frees, apriori, k):
             jac[i * k : (i + 1) * k, 9 + kk * k : 9 + (kk + 1) * k] = -s_inv[i, kk] * np.eye(k)
             for m in range(3):
                 jac[i * k : (i + 1) * k, 3 * kk + m] = -s_inv[i, kk] * b[m]
-    b_cov = jac @ cov @ jac.T
-    return s, cov[:9, :9], b, b_cov
+    full = np.zeros((npar, npar))  # Jacobian of (S, B) with respect to (S, D)
+    full[:9, :9] = np.eye(9)
+    full[9:] = jac
+    return s, b, full @ cov @ full.T
