@@ -633,101 +633,6 @@ def _row_source(
     }
 
 
-def _reference_outputs(
-    path: Path,
-    out_dir: Path,
-    opts: GraceBiasOptions,
-    series: AccSeries,
-    minus_ref: AccSeries,
-    day: Any,
-    arc: dict[str, Any] | None = None,
-) -> FileOutcome:
-    """Write the outputs of one input's reference fit (``--bias-basis``, ``--scale fit``).
-
-    ``day`` is its :class:`accal.pipeline_reference.ReferenceDay`; ``arc`` describes the
-    arc it was fitted in (sources, parameter table), None for a day fitted alone.
-    """
-    from accal.degraded import classify_day, load_periods
-    from accal.io.writers import write_table
-    from accal.pipeline_reference import (
-        PARAMETER_UNITS,
-        parameter_table,
-        report_entry,
-        row_fields,
-        write_covariance,
-    )
-    from accal.timescale import gps_to_date
-
-    stem = output_stem(path)
-    series = _with_warnings(series, *day.warnings)
-    t = series.time
-    date = gps_to_date(0.5 * (float(t[0]) + float(t[-1])))
-    periods = load_periods(opts.degraded_days) if opts.degraded_days else None
-    status = classify_day(series.satellite, date, series.meta, periods=periods)
-    rows = []
-    for ax in series.axes:
-        row = {**_row_source(path, series, opts, date, ax), **row_fields(day, ax, t, opts.scale)}
-        row.update(signal_share(series, minus_ref, ax, day.use))
-        row["day_status"], row["day_status_reason"] = status
-        rows.append(row)
-    meta = {
-        "source": path.name,
-        "satellite": series.satellite,
-        "frame": series.frame,
-        "method": "reference",
-        "bias_basis": day.fit.basis.name(),
-        "history": list(day.calibrated.history),
-        "input_meta": series.meta,
-    }
-    cal_path = write_table(
-        calibrated_frame(day.calibrated, day.use),
-        out_dir / f"{stem}.calibrated.{opts.fmt}",
-        fmt=opts.fmt,
-        units=CALIBRATED_UNITS,
-        meta=meta,
-        sync=False,
-        required=True,
-    )
-    if arc is None:
-        par_path = write_table(
-            parameter_table(day.fit),
-            out_dir / f"{stem}.bias_basis.{opts.fmt}",
-            fmt=opts.fmt,
-            units=PARAMETER_UNITS,
-            meta={"source": path.name, **report_entry(day)},
-            sync=False,
-            required=True,
-        )
-        cov_path = write_covariance(out_dir / f"{stem}.reference_cov.npz", day.fit)
-    else:
-        par_path = cov_path = None
-    report = {
-        "source": str(path),
-        "accal_version": __version__,
-        "satellite": series.satellite,
-        "read_report": series.report.as_dict(),
-        "fits": rows,
-        "reference_fit": report_entry(day),
-        "history": list(day.calibrated.history),
-    }
-    if arc is not None:
-        report["reference_fit"]["arc"] = arc
-    rep_path = out_dir / f"{stem}.report.json"
-    _write_json(rep_path, report, sync=False)
-    return FileOutcome(
-        path,
-        True,
-        rows=rows,
-        n_samples=len(series),
-        # an arc's parameter table is shared by its days: not one input's output
-        outputs=(cal_path, rep_path)
-        if arc is not None
-        else (cal_path, par_path, cov_path, rep_path),
-        n_bytes=_size(path),
-        warnings=tuple(report["read_report"]["warnings"]),
-    )
-
-
 def calibrated_frame(series: AccSeries, use: np.ndarray) -> dict[str, np.ndarray]:
     """The calibrated series as columns (``gps_time``, ``lin_accl_*``, ``valid``, ``qualflg``)."""
     data: dict[str, Any] = {"gps_time": series.time}
@@ -773,10 +678,11 @@ def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutco
     stem = output_stem(path)
     if opts.reference_fit:
         # imported here: the reference fit's modules import scipy (~0.3 s of start-up)
+        from accal.pipeline_arcs import reference_outputs
         from accal.pipeline_reference import fit_day
 
         day = fit_day(path, series, ref_series, opts)
-        return _reference_outputs(path, out_dir, opts, series, ref_series, day)
+        return reference_outputs(path, out_dir, opts, series, ref_series, day)
     scale = parse_scale(opts.scale, series.satellite)
     use = np.ones(len(series), bool) if opts.keep_flagged else fit_series.valid
     closure: dict[str, Any] = {}
@@ -1415,9 +1321,11 @@ def run(
             pending: list[FileOutcome] = []
             last = _time.monotonic()
             if opts.arc != "day":
+                from accal.pipeline_arcs import arc_outcomes, redo_all
+
                 if todo:  # an arc is fitted whole: any input to redo redoes all of them
-                    todo = _redo_all(todo, results, paths)
-                gen = _arc_outcomes([paths[i] for i in todo], out_dir, opts)
+                    todo = redo_all(todo, results, paths)
+                gen = arc_outcomes([paths[i] for i in todo], out_dir, opts)
             else:
                 gen = execute(
                     task,
@@ -1486,99 +1394,6 @@ def run(
             return summary
         finally:
             rlog.close()
-
-
-def _redo_all(todo: list[int], results: dict[int, FileOutcome], paths: list[Path]) -> list[int]:
-    """``todo`` plus the inputs skipped as current (an arc is refitted whole)."""
-    for i, out in list(results.items()):
-        if i >= 0 and out.skipped:
-            del results[i]
-    return sorted(set(todo) | {i for i in range(len(paths)) if i not in results})
-
-
-def _arc_outcomes(
-    paths: list[Path], out_dir: Path, opts: GraceBiasOptions
-) -> Iterable[tuple[int, FileOutcome]]:
-    """Fit the inputs in arcs (``--arc``), in this process; yield ``(index, outcome)``.
-
-    Every input is read (a bad one fails alone), the good ones are grouped by
-    :func:`accal.pipeline_reference.group_arcs` and each arc is fitted at once
-    (:func:`accal.pipeline_reference.fit_arc`); a failed fit fails the inputs of its
-    arc with one message.  The arc's coefficients go to
-    ``arc_<satellite>_<first date>_<last date>.bias_basis.<fmt>``.
-    """
-    from accal.io.writers import write_table
-    from accal.pipeline_reference import (
-        PARAMETER_UNITS,
-        fit_arc,
-        group_arcs,
-        parameter_table,
-        report_entry,
-        write_covariance,
-    )
-    from accal.timescale import gps_to_date
-
-    reference = None
-    try:
-        reference = read_input(opts.reference, GraceBiasOptions(columns=opts.columns))
-    except AccalError as exc:
-        for j, p in enumerate(paths):
-            yield j, FileOutcome(p, False, failure_message(p, exc))
-        return
-    loaded: dict[int, tuple[AccSeries, AccSeries, Any]] = {}
-    for j, p in enumerate(paths):
-        try:
-            check_input(p)
-            before = file_signature(p)
-            series, _, minus_ref = _read_with_reference(p, opts, reference)
-            loaded[j] = (series, minus_ref, before)
-        except AccalError as exc:
-            yield j, FileOutcome(p, False, failure_message(p, exc))
-        except OSError as exc:
-            yield j, FileOutcome(p, False, write_error_message(p, exc))
-    good = sorted(loaded)
-    keys = [(loaded[j][0].satellite, float(loaded[j][0].time[0]), float(loaded[j][0].time[-1]))
-            for j in good]  # fmt: skip
-    arcs, notes = group_arcs(keys, opts.arc)
-    for arc in arcs:
-        js = [good[k] for k in arc]
-        names = [paths[j].name for j in js]
-        try:
-            days = fit_arc(
-                [paths[j] for j in js],
-                [loaded[j][0] for j in js],
-                [loaded[j][1] for j in js],
-                opts,
-            )
-            first, last = (
-                gps_to_date(float(loaded[j][0].time[k])) for j, k in ((js[0], 0), (js[-1], -1))
-            )
-            who = loaded[js[0]][0].satellite or output_stem(paths[js[0]])
-            par_name = f"arc_{who}_{first}_{last}.bias_basis.{opts.fmt}"
-            info = {"sources": names, "parameters": par_name, "first": first, "last": last}
-            write_table(
-                parameter_table(days[0].fit),
-                out_dir / par_name,
-                fmt=opts.fmt,
-                units=PARAMETER_UNITS,
-                meta={"sources": names, **report_entry(days[0])},
-            )
-            write_covariance(out_dir / f"arc_{who}_{first}_{last}.reference_cov.npz", days[0].fit)
-            for j, day in zip(js, days, strict=True):
-                series, minus_ref, before = loaded[j]
-                series = _with_warnings(series, *(n for n in notes if first in n))
-                out = _reference_outputs(paths[j], out_dir, opts, series, minus_ref, day, info)
-                yield j, dataclasses.replace(out, peak_rss=_peak_rss_mb(), signature=before)
-        except AccalError as exc:
-            for j in js:
-                msg = f"arc of {len(js)} inputs ({names[0]} .. {names[-1]}): {exc}"
-                yield (
-                    j,
-                    FileOutcome(paths[j], False, failure_message(paths[j], ValidationError(msg))),
-                )
-        except OSError as exc:
-            for j in js:
-                yield j, FileOutcome(paths[j], False, write_error_message(paths[j], exc))
 
 
 def _table_if_exists(out_dir: Path, fmt: str) -> Path | None:
