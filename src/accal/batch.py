@@ -31,6 +31,7 @@ import hashlib
 import json
 import os
 import re
+import secrets
 import stat
 import time as _time
 import warnings
@@ -316,6 +317,7 @@ class OutputLock:
     def __init__(self, out_dir: Path, what: str = "accal") -> None:
         self.path = Path(out_dir) / LOCK
         self.what = what
+        self.token: str | None = None  # names this run in the lock file (run_guard)
         self._fh: Any = None
 
     def acquire(self) -> None:
@@ -336,7 +338,11 @@ class OutputLock:
             ) from None
         fh.seek(0)
         fh.truncate()
-        fh.write(f"pid {os.getpid()}, {self.what}, started {_time.strftime('%Y-%m-%d %H:%M:%S')}")
+        self.token = secrets.token_hex(8)
+        fh.write(
+            f"pid {os.getpid()}, {self.what}, started {_time.strftime('%Y-%m-%d %H:%M:%S')}, "
+            f"run {self.token}"
+        )
         fh.flush()
         self._fh = fh
         _HELD_LOCKS.add(self)

@@ -23,6 +23,7 @@ import numpy as np
 
 from accal import __version__
 from accal.batch import (
+    LOCK,
     Outcome,
     check_input,
     failure_message,
@@ -31,6 +32,7 @@ from accal.batch import (
     write_error_message,
 )
 from accal.errors import AccalError, ValidationError, check_option
+from accal.io.writers import run_guard
 from accal.plausibility import flag_wild_samples
 from accal.series import ACC_UNIT_FACTORS, AccSeries, acceleration_factor
 
@@ -1139,13 +1141,22 @@ def options_key(opts: GraceBiasOptions) -> dict[str, Any]:
     return json.loads(json.dumps(d, sort_keys=True))
 
 
-def process_one(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutcome:
+def process_one(
+    path: Path, out_dir: Path, opts: GraceBiasOptions, run_token: str | None = None
+) -> FileOutcome:
     """:func:`process_file` with every failure turned into a one-line :class:`FileOutcome`.
 
     Module-level and picklable: this is the task the worker processes and the
-    dask workers run.
+    dask workers run.  ``run_token``: the lock token of the submitting run; the
+    task's outputs are renamed into ``out_dir`` only while that run holds the lock
+    (:func:`accal.io.writers.run_guard`), so a task orphaned by a killed run cannot
+    overwrite a later run's outputs.
     """
-    path = Path(path)
+    with run_guard(Path(out_dir) / LOCK if run_token else None, run_token):
+        return _process_one(Path(path), out_dir, opts)
+
+
+def _process_one(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutcome:
     try:
         check_input(path)
         if path.is_dir():
@@ -1269,7 +1280,7 @@ def run(
             f"{out_dir} holds bias_drift.{other} of --format {other} runs; use --format "
             f"{other} there, or another --out for {opts.fmt}"
         )
-    with OutputLock(out_dir, "accal grace-bias"):
+    with OutputLock(out_dir, "accal grace-bias") as lock:
         remove_stale_temporaries(out_dir)
         rlog = RunLog(out_dir, enabled=log)
         try:
@@ -1317,7 +1328,7 @@ def run(
                     rlog(f"skip {p}: outputs current")
                 else:
                     todo.append(i)
-            task = functools.partial(process_one, out_dir=out_dir, opts=opts)
+            task = functools.partial(process_one, out_dir=out_dir, opts=opts, run_token=lock.token)
             pending: list[FileOutcome] = []
             last = _time.monotonic()
             if opts.arc != "day":

@@ -19,13 +19,57 @@ from typing import Any
 
 import numpy as np
 
-from accal.errors import check_option
+from accal.errors import AccalError, check_option
 
 FORMATS = ("parquet", "csv")
 #: In the name of every temporary file accal writes (``.NAME.accal-XXXXXXXX.tmp``), so
 #: that the clean-up after a killed run removes accal's temporaries only (issue 23:
 #: every ``.*.tmp`` of the output directory went, other programs' too).
 TEMP_MARK = "accal-"
+
+
+class RunSuperseded(AccalError):
+    """A later run holds the output directory: this (orphaned) task must not write."""
+
+
+#: (lock file, token) of the run whose task this process is doing (:func:`run_guard`).
+_RUN_GUARD: tuple[Path, str] | None = None
+
+
+@contextlib.contextmanager
+def run_guard(lock_path: str | Path | None, token: str | None) -> Iterator[None]:
+    """Let :func:`atomic_path` rename into the lock's directory only while ``token`` holds it.
+
+    A batch task (a worker process, a Dask task) runs under the guard of the run that
+    submitted it.  Each rename of an output into that directory first checks that the
+    lock file still names ``token``: when the submitting run was killed and a later run
+    took the lock, the orphaned task's outputs are dropped (:class:`RunSuperseded`)
+    instead of overwriting the later run's (issue 23, finding 1).
+    """
+    global _RUN_GUARD
+    before = _RUN_GUARD
+    _RUN_GUARD = None if lock_path is None or token is None else (Path(lock_path), token)
+    try:
+        yield
+    finally:
+        _RUN_GUARD = before
+
+
+def _check_run(path: Path) -> None:
+    if _RUN_GUARD is None:
+        return
+    lock, token = _RUN_GUARD
+    if os.path.realpath(path.parent) != os.path.realpath(lock.parent):
+        return
+    try:
+        holder = lock.read_text(errors="replace")
+    except OSError:
+        holder = ""
+    if f"run {token}" not in holder:
+        raise RunSuperseded(
+            f"{lock.parent}: a later accal run holds this output directory; {path.name} of "
+            "this task of an earlier (interrupted) run is dropped"
+        )
 
 
 @contextlib.contextmanager
@@ -60,6 +104,7 @@ def atomic_path(path: str | Path, *, sync: bool = True) -> Iterator[Path]:
         if sync:
             with open(tmp_path, "rb+") as fh:
                 os.fsync(fh.fileno())
+        _check_run(path)
         try:
             os.replace(tmp_path, path)
         except OSError as exc:  # name the file asked for, not the temporary (issue 23)
