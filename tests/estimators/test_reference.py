@@ -202,7 +202,7 @@ def test_crosstalk_test_flags_a_real_cross_term_only():
         fit = fit_reference(t, raw, ref, np.ones(t.size, bool), basis, scale="fit-matrix")
         assert fit.crosstalk_test["dof"] == 6
         p[name] = fit.crosstalk_test["p"]
-    assert p["cross"] < 1e-6 < 1e-3 < p["clean"]
+    assert p["cross"] < 1e-4 < 1e-3 < p["clean"]
     assert fit.modes[2] == "fit-matrix"
     assert abs(fit.scale[2, 0] - 0.005) < 3 * fit.scale_sigma[2, 0]
 

@@ -145,6 +145,32 @@ class ArModel:
             out[idx] = e / np.sqrt(self.v[m])
         return out
 
+    def whiten_adjoint(self, v: NDArray[np.float64], pos: NDArray[np.int64]) -> NDArray[np.float64]:
+        """``Wᵀ v``: the transpose of :meth:`whiten` (samples along axis 0).
+
+        Needed for the weights of the estimator in the data domain,
+        ``g = Wᵀ X̃ A⁻¹`` (:func:`accal.estimators.reference.fit_reference`).
+        """
+        v = np.asarray(v, dtype=np.float64)
+        p = self.order
+        n = v.shape[0]
+        # rows with m = pos < p use the partial predictors; the others the order-p filter
+        part = pos < p
+        main = np.where(part, 0.0, 1.0)
+        vm = v * (main / np.sqrt(self.v[p])).reshape((-1,) + (1,) * (v.ndim - 1))
+        out = vm.copy()
+        for j in range(1, p + 1):
+            out[: n - j] -= self.phi[p][j - 1] * vm[j:]
+        for m in range(min(p, int(pos.max(initial=0)) + 1)):
+            idx = np.flatnonzero(pos == m)
+            if idx.size == 0:
+                continue
+            vk = v[idx] / np.sqrt(self.v[m])
+            out[idx] += vk
+            for j in range(1, m + 1):
+                np.subtract.at(out, idx - j, self.phi[m][j - 1] * vk)
+        return out
+
     def psd(self, f: NDArray[np.float64], dt: float) -> NDArray[np.float64]:
         """One-sided power spectral density of the model at ``f`` [Hz] [unit²/Hz]."""
         p = self.order

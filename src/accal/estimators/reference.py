@@ -40,6 +40,7 @@ from scipy import linalg, stats
 from accal.errors import ValidationError, check_option
 from accal.estimators.arnoise import ArModel, fit_ar, segment_positions
 from accal.estimators.refbasis import BiasBasis
+from accal.estimators.trend import linear_estimator_covariance
 
 __all__ = ["SCALE_MODES", "ReferenceFit", "fit_reference"]
 
@@ -307,6 +308,74 @@ def _unidentifiable(cov, theta, free, axis, max_rel_sigma) -> str:
     return ""
 
 
+#: Largest number of parameters of one row whose data-domain weights the sandwich
+#: covariance evaluates one by one; beyond it the basis coefficients share one factor
+#: from :data:`SANDWICH_SAMPLE` evenly spaced ones (memory: one weight vector of the
+#: arc's length per parameter evaluated).
+SANDWICH_MAX = 24
+SANDWICH_SAMPLE = 6
+
+
+def _honest_cov(
+    ax: _Axis, inv: NDArray, s0: float, free: NDArray, ar: ArModel, t, r, basis
+) -> tuple[NDArray, NDArray]:
+    """Covariance of the free parameters of one row that holds for noise the AR model misses.
+
+    The estimate is linear in the reference, θ = G y with G = A⁻¹X̃ᵀW; its covariance
+    under the residual's own spectrum, ``G C Gᵀ``, is evaluated with the FFT method of
+    :func:`accal.estimators.trend.linear_estimator_covariance` (the one the wavelet
+    fit's σ use) on the weights ``Wᵀ X̃ A⁻¹ e_j`` (:meth:`ArModel.whiten_adjoint`).
+    The result is the model's covariance ``σ0² A⁻¹`` plus the positive part of the
+    difference (eigenvalues clipped at 0): where the residual holds a red component,
+    a spectral line or an f⁴ rise the AR(p) cannot follow, the σ (and the
+    scale–bias correlations that the bias' σ depend on) come from the data, not the
+    model.  With more than :data:`SANDWICH_MAX` free parameters this is done for
+    the scales and :data:`SANDWICH_SAMPLE` evenly spaced basis coefficients, and the
+    other coefficients' variances get the median inflation of those.
+
+    Returns the covariance and the variance inflation of each parameter (≥ 1).
+    """
+    idx = np.flatnonzero(free)
+    p = idx.size
+    model = inv * s0**2
+    n_scale = int(free[:3].sum())
+    if p <= SANDWICH_MAX:
+        sel = np.arange(p)
+    else:
+        rest = np.arange(n_scale, p)
+        pick = np.linspace(0, rest.size - 1, SANDWICH_SAMPLE).round().astype(int)
+        sel = np.r_[np.arange(n_scale), rest[pick]]
+    weights = np.zeros((sel.size, ax.y.size))
+    for s, j in enumerate(sel):
+        c = np.zeros(3 + ax.k)
+        c[idx] = inv[:, j]
+        v = np.empty(ax.y.size)
+        for (a, b), w, (cols, first) in zip(ax.chunks, ax._white, ax._cols, strict=True):
+            sl = slice(3 + first, 3 + first + cols.shape[1])
+            v[a:b] = w[:, :-1] @ np.concatenate([c[:3], c[sl]])
+        for a, b in ax.chunks:
+            weights[s, a:b] = ar.whiten_adjoint(v[a:b], ax.pos[a:b])
+    order = basis.degree if basis.kind == "poly" else 1
+    sw = linear_estimator_covariance(t, r, weights, order=min(order, 2))
+    del weights
+    if not np.all(np.isfinite(sw)):
+        return model, np.ones(p)
+    sub = model[np.ix_(sel, sel)]
+    vals, vecs = np.linalg.eigh(sw - sub)
+    extra = (vecs * np.clip(vals, 0, None)) @ vecs.T
+    out = model.copy()
+    out[np.ix_(sel, sel)] += extra
+    infl = np.diag(out) / np.diag(model)
+    if p > SANDWICH_MAX:  # the coefficients not evaluated: the median inflation
+        others = np.setdiff1d(np.arange(n_scale, p), sel)
+        f = float(np.median(infl[sel[n_scale:]])) if sel.size > n_scale else 1.0
+        d = np.ones(p)
+        d[others] = np.sqrt(f)
+        out = out * np.outer(d, d)
+        infl = np.diag(out) / np.diag(model)
+    return out, infl
+
+
 def _rss_from_normal(mat: NDArray, theta: NDArray) -> float:
     m = theta.size
     return float(mat[m, m] - 2 * theta @ mat[:m, m] + theta @ mat[:m, :m] @ theta)
@@ -417,7 +486,7 @@ def fit_reference(
             else:
                 dof = n - int(free.sum())
                 s0 = np.sqrt(rss / dof)
-                cov = inv * s0**2
+                cov, infl = _honest_cov(ax, inv, s0, free, ar, t, r, basis)
                 why = _unidentifiable(cov, theta, free, i, max_scale_sigma)
                 if mode == "fixed" or not why:
                     break
@@ -427,6 +496,7 @@ def fit_reference(
                 + (f" at {apriori[i]:g}" if fallback == "fixed" else "")
             )
             mode = fallback
+        n_free_scale = int(free[:3].sum())
         # cross-talk test: the full row against the diagonal one, same weights (eq. 2)
         full = np.ones(3 + k, dtype=bool)
         full[3:] = ~unsupported
@@ -435,7 +505,11 @@ def fit_reference(
         try:
             th_f, _ = _solve(mat, full, np.zeros(3 + k), eiv)
             th_d, _ = _solve(mat, diag, np.zeros(3 + k), eiv)
-            chi2_total += (_rss_from_normal(mat, th_d) - _rss_from_normal(mat, th_f)) / s0**2
+            # the residual's misfit of the AR model inflates the test statistic as it
+            # does the scale's variance: deflate by the same factor (≥ 1)
+            chi2_total += (_rss_from_normal(mat, th_d) - _rss_from_normal(mat, th_f)) / (
+                s0**2 * float(infl[:n_free_scale].max(initial=1.0))
+            )
             chi2_dof += 2
         except ValidationError:
             pass
