@@ -10,7 +10,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 OUT    ?= out
 
-.PHONY: install run demo test test-all lint bench bench-readers bench-archive bench-demod-year bench-closure closure-detection mc-sigma mc-sigma-indep mc-sigma-demod clean
+.PHONY: install run demo test test-all lint bench bench-readers bench-archive bench-demod-year bench-closure closure-detection mc-sigma mc-sigma-indep mc-sigma-demod mc-reference bench-reference clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -75,6 +75,10 @@ mc-sigma-demod: $(STAMP)
 ## mc-reference: Monte-Carlo of the reference fit (issue 22): scales, bias and cross-talk test on 30-day 1 Hz arcs (~18 min on 2 cores)
 mc-reference: $(STAMP)
 	$(BIN)/python benchmarks/mc_reference.py
+
+## bench-reference: a 30-day 1 Hz arc through the CLI, --scale fit-matrix --bias-basis spline:6h --arc 30d: time and peak RSS vs the wavelet baseline (issue 22)
+bench-reference: $(STAMP)
+	$(BIN)/python benchmarks/bench_reference.py
 
 bench-readers: $(STAMP)
 	$(BIN)/python benchmarks/bench_readers.py
