@@ -329,9 +329,10 @@ def _honest_cov(
     difference (eigenvalues clipped at 0): where the residual holds a red component,
     a spectral line or an f⁴ rise the AR(p) cannot follow, the σ (and the
     scale–bias correlations that the bias' σ depend on) come from the data, not the
-    model.  With more than :data:`SANDWICH_MAX` free parameters this is done for
-    the scales and :data:`SANDWICH_SAMPLE` evenly spaced basis coefficients, and the
-    other coefficients' variances get the median inflation of those.
+    model.  With more than :data:`SANDWICH_MAX` free parameters (arcs) the scales
+    and :data:`SANDWICH_SAMPLE` evenly spaced basis coefficients are evaluated and
+    the row's whole covariance is scaled by the median of their variance ratios
+    (at least 1).
 
     Returns the covariance and the variance inflation of each parameter (≥ 1).
     """
@@ -360,20 +361,18 @@ def _honest_cov(
     del weights
     if not np.all(np.isfinite(sw)):
         return model, np.ones(p)
+    if p > SANDWICH_MAX:
+        # one factor for the row: the model's correlations stay whole (the bias of an
+        # arc is B = −S⁻¹D, whose σ rests on cancelling scale–bias correlations that
+        # a partial correction breaks: tried, bias σ 10× too large in make mc-reference)
+        ratio = np.diag(sw) / np.diag(model)[sel]
+        f = max(1.0, float(np.median(ratio[np.isfinite(ratio)])))
+        return model * f, np.full(p, f)
     sub = model[np.ix_(sel, sel)]
     vals, vecs = np.linalg.eigh(sw - sub)
     extra = (vecs * np.clip(vals, 0, None)) @ vecs.T
-    out = model.copy()
-    out[np.ix_(sel, sel)] += extra
-    infl = np.diag(out) / np.diag(model)
-    if p > SANDWICH_MAX:  # the coefficients not evaluated: the median inflation
-        others = np.setdiff1d(np.arange(n_scale, p), sel)
-        f = float(np.median(infl[sel[n_scale:]])) if sel.size > n_scale else 1.0
-        d = np.ones(p)
-        d[others] = np.sqrt(f)
-        out = out * np.outer(d, d)
-        infl = np.diag(out) / np.diag(model)
-    return out, infl
+    out = model + extra
+    return out, np.diag(out) / np.diag(model)
 
 
 def _rss_from_normal(mat: NDArray, theta: NDArray) -> float:
