@@ -28,12 +28,16 @@ Generator (SRF: x along-track, y cross-track, z radial; all numbers in m/s²)
   was not designed for: an AR model cannot whiten a line) white 3e-9 plus a once-per-rev
   sinusoid of 5e-10 whose phase random-walks by 1 rad per √day.
 
-Fits per arc, truth and reference noise (:data:`CONFIGS`): ``spline:6h`` over the arc
-with ``scale="fit"`` and ``"fit-matrix"``, and ``poly1`` per day (each day its own
-fit), both on the ``cross`` and on the ``diag`` truth; the days are noise-model
-segments (``breaks``) as ``grace-bias --arc`` sets them.  Without a reference, each day
-of x is also fitted by the wavelet trend (``fit_trends(method="wavelet", order=1)``):
-its day mean against the true day mean of b is the reference-free error.
+Truths and fits (:data:`TRUTHS`, :data:`CONFIGS`; the same signal, accelerometer noise
+and reference noise for every truth of a replicate): ``cross``/``diag`` (S with/without
+cross-talk, spline bias) fitted with ``spline:6h`` over the arc (``scale="fit"`` and
+``"fit-matrix"``; on ``cross`` also ``poly1`` per day, a bias model that cannot follow
+the 6 h spline, to show what that costs); ``cross/lin``/``diag/lin`` (a bias that is a
+line per day) fitted with ``poly1`` per day, each day its own fit.  The days are
+noise-model segments (``breaks``) as ``grace-bias --arc`` sets them.  Without a
+reference, each day of raw x is also fitted by the wavelet trend
+(``fit_trends(method="wavelet", order=1)``): its day mean against the true day mean of b
+is the reference-free error.
 
 Reported per case: scatter/σ (std of z) and mean z of each scale entry and of the bias
 at every day start, the fractions |z| > 2 and > 3, the cross-talk test's p-values
@@ -44,8 +48,12 @@ wavelet's, the run time per fit and the peak RSS of the fitting process during a
 ``--out`` and ``docs/figures/reference_mc.png``.
 
 Run: ``python benchmarks/mc_reference.py [--quick] [--days D] [--reps R] [--workers W]``
-(default: the 30-day arcs of issue 22 at 1 Hz, 6 replicates of every case, 2
-processes, ~18 min; ``--quick``: 2-day arcs, 5 replicates, ~2 min).
+(default: the 30-day arcs of issue 22 at 1 Hz, 5 replicates of every case, 2
+processes: 17 min, 23 min with the data-domain σ of the fit; ``--quick``: 2-day arcs,
+5 replicates, ~2 min).  The estimator is the one importable as ``accal`` (e.g.
+``PYTHONPATH=/path/to/snapshot/src`` to measure a frozen tree): its file hashes are in
+``results.json``.  ``--replot`` redraws the tables and the figure from
+``OUT/results.json``.
 """
 
 from __future__ import annotations
@@ -516,7 +524,8 @@ def markdown(rows: list[dict], meta: dict) -> str:
     lines = [
         f"Monte-Carlo of `fit_reference`: {meta['days']:g}-day arcs at 1 Hz, {meta['reps']} "
         f"replicate(s) per case, {meta['wall_s'] / 60:.1f} min on {meta['workers']} "
-        f"process(es) (accal {meta['git']}).",
+        f"process(es) (accal {meta['git']}, estimator sha256 "
+        f"{meta.get('code', {}).get('sha256', {}).get('reference.py', '?')}).",
         "",
         "z = (estimate − truth)/σ; cells `std z (mean z)`, target std 0.8–1.25; "
         "tails `% |z|>2 / % |z|>3` (Gaussian 4.6/0.3 %). Bias z at every day start. "
@@ -661,41 +670,63 @@ def figure(records: list[dict], rows: list[dict], path: Path) -> None:
             ax.set_title(f"{truth} truth, {basis}, scale={mode}", fontsize=10)
             ax.legend(fontsize=7, loc="upper left")
     ax = axes[0, 2]
-    shown = [r for r in rows if "scale" in r and r.get("wavelet_daymean_rms_x") is not None]
-    y = np.arange(len(shown))
-    ax.barh(y - 0.2, [r["daymean_rms_err"][0] for r in shown], height=0.4, color="C0",
-            label="with reference (fit_reference)")  # fmt: skip
-    ax.barh(y + 0.2, [r["wavelet_daymean_rms_x"] for r in shown], height=0.4, color="C3",
-            label="no reference (wavelet, per day)")  # fmt: skip
+    bars = (
+        ("cross", "spline:6h", "fit-matrix", "C0", "with reference: spline:6h, fit-matrix"),
+        ("cross/lin", "poly1/day", "fit-matrix", "C2", "with reference: poly1/day, fit-matrix"),
+    )
+    y = np.arange(len(noises))
+    for j, (truth, basis, mode, color, label) in enumerate(bars):
+        val = [
+            next(
+                (
+                    r["daymean_rms_err"][0]
+                    for r in rows
+                    if (r["truth"], r["noise"], r["basis"], r["mode"]) == (truth, nz, basis, mode)
+                    and "scale" in r
+                ),
+                np.nan,
+            )
+            for nz in noises
+        ]
+        ax.barh(y - 0.27 + 0.27 * j, val, height=0.27, color=color, label=label)
+    wav = [r.get("wavelet_daymean_rms_x") for r in rows if r["truth"] == "cross"]
+    wav = next((w for w in wav if w is not None), np.nan)
+    ax.barh(y + 0.27, [wav] * len(noises), height=0.27, color="C3",
+            label="no reference: wavelet per day (same raw data)")  # fmt: skip
     ax.set_xscale("log")
-    ax.set_yticks(y, [f"{r['truth']} {r['noise']} {r['basis']} {r['mode']}" for r in shown],
-                  fontsize=6)  # fmt: skip
+    ax.set_yticks(y, [f"{nz}\n(cross truth)" for nz in noises], fontsize=8)
     ax.invert_yaxis()
     ax.set_xlabel("RMS error of the day-mean bias on x [m/s²]")
     ax.legend(fontsize=7, loc="lower right")
     ax = axes[1, 2]
-    pp = np.linspace(0, 1, 101)
+    pp = np.logspace(-5, 0, 101)
+    cases = (
+        ("diag", "spline:6h", "fit", "-"),
+        ("diag/lin", "poly1/day", "fit", "--"),
+        ("cross", "spline:6h", "fit", ":"),
+    )
     for k, noise in enumerate(noises):
-        for truth, ls in (("diag", "-"), ("cross", ":")):
+        for truth, basis, mode, ls in cases:
             p = np.array(
                 [
                     r["p"]
                     for r in records
                     if (r["truth"], r["basis"], r["mode"], r["noise"])
-                    == (truth, "spline:6h", "fit", noise)
+                    == (truth, basis, mode, noise)
                     and "error" not in r
                 ],
                 float,
             )
             if p.size:
-                p = np.clip(p, 1e-4, 1.0)  # p = 0 drawn at the left edge
+                p = np.clip(p, 1e-5, 1.0)  # p below 1e-5 drawn at the left edge
                 ax.step(np.sort(p), np.arange(1, p.size + 1) / p.size, where="post", ls=ls,
-                        color=f"C{k}", label=f"{truth}, {noise} (n={p.size})")  # fmt: skip
-    ax.plot(pp, pp, "k--", lw=1, label="uniform (calibrated test)")
+                        color=f"C{k}", label=f"{truth} {basis}, {noise} (n={p.size})")  # fmt: skip
+    ax.plot(pp, pp, "k", lw=0.8, label="uniform (a calibrated test on a diagonal S)")
+    ax.axvline(0.05, color="0.6", lw=0.8)
     ax.set_xscale("log")
-    ax.set_xlim(1e-4, 1)
-    ax.set_xlabel("cross-talk test p (spline:6h, scale=fit): empirical CDF")
-    ax.legend(fontsize=6, loc="lower right")
+    ax.set_xlim(1e-5, 1)
+    ax.set_xlabel("cross-talk test p (scale=fit), empirical CDF; p < 1e-5 at the left edge")
+    ax.legend(fontsize=5.5, loc="upper left", ncol=2)
     fig.suptitle(
         f"fit_reference Monte-Carlo: {records[0]['days']:g}-day arcs at 1 Hz "
         "(benchmarks/mc_reference.py)"
@@ -706,23 +737,37 @@ def figure(records: list[dict], rows: list[dict], path: Path) -> None:
     plt.close(fig)
 
 
-def _git() -> str:
+def code_state() -> dict:
+    """Which estimator ran: ``git describe`` of the tree and a hash of each estimator
+    module as imported (the tree may change while a long run goes on; the workers are
+    forked after the import, so the hash is that of the code they ran)."""
+    import hashlib
     import subprocess
 
+    import accal.estimators.arnoise as m_ar
+    import accal.estimators.refbasis as m_basis
+    import accal.estimators.reference as m_ref
+    import accal.estimators.trend as m_trend
+
     try:
-        return subprocess.run(
-            ["git", "-C", str(ROOT), "describe", "--always", "--dirty"],
+        git = subprocess.run(
+            ["git", "-C", str(Path(m_ref.__file__).parent), "describe", "--always", "--dirty"],
             capture_output=True, text=True, check=True,
         ).stdout.strip()  # fmt: skip
     except (OSError, subprocess.CalledProcessError):
-        return "unknown"
+        git = "unknown (not a git tree)"
+    sha = {
+        Path(m.__file__).name: hashlib.sha256(Path(m.__file__).read_bytes()).hexdigest()[:12]
+        for m in (m_ref, m_ar, m_basis, m_trend)
+    }
+    return {"git": git, "accal": str(Path(m_ref.__file__).parents[2]), "sha256": sha}
 
 
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="2-day arcs, 5 replicates (~2 min)")
     ap.add_argument("--days", type=float, default=None, help="arc length [days] (30)")
-    ap.add_argument("--reps", type=int, default=None, help="replicates per case (6)")
+    ap.add_argument("--reps", type=int, default=None, help="replicates per case (5)")
     ap.add_argument("--noises", default=None, help=f"comma list of {', '.join(NOISES)}")
     ap.add_argument("--truths", default=",".join(TRUTHS))
     ap.add_argument("--workers", type=int, default=2)
@@ -734,7 +779,7 @@ def main(argv: list[str] | None = None) -> None:
     )
     args = ap.parse_args(argv)
     args.days = args.days or (2.0 if args.quick else 30.0)
-    args.reps = args.reps or (5 if args.quick else 6)
+    args.reps = args.reps or 5
     args.noises = tuple((args.noises or ",".join(NOISES)).split(","))
     args.truths = tuple(args.truths.split(","))
     for nm in args.noises:
@@ -749,6 +794,8 @@ def main(argv: list[str] | None = None) -> None:
         meta, records = saved["meta"], saved["records"]
     else:
         tasks = make_tasks(args)
+        code = code_state()  # before the run: the workers fork from this image
+        print(f"# estimator: {code}", file=sys.stderr, flush=True)
         t0 = time.perf_counter()
         records = run_all(tasks, min(args.workers, 2))
         meta = {
@@ -756,7 +803,8 @@ def main(argv: list[str] | None = None) -> None:
             "reps": args.reps,
             "workers": min(args.workers, 2),
             "wall_s": time.perf_counter() - t0,
-            "git": _git(),
+            "git": code["git"],
+            "code": code,
             "noises": list(args.noises),
             "truths": list(args.truths),
         }
