@@ -72,7 +72,7 @@ mc-sigma-indep: $(STAMP)
 mc-sigma-demod: $(STAMP)
 	$(BIN)/python benchmarks/mc_sigma_demod.py
 
-## mc-reference: Monte-Carlo of the reference fit (issue 22): scales, bias and cross-talk test on 30-day 1 Hz arcs (~18 min on 2 cores)
+## mc-reference: Monte-Carlo of the reference fit (issue 22): scales, bias and cross-talk test on 30-day 1 Hz arcs (~25 min on 2 cores)
 mc-reference: $(STAMP)
 	$(BIN)/python benchmarks/mc_reference.py
 
