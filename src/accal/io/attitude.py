@@ -98,14 +98,15 @@ from accal.io._common import (
 from accal.io.grace_l1b import (
     SATELLITES,
     _check_header_span,
-    _grace_int,
     _header_time,
     _parse_grace_header,
     _record_count,
     _span,
     _split_header,
     _yaml_line,
+    header_satellite,
     load_yaml_header,
+    refuse_binary,
 )
 from accal.series import UNITS
 
@@ -512,19 +513,8 @@ def _interpret_grace(header: bytes, path: Path) -> dict[str, Any]:
                 path,
                 lines[file_type],
             )
-    fmt = _grace_int(meta, lines, "FILE FORMAT 0=BINARY 1=ASCII", path)
-    if fmt == 0:
-        raise UnsupportedFormatError(
-            "binary SCA1B (FILE FORMAT 0) is not supported; use the ASCII file", path
-        )
-    sat = str(meta.get("SATELLITE NAME", ""))
-    letter = sat.split()[-1] if sat.split() else ""
-    if letter not in SATELLITES:
-        raise FormatError(
-            f"header 'SATELLITE NAME' is {_short(sat, 40)}, expected 'GRACE A' ... 'GRACE D'",
-            path,
-            lines.get("SATELLITE NAME"),
-        )
+    refuse_binary(meta, lines, path, "SCA1B")
+    letter = header_satellite(meta, lines, path)
     first, last = (
         _header_time(meta.get(key), key, path, lines.get(key))
         for key in ("TIME FIRST OBS(SEC PAST EPOCH)", "TIME LAST OBS(SEC PAST EPOCH)")

@@ -311,14 +311,7 @@ def _interpret_grace(header: bytes, path: Path) -> dict[str, Any]:
                 path,
                 lines[file_type],
             )
-    sat = str(meta.get("SATELLITE NAME", ""))
-    letter = sat.split()[-1] if sat.split() else ""
-    if letter not in SATELLITES:
-        raise FormatError(
-            f"header 'SATELLITE NAME' is {_short(sat, 40)}, expected 'GRACE A' ... 'GRACE D'",
-            path,
-            lines.get("SATELLITE NAME"),
-        )
+    letter = header_satellite(meta, lines, path)
     fmt = _grace_int(meta, lines, "FILE FORMAT 0=BINARY 1=ASCII", path)
     if fmt not in (None, 0, 1):
         raise FormatError(f"header 'FILE FORMAT' is {fmt}, expected 0 or 1", path)
@@ -1016,6 +1009,35 @@ def _calendar(t: float) -> str:
     s = str(gps_to_gps_calendar([t])[0])  # 'YYYY-MM-DDTHH:MM:SS.fffffffff'
     date, _, clock = s.partition("T")
     return f"{date} {clock[:11]}"
+
+
+def header_satellite(meta: dict[str, Any], lines: dict[str, int], path: Path) -> str:
+    """The satellite letter (A-D) of a GRACE-style header's ``SATELLITE NAME``.
+
+    Raises
+    ------
+    FormatError
+        Naming the file and header line when the name is not 'GRACE A' ... 'GRACE D'.
+    """
+    sat = str(meta.get("SATELLITE NAME", ""))
+    letter = sat.split()[-1] if sat.split() else ""
+    if letter not in SATELLITES:
+        raise FormatError(
+            f"header 'SATELLITE NAME' is {_short(sat, 40)}, expected 'GRACE A' ... 'GRACE D'",
+            path,
+            lines.get("SATELLITE NAME"),
+        )
+    return letter
+
+
+def refuse_binary(meta: dict[str, Any], lines: dict[str, int], path: Path, product: str) -> None:
+    """UnsupportedFormatError for a binary (``FILE FORMAT 0``) file of an ASCII-only reader."""
+    if _grace_int(meta, lines, "FILE FORMAT 0=BINARY 1=ASCII", path) == 0:
+        raise UnsupportedFormatError(
+            f"binary {product} files are not supported (use the ASCII product)",
+            path,
+            lines.get("FILE FORMAT 0=BINARY 1=ASCII"),
+        )
 
 
 def calendar_text(t: float) -> str:

@@ -83,7 +83,9 @@ from accal.io.grace_l1b import (
     _grace_int,
     _parse_grace_header,
     _split_header,
+    header_satellite,
     load_yaml_header,
+    refuse_binary,
 )
 from accal.series import UNITS
 
@@ -426,21 +428,8 @@ def _interpret_grace(header: bytes, path: Path) -> dict[str, Any]:
                 path,
                 lines[file_type],
             )
-    fmt = _grace_int(meta, lines, "FILE FORMAT 0=BINARY 1=ASCII", path)
-    if fmt == 0:
-        raise UnsupportedFormatError(
-            "binary AHK1B files are not supported (use the ASCII product)",
-            path,
-            lines.get("FILE FORMAT 0=BINARY 1=ASCII"),
-        )
-    sat = str(meta.get("SATELLITE NAME", ""))
-    letter = sat.split()[-1] if sat.split() else ""
-    if letter not in SATELLITES:
-        raise FormatError(
-            f"header 'SATELLITE NAME' is {sat!r}, expected 'GRACE A' ... 'GRACE D'",
-            path,
-            lines.get("SATELLITE NAME"),
-        )
+    refuse_binary(meta, lines, path, "AHK1B")
+    letter = header_satellite(meta, lines, path)
     return {
         "meta": {"grace": meta},
         "letter": letter,

@@ -94,7 +94,9 @@ from accal.io.grace_l1b import (
     _grace_int,
     _parse_grace_header,
     _split_header,
+    header_satellite,
     load_yaml_header,
+    refuse_binary,
 )
 
 #: The 14 thrusters in record order: attitude control branch 1 and 2, thrusters 1-6
@@ -303,21 +305,8 @@ def _interpret_grace(header: bytes, path: Path) -> dict[str, Any]:
             raise UnsupportedFormatError(
                 f"file type {m.group(0)!r} is not thruster data (THR1B)", path, lines[file_type]
             )
-    fmt = _grace_int(meta, lines, "FILE FORMAT 0=BINARY 1=ASCII", path)
-    if fmt == 0:
-        raise UnsupportedFormatError(
-            "binary THR1B files are not supported (use the ASCII product)",
-            path,
-            lines.get("FILE FORMAT 0=BINARY 1=ASCII"),
-        )
-    sat = str(meta.get("SATELLITE NAME", ""))
-    letter = sat.split()[-1] if sat.split() else ""
-    if letter not in SATELLITES:
-        raise FormatError(
-            f"header 'SATELLITE NAME' is {one_line(sat, 40)!r}, expected 'GRACE A' ... 'GRACE D'",
-            path,
-            lines.get("SATELLITE NAME"),
-        )
+    refuse_binary(meta, lines, path, "THR1B")
+    letter = header_satellite(meta, lines, path)
     n = _grace_int(meta, lines, "NUMBER OF DATA RECORDS", path)
     return {
         "meta": {"grace": meta},
