@@ -665,30 +665,68 @@ def _read_with_reference(
     return series.replace(report=minus_ref.report), minus_ref, minus_ref
 
 
-def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutcome:
-    """Run the whole chain on one input and write its calibrated series and report.
+@dataclass(frozen=True)
+class InputFit:
+    """The fits of one input and its calibrated series, before anything is written.
 
-    Raises
-    ------
-    AccalError
-        On bad input; nothing is written for this input then.
+    What :func:`fit_input` returns (and :func:`process_file` writes; the Python API,
+    :mod:`accal.api`, returns it in memory).
+
+    Attributes
+    ----------
+    series : AccSeries
+        The input, with the warnings of the fit appended to its report.
+    fit_series : AccSeries
+        The series the estimators fitted (``raw − reference``, minus the instrument
+        effects the closure removed).
+    calibrated : AccSeries
+        ``scale·(a_raw − trend)`` of the first method (effects removed with ``close_loop``).
+    use : ndarray of bool
+        The samples used (the calibrated file's ``valid`` column).
+    fits : dict
+        ``{(axis, method): TrendFit}``.
+    rows : list of dict
+        The ``bias_drift`` rows (one per axis and method).
+    closure : dict
+        ``{axis: {"summary", "instrument", "model", ...}}`` with ``close_loop`` (else empty).
+    exclude : dict
+        Per axis, samples left out of that axis' refit (a coupling's uncovered samples).
+    outputs : tuple of Path
+        The closure's plots (``opts.plots``).
+    """
+
+    series: AccSeries
+    fit_series: AccSeries
+    calibrated: AccSeries
+    use: np.ndarray
+    fits: dict[tuple[str, str], Any]
+    rows: list[dict[str, Any]]
+    closure: dict[str, Any]
+    exclude: dict[str, np.ndarray]
+    outputs: tuple[Path, ...] = ()
+
+
+def fit_input(
+    path: Path,
+    series: AccSeries,
+    fit_series: AccSeries,
+    ref_series: AccSeries | None,
+    opts: GraceBiasOptions,
+    prefix: Path,
+) -> InputFit:
+    """Fit one read input (wavelet/lsq, closure with ``opts.close_loop``) and calibrate it.
+
+    ``series`` is the input as read, ``fit_series`` what is fitted (``series`` or
+    ``ref_series`` = ``series − reference``); ``path`` names the input in the rows
+    (``source``) and reports; ``prefix`` is where the closure's plots go
+    (``<prefix>.closure.<axis>.png``).  Writes nothing else.
     """
     from accal.calibration import parse_scale
-    from accal.io.writers import write_table
 
-    series, fit_series, ref_series = _read_with_reference(path, opts)
-    stem = output_stem(path)
-    if opts.reference_fit:
-        # imported here: the reference fit's modules import scipy (~0.3 s of start-up)
-        from accal.pipeline_arcs import reference_outputs
-        from accal.pipeline_reference import fit_day
-
-        day = fit_day(path, series, ref_series, opts)
-        return reference_outputs(path, out_dir, opts, series, ref_series, day)
     scale = parse_scale(opts.scale, series.satellite)
     use = np.ones(len(series), bool) if opts.keep_flagged else fit_series.valid
     closure: dict[str, Any] = {}
-    extra_outputs: list[Path] = []
+    plots: list[Path] = []
     close_loop = opts.close_loop
     if close_loop:
         from accal.closure.select import MIN_SAMPLES
@@ -712,8 +750,8 @@ def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutco
         )
 
         fits_before = estimate(fit_series, opts)
-        fit_series, closure, extra_outputs, notes = close_the_loop(
-            path, series, fit_series, use, opts, out_dir / stem
+        fit_series, closure, plots, notes = close_the_loop(
+            path, series, fit_series, use, opts, prefix
         )
         series = _with_warnings(series, *notes)
     exclude = {ax: c["exclude"] for ax, c in closure.items() if c.get("exclude") is not None}
@@ -740,6 +778,41 @@ def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutco
         opts.methods[0],
         scale,
     )
+    return InputFit(
+        series=series,
+        fit_series=fit_series,
+        calibrated=cal,
+        use=use,
+        fits=fits,
+        rows=rows,
+        closure=closure,
+        exclude=exclude,
+        outputs=tuple(plots),
+    )
+
+
+def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutcome:
+    """Run the whole chain on one input and write its calibrated series and report.
+
+    Raises
+    ------
+    AccalError
+        On bad input; nothing is written for this input then.
+    """
+    from accal.io.writers import write_table
+
+    series, fit_series, ref_series = _read_with_reference(path, opts)
+    stem = output_stem(path)
+    if opts.reference_fit:
+        # imported here: the reference fit's modules import scipy (~0.3 s of start-up)
+        from accal.pipeline_arcs import reference_outputs
+        from accal.pipeline_reference import fit_day
+
+        day = fit_day(path, series, ref_series, opts)
+        return reference_outputs(path, out_dir, opts, series, ref_series, day)
+    fitted = fit_input(path, series, fit_series, ref_series, opts, out_dir / stem)
+    series, cal, use, rows = fitted.series, fitted.calibrated, fitted.use, fitted.rows
+    closure, extra_outputs = fitted.closure, list(fitted.outputs)
     meta = {
         "source": path.name,
         "satellite": series.satellite,
@@ -771,7 +844,9 @@ def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutco
     rep_path = out_dir / f"{stem}.report.json"
     _write_json(rep_path, report, sync=False)
     if opts.pool_days:
-        extra_outputs.append(_save_spectra(out_dir / stem, fit_series, opts, exclude, fits))
+        extra_outputs.append(
+            _save_spectra(out_dir / stem, fitted.fit_series, opts, fitted.exclude, fitted.fits)
+        )
     return FileOutcome(
         path,
         True,
