@@ -1,0 +1,159 @@
+"""Noise from the data (issue 20): the residual spectrum and the noise report.
+
+The periodogram of the per-period residual grouped by rest-mask layout
+(:class:`_ResidualSpectra`, pass 1), the PSD fitted to it and the choice between
+it and the a-priori PSD (:func:`_noise_report`), and the σ ratio of the two
+(:func:`_with_sigma_ratio`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..noise import PSD, ResidualSpectrum, fit_residual_psd, psd_nodes, residual_kernel
+from .blocks import _Block, _block_basis, _Setup
+from .records import NoiseReport
+from .weights import _batched_solve, _design_joint
+
+#: Fewest kept periods for σ from the data (``noise="data"``, ``accal demod --psd auto``):
+#: a shorter run keeps the a-priori PSD.  With 24 periods (4 h at τ = 600 s) the σ from
+#: the data scatters by ~6 % from run to run (docs/demod.md, "σ from the data").
+MIN_PERIODS_DATA_PSD = 24
+#: Distinct rest-mask layouts whose residual kernels are computed for the PSD estimate;
+#: the periods of further layouts (gaps, jitter) are left out of it.
+MAX_PSD_LAYOUTS = 24
+
+
+class _ResidualSpectra:
+    """Periodogram of the per-period residual, grouped by rest-mask layout (pass 1).
+
+    The residual is that of a least-squares fit, per period and on the unmasked
+    samples, of eq. 17 with an affine signal (eq. 19) and the affine bias plus
+    the auxiliary channels (``Va = V̂b = [1, u]``): a signal that varies within
+    the period (a slope) does not enter the noise estimate, whatever
+    ``signal_model``.  A quadratic term in either would take what is left of the
+    noise around ``2/τ``, the band that sets σ (eq. 26): a period of ``q``
+    unmasked samples has ~6 degrees of freedom per axis below ``4/τ``.  What the fit removes from the noise is in
+    the kernel (:func:`accal.estimators.noise.residual_kernel`), computed once per
+    layout (the first period of the layout stands for its auxiliary channels).
+    """
+
+    def __init__(self, q: int, fs: float) -> None:
+        self.q, self.fs = q, fs
+        top = q // 2
+        low = np.arange(1, min(32, top) + 1)
+        high = np.round(np.geomspace(33, top, 96)).astype(np.int64) if top > 33 else low[:0]
+        self.bins = np.unique(np.concatenate([low, high]))
+        self.groups: dict[bytes, list[Any]] = {}
+        self.skipped = 0
+
+    def add(self, st: _Setup, blk: _Block, keep: NDArray) -> None:
+        m, c, s, _, vb, _ = _block_basis(st, blk)
+        ones = np.ones_like(m)
+        va = np.stack([ones, ones * st.u, ones * (st.u**2 - np.mean(st.u**2))], axis=2)
+        x = _design_joint(va, vb, c, s, m)
+        a = blk.arrs
+        ok = a["valid"].astype(bool)
+        data = np.concatenate([np.where(ok, a["m_y"], 0.0), np.where(ok, a["m_z"], 0.0)], axis=1)
+        mm = np.concatenate([m, m], axis=1)
+        data = data * mm
+        n = np.einsum("pqa,pqb->pab", x, x)
+        sol, good = _batched_solve(n, np.einsum("pqa,pq->pa", x, data)[..., None])
+        use = keep & good
+        if not use.any():
+            return
+        r = (data - np.einsum("pqa,pa->pq", x, np.nan_to_num(sol[..., 0]))) * mm
+        q = st.q
+        spec = np.fft.rfft(r[:, :q], axis=1)[:, self.bins]
+        power = np.abs(spec) ** 2
+        spec = np.fft.rfft(r[:, q:], axis=1)[:, self.bins]
+        power += np.abs(spec) ** 2
+        cm, sm = np.round(c * m, 6), np.round(s * m, 6)
+        for i in np.flatnonzero(use):
+            key = m[i].astype(bool).tobytes() + cm[i].tobytes() + sm[i].tobytes()
+            g = self.groups.get(key)
+            if g is None:
+                if len(self.groups) >= MAX_PSD_LAYOUTS:
+                    self.skipped += 1
+                    continue
+                g = self.groups[key] = [0, np.zeros(self.bins.size), x[i], m[i]]
+            g[0] += 1
+            g[1] += power[i]
+
+    @property
+    def n_periods(self) -> int:
+        return sum(g[0] for g in self.groups.values())
+
+    def spectrum(self) -> ResidualSpectrum | None:
+        if not self.groups:
+            return None
+        f_grid, kern, power = None, 0.0, 0.0
+        for count, pw, x, m in self.groups.values():
+            f_grid, k = residual_kernel(x, m, self.bins, self.fs)
+            kern = kern + count * k
+            power = power + pw
+        return ResidualSpectrum(
+            self.bins * self.fs / self.q, power, f_grid, kern, self.n_periods, n_axes=2
+        )
+
+
+def _noise_report(
+    spectra: _ResidualSpectra | None,
+    apriori: PSD,
+    noise: str,
+    min_periods: int,
+    tau: float,
+    fs: float,
+) -> NoiseReport | None:
+    """Estimate the PSD from the residual spectrum and decide which PSD is used."""
+    if spectra is None:
+        return None
+    spec = spectra.spectrum()
+    n = 0 if spec is None else spec.n_segments
+    fit = None
+    reason = ""
+    if spec is None or n < min_periods or spectra.q < 8:
+        reason = f"{n} period(s) for the noise estimate, fewer than {min_periods}" + (
+            f" ({spectra.skipped} in rest-mask layouts beyond the first {MAX_PSD_LAYOUTS})"
+            if spectra.skipped
+            else ""
+        )
+        if spectra.q < 8:
+            reason = f"{spectra.q} samples per period are too few for a noise spectrum"
+    else:
+        fit = fit_residual_psd(spec, psd_nodes(tau, fs))
+    use_data = noise == "data" and fit is not None
+    used = fit.psd if use_data else apriori
+    band = (1.0 / tau, 4.0 / tau)
+    ratio = scatter = float("nan")
+    if spec is not None:
+        ratio = spec.power_ratio(used, band)
+        nb = int(np.count_nonzero((spec.f_bins >= band[0]) & (spec.f_bins <= band[1])))
+        scatter = float(np.sqrt(2.0 / max(spec.dof * nb, 1)))
+    if noise == "report":
+        reason = "a-priori PSD asked for"
+    return NoiseReport(
+        source="data" if use_data else "apriori",
+        reason=reason,
+        fit=fit,
+        apriori=apriori,
+        used=used,
+        check_ratio=ratio,
+        check_scatter=scatter,
+        band=band,
+        n_periods=n,
+    )
+
+
+def _with_sigma_ratio(
+    report: NoiseReport | None, rd_used: float, rd_other: float
+) -> NoiseReport | None:
+    """``report`` with ``sigma_ratio`` = σ(a-priori PSD)/σ(data PSD) for the same weights."""
+    if report is None or report.fit is None or not (rd_used > 0 and rd_other > 0):
+        return report
+    r = rd_other / rd_used if report.source == "data" else rd_used / rd_other
+    return replace(report, sigma_ratio=float(np.sqrt(r)))
