@@ -55,8 +55,8 @@ __all__ = [
 #: History entry :func:`read` leaves (the input's name: ``source`` of :func:`fit_bias`).
 READ_ENTRY = f"accal {__version__}: read("
 
-#: CF-style units (UDUNITS) of the quantities the results carry.
-CF_UNITS = {"acc": "m s-2", "drift": "m s-3", "quadratic": "m s-4", "time": "s"}
+#: accal's unit texts → CF-style (UDUNITS) units, as ``to_xarray`` writes them.
+CF_UNITS = {"m/s^2": "m s-2", "m/s^3": "m s-3", "m/s^4": "m s-4", "s": "s", "rad": "rad", "K": "K"}
 
 #: Long names of the calibrated series' columns.
 CALIBRATED_LONG_NAMES = {
@@ -78,6 +78,11 @@ ESTIMATE_VARIABLES = {
     "t0": ("s", "GPS seconds of the first sample used"),
     "rms": ("m s-2", "residual RMS after removing the trend"),
     "scale": ("1", "scale applied to the calibrated series"),
+}
+#: ... and with ``order=2``.
+QUADRATIC_VARIABLES = {
+    "quadratic": ("m s-4", "quadratic term of the trend"),
+    "quadratic_sigma": ("m s-4", "1 sigma of the quadratic term"),
 }
 
 
@@ -457,7 +462,7 @@ class BiasFit:
         data_vars: dict[str, Any] = {}
         for ax in cal.axes:
             name = f"lin_accl_{ax}"
-            attrs = {"units": CF_UNITS["acc"], "long_name": CALIBRATED_LONG_NAMES[name]}
+            attrs = {"units": CF_UNITS["m/s^2"], "long_name": CALIBRATED_LONG_NAMES[name]}
             attrs["comment"] = CALIBRATED_UNITS[name]
             data_vars[name] = ("time", cal.axis(ax), attrs)
         data_vars["valid"] = ("time", self.used, {"long_name": CALIBRATED_LONG_NAMES["valid"]})
@@ -467,7 +472,8 @@ class BiasFit:
             {"long_name": CALIBRATED_LONG_NAMES["qualflg"]},
         )
         index = {(r["method"], r["axis"]): r for r in self.rows}
-        for key, (unit, long_name) in ESTIMATE_VARIABLES.items():
+        estimates = {**ESTIMATE_VARIABLES, **(QUADRATIC_VARIABLES if self.order >= 2 else {})}
+        for key, (unit, long_name) in estimates.items():
             values = np.array(
                 [[float(index[(m, ax)][key]) for ax in cal.axes] for m in self.methods]
             )
@@ -608,6 +614,11 @@ def fit_bias(
         orbit_period=GraceBiasOptions.orbit_period if orbit_period is None else orbit_period,
         degraded_days=None if degraded_days is None else Path(degraded_days),
     )
+    if opts.reference_fit:  # scale "fit"/"fit-matrix": accal.pipeline_reference's job
+        raise ValidationError(
+            f"scale {scale!r}: the reference fit (--scale fit, --bias-basis) is not in the "
+            "Python API yet; use accal grace-bias"
+        )
     name = source or source_of(series)
     path = Path(name)
     fit_series = ref_series = None
@@ -763,10 +774,6 @@ class Demodulation:
         )  # fmt: skip
 
 
-#: accal unit texts → CF/UDUNITS units.
-_CF = {"m/s^2": "m s-2", "m/s^3": "m s-3", "m/s^4": "m s-4", "s": "s", "rad": "rad", "K": "K"}
-
-
 def _cf_unit(text: str) -> str:
     """CF/UDUNITS form of the unit at the head of an accal unit text (``"1"`` if none).
 
@@ -775,10 +782,10 @@ def _cf_unit(text: str) -> str:
     """
     head = text.split(" (")[0].strip()
     base, _, per = head.partition(" per ")
-    unit = _CF.get(base.strip(), "1")
+    unit = CF_UNITS.get(base.strip(), "1")
     per_unit = per.split(" of ")[0].strip()
     if unit != "1" and per_unit:
-        return f"{unit} {_CF.get(per_unit, per_unit)}-1" if " " not in per_unit else "1"
+        return f"{unit} {CF_UNITS.get(per_unit, per_unit)}-1" if " " not in per_unit else "1"
     return unit
 
 
