@@ -211,10 +211,13 @@ def test_import_accal_stays_lazy() -> None:
         accal.fit_biass  # noqa: B018
 
 
-def test_api_docstring_examples_run(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_api_docstring_examples_run(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    import tempfile
+
     import accal.api
 
     monkeypatch.chdir(REPO)  # the examples read data/samples/ relative to the repository
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))  # their simulated runs go here
     result = doctest.testmod(accal.api, optionflags=doctest.NORMALIZE_WHITESPACE)
     assert result.attempted >= 20
     assert result.failed == 0
