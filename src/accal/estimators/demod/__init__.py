@@ -44,6 +44,7 @@ This package re-exports the public names of its modules (import them from here):
 
 * :mod:`.stream`: :func:`demodulate_stream`, :func:`demodulate`,
   :func:`demodulate_table`;
+* :mod:`.passes`: the two passes of :func:`demodulate_stream` over the blocks;
 * :mod:`.records`: :class:`DemodChunk`, :class:`DemodResult`, :class:`NoiseReport`;
 * :mod:`.checks`: input checks, sampling step, θ convention;
 * :mod:`.blocks`: chunks → blocks of whole periods, rest mask, bases (eqs. 18-19);

@@ -1,31 +1,26 @@
 """The demodulation itself: :func:`demodulate_stream`, :func:`demodulate`, :func:`demodulate_table`.
 
 A record in chunks (or in one piece) → per-period unbiased accelerations with
-their uncertainties (:class:`DemodResult`), in two passes over the blocks of
-whole periods.
+their uncertainties (:class:`DemodResult`), by the two passes of
+:mod:`accal.estimators.demod.passes`.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping, Sequence
+from functools import partial
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from ...errors import ValidationError, check_option
-from ..noise import PSD, as_psd, regularised_autocov, structure_function
-from .blocks import _Block, _chunks_of, _Periods, _Setup
+from ..noise import PSD, as_psd
+from .blocks import _Setup
 from .checks import _Checker, _validate
-from .estimate import _estimate_block, _scan_block
-from .lagcov import _fft_length, _lag_cov, _lag_kernel
-from .layout import LAYOUT_LAGS, _layout_shifts, _pattern_of_shifts
-from .records import DemodChunk, DemodResult
-from .residual import (
-    MIN_PERIODS_DATA_PSD,
-    _noise_report,
-    _ResidualSpectra,
-    _with_sigma_ratio,
-)
+from .layout import _pattern_of_shifts
+from .passes import _Estimates, _first_pass, _new_setup, _noise_kernels, _Scan, _second_pass
+from .records import DemodChunk, DemodResult, NoiseReport
+from .residual import MIN_PERIODS_DATA_PSD, _noise_report, _with_sigma_ratio
 
 #: Columns :func:`demodulate_table` needs.
 REQUIRED_COLUMNS = ("time", "m_y", "m_z", "theta")
@@ -105,140 +100,69 @@ def demodulate_stream(
     tau, mask = float(tau), float(mask)
     aux_names = tuple(bias_aux)
     psd = as_psd(psd)
-    spectra: _ResidualSpectra | None = None
     # pass 1: checks, rest masks, usable periods, eq. 16 leakage
+    setup = partial(
+        _new_setup,
+        tau=tau,
+        mask=mask,
+        method=method,
+        signal_model=signal_model,
+        aux_names=aux_names,
+        min_fraction=min_fraction,
+        n_lags=n_lags,
+    )
     chk = _Checker(aux_names, tau, mask, fs)
-    cutter = None
-    st = None
-    n_per, n_keep, best, leak_max = 0, 0, 0, 0.0
-    shifts: dict[int, list[NDArray]] = {lag: [] for lag in range(1, LAYOUT_LAGS + 1)}
-    last_spec: NDArray | None = None
-
-    def scan(blk: _Block | None) -> None:
-        nonlocal n_per, n_keep, best, leak_max, last_spec
-        if blk is None:
-            return
-        n_used, keep, leak = _scan_block(st, blk)
-        if spectra is not None:
-            spectra.add(st, blk, keep)
-        sh, last_spec = _layout_shifts(blk.rest, last_spec)
-        for lag, d in sh.items():
-            shifts[lag].append(d)
-        n_per += n_used.size
-        n_keep += int(keep.sum())
-        best = max(best, int(n_used.max()))
-        if keep.any():
-            leak_max = max(leak_max, float(np.max(leak[keep])))
-
-    for ch in _chunks_of(source):
-        arrs = chk(ch)
-        if cutter is None:
-            q = chk.q
-            cutter = _Periods(q, int(round(settle * chk.fs)), rest_tol)
-            pa = 1 if signal_model == "mean" else 2
-            st = _Setup(
-                q=q,
-                fs=chk.fs,
-                tau=tau,
-                mask=mask,
-                method=method,
-                signal_model=signal_model,
-                aux_names=aux_names,
-                need=max(min_fraction * (q - mask * chk.fs), 2 * (pa + 2 + len(aux_names))),
-                d=np.empty(0),
-                r_reg=None,
-                n_lags=int(n_lags),
-            )
-            if noise != "apriori":
-                spectra = _ResidualSpectra(q, chk.fs)
-        scan(cutter.feed(arrs))
-    if cutter is None:
-        raise ValidationError("need at least 3 samples, got 0")
-    chk.finish()
-    scan(cutter.finish())
-    if n_per < 1:
-        raise ValidationError(f"record of {chk.n} samples is shorter than one period ({st.q})")
-    if n_keep == 0:
-        raise ValidationError(
-            f"no period has enough unmasked samples at both θ = 0 and π (need {st.need:g} of "
-            f"{st.q}; best period has {best}). A sample is at rest where θ's first and second "
-            f"differences are within {rest_tol:g} rad (--rest-tol; raise it if θ is noisy at "
-            "rest), and the rests must be at θ = 0 and π"
-        )
-    rotation_shift, pattern_periods, steady = _pattern_of_shifts(shifts)
-    if method == "gls":
-        used = "gls-eq17"
-    elif solver == "auto":
-        used = "eq14" if (not aux_names and leak_max <= leak_tol) else "joint"
-    else:
-        used = solver
-    report = _noise_report(spectra, psd, noise, int(min_periods_data), tau, st.fs)
-    used_psd = psd if report is None else report.used
-    st.d = structure_function(used_psd, (st.n_lags + 2) * st.q, st.fs)
-    st.kernels = [_lag_kernel(st.d, st.q, k) for k in range(st.n_lags + 1)]
-    if report is not None and report.fit is not None:
-        other = report.apriori if report.source == "data" else report.fit.psd
-        st.kernel_other = _lag_kernel(structure_function(other, st.q + 1, st.fs), st.q, 0)
-    if used == "gls-eq17":
-        st.r_reg, _ = regularised_autocov(st.d, st.q)
-
+    scan = _first_pass(source, chk, setup, rest_tol=rest_tol, settle=settle, noise=noise)
+    st = scan.st
+    layout = _pattern_of_shifts(scan.shifts)
+    used = _solver_used(method, solver, aux_names, scan.leak_max, leak_tol)
+    report = _noise_report(scan.spectra, psd, noise, int(min_periods_data), tau, st.fs)
+    _noise_kernels(st, psd if report is None else report.used, report, used)
     # pass 2: estimates, covariances, Rd[k] across block borders
-    rows: list[dict[str, NDArray]] = []
-    rd_sum = np.zeros(st.n_lags + 1)
-    rd_cnt = np.zeros(st.n_lags + 1, dtype=np.int64)
-    rd_other = [0.0]
-    prev_w = np.zeros((0, 1, 2, _fft_length(st.q) // 2 + 1), complex)
-    prev_keep = np.zeros(0, bool)
-    n_masked, n_samples = 0.0, 0
-    cache: dict = {}
-    cutter = _Periods(st.q, int(round(settle * st.fs)), rest_tol)
-    chk2 = _Checker(aux_names, tau, mask, st.fs)
+    acc = _second_pass(
+        source, st, used, _Checker(aux_names, tau, mask, st.fs), rest_tol=rest_tol, settle=settle
+    )
+    return _result(st, scan, acc, used, layout, report)
 
-    def estimate(blk: _Block | None) -> None:
-        nonlocal prev_w, prev_keep, n_masked, n_samples
-        if blk is None:
-            return
-        r = _estimate_block(st, blk, used, cache)
-        rows.append(r["rows"])
-        keep = r["keep"]
-        rd_sum[0] += float(np.sum(r["rd0"][keep]))
-        if r["rd0_other"] is not None:
-            rd_other[0] += float(np.sum(r["rd0_other"][keep]))
-        rd_cnt[0] += int(keep.sum())
-        n_masked += r["n_masked"]
-        n_samples += r["n_samples"]
-        w_ext = np.concatenate([prev_w, r["spec1"]])
-        k_ext = np.concatenate([prev_keep, keep])
-        lp = prev_w.shape[0]
-        for k in range(1, st.n_lags + 1):
-            i0, i1 = max(0, lp - k), w_ext.shape[0] - k
-            if i1 <= i0:
-                continue
-            both = k_ext[i0:i1] & k_ext[i0 + k : i1 + k]
-            if not both.any():
-                continue
-            ck = _lag_cov(w_ext[i0:i1][both], w_ext[i0 + k : i1 + k][both], st.kernels[k])
-            rd_sum[k] += float(np.sum(ck[:, 0, 0]))
-            rd_cnt[k] += int(both.sum())
-        prev_w = w_ext[-st.n_lags :] if st.n_lags else w_ext[:0]
-        prev_keep = k_ext[-st.n_lags :] if st.n_lags else k_ext[:0]
 
-    for ch in _chunks_of(source):
-        estimate(cutter.feed(chk2(ch)))
-    estimate(cutter.finish())
-    if not any(r["period_index"].size for r in rows):
-        raise ValidationError(
-            "the design is singular in every period (auxiliary channel constant?)"
-        )
+def _solver_used(
+    method: str, solver: str, aux_names: tuple[str, ...], leak_max: float, leak_tol: float
+) -> str:
+    """The estimator of pass 2: ``"gls-eq17"``, ``"eq14"`` or ``"joint"``.
+
+    ``solver="auto"`` takes eq. 14 when there is no auxiliary channel and no kept
+    period's eq. 16 leakage exceeds ``leak_tol``, the joint LS of eq. 17 otherwise.
+    """
+    if method == "gls":
+        return "gls-eq17"
+    if solver == "auto":
+        return "eq14" if (not aux_names and leak_max <= leak_tol) else "joint"
+    return solver
+
+
+def _result(
+    st: _Setup,
+    scan: _Scan,
+    acc: _Estimates,
+    solver: str,
+    layout: tuple[float, int, bool],
+    report: NoiseReport | None,
+) -> DemodResult:
+    """The :class:`DemodResult` of the two passes (Rd[k] averaged over the period pairs)."""
+    rows = acc.rows
+    n_per = scan.n_per
     cat = {k: np.concatenate([r[k] for r in rows]) for k in rows[0]}
     n_lag_max = min(st.n_lags, n_per - 1)
     with np.errstate(invalid="ignore"):
-        rd = np.where(rd_cnt > 0, rd_sum / np.maximum(rd_cnt, 1), np.nan)[: n_lag_max + 1]
+        rd = np.where(acc.rd_cnt > 0, acc.rd_sum / np.maximum(acc.rd_cnt, 1), np.nan)[
+            : n_lag_max + 1
+        ]
     pa = st.pa
     est, sig = cat["est"], cat["sig"]
     nanp = np.full(est.shape[0], np.nan)
-    names = ("bias", "drift", *aux_names)
+    names = ("bias", "drift", *st.aux_names)
     kk = cat["period_index"]
+    rotation_shift, pattern_periods, steady = layout
     return DemodResult(
         period_index=kk,
         t_start=cat["t_start"],
@@ -256,22 +180,22 @@ def demodulate_stream(
         bias_names=names,
         n_used=cat["n_used"],
         masked_time=(st.q - cat["n_used"]) / st.fs,
-        nominal_masked_time=mask,
-        masked_fraction=float(n_masked / n_samples),
+        nominal_masked_time=st.mask,
+        masked_fraction=float(acc.n_masked / acc.n_samples),
         leakage=cat["leakage"],
         Rd=np.asarray(rd),
         cov=cat["cov"],
         dropped=int(n_per - kk.size),
         n_periods=int(n_per),
-        tau=tau,
+        tau=st.tau,
         fs=float(st.fs),
-        method=method,
-        solver=used,
-        signal_model=signal_model,
+        method=st.method,
+        solver=solver,
+        signal_model=st.signal_model,
         rotation_shift=rotation_shift,
         pattern_periods=pattern_periods,
         rotation_shift_steady=steady,
-        noise=_with_sigma_ratio(report, rd_sum[0], rd_other[0]),
+        noise=_with_sigma_ratio(report, acc.rd_sum[0], acc.rd_other),
         shape_gain=cat["gain"],
     )
 
