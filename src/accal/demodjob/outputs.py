@@ -1,0 +1,160 @@
+"""The files of an ``accal demod`` output directory: names, checks, summaries on disk.
+
+``DIR/periods.<fmt>`` is one cumulative table for every input.  Summaries: with
+one input ``DIR/summary.json`` and ``DIR/summary.md``; with several
+``DIR/<stem>.summary.json`` and ``DIR/<stem>.summary.md`` (see
+:mod:`accal.demodjob.batch`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from accal.errors import ValidationError
+from accal.io.writers import _json_default
+from accal.pipeline import _nan_to_none, output_stem
+
+
+def json_text(obj: Any) -> str:
+    """``obj`` as the text of a standard JSON file (non-finite floats as null, indented).
+
+    The conventions of the JSON files :mod:`accal.pipeline` writes (its
+    ``_nan_to_none`` and :mod:`accal.io.writers`' ``_json_default``, not public yet).
+    """
+    return json.dumps(_nan_to_none(obj), indent=2, default=_json_default) + "\n"
+
+
+def check_distinct_runs(paths: Sequence[Path]) -> None:
+    """Refuse a run file given more than once (also under another name or via a link).
+
+    Parameters
+    ----------
+    paths : sequence of Path
+        The run files, as given.
+
+    Raises
+    ------
+    ValidationError
+        One line naming the file given twice.
+    """
+    seen: dict[Path, Path] = {}
+    for p in map(Path, paths):
+        try:
+            key = p.resolve()
+        except (RuntimeError, OSError):  # a symlink loop: the reader says so, per run
+            key = Path(os.path.abspath(p))
+        if key in seen:
+            what = f"run {p} is given twice"
+            if seen[key] != p:
+                what = f"runs {seen[key]} and {p} are the same file"
+            raise ValidationError(f"{what}; give each run once")
+        seen[key] = p
+
+
+def output_paths(paths: Sequence[Path], out_dir: Path, fmt: str) -> list[tuple[Path, Path, Path]]:
+    """``(periods table, summary.json, summary.md)`` of each input (see :mod:`accal.demodjob.batch`).
+
+    The periods table is the same cumulative ``DIR/periods.<fmt>`` for every input.
+
+    Raises
+    ------
+    ValidationError
+        A run given twice (:func:`check_distinct_runs`), or two inputs that would
+        write the same summaries (or the same ``source`` rows).
+    """
+    check_distinct_runs(paths)
+    table = out_dir / f"periods.{fmt}"
+    if len(paths) == 1 and not _summaries_of_other_runs(out_dir, Path(paths[0]).name):
+        return [(table, out_dir / "summary.json", out_dir / "summary.md")]
+    seen: dict[str, Path] = {}
+    out = []
+    for p in paths:
+        stem = output_stem(Path(p))
+        other = seen.get(stem) or next((q for q in seen.values() if q.name == Path(p).name), None)
+        if other is not None:
+            raise ValidationError(
+                f"inputs {other} and {p} would both write {stem}.summary.json; rename one"
+            )
+        seen[stem] = Path(p)
+        out.append((table, out_dir / f"{stem}.summary.json", out_dir / f"{stem}.summary.md"))
+    return out
+
+
+def _summaries_of_other_runs(out_dir: Path, name: str) -> bool:
+    """Whether ``out_dir`` holds the summary of a run other than ``name``.
+
+    One run per call into the same directory (a cron job) must not overwrite the
+    ``summary.json`` of the run before it, whose rows stay in the periods table:
+    the new run's summaries are then named after it, as with several inputs.
+    """
+    return any(
+        (src := summary_source(sp)) is not None and src != name
+        for sp in Path(out_dir).glob("*summary.json")
+    )
+
+
+def check_output_format(out_dir: Path, fmt: str) -> None:
+    """Refuse a ``--format`` other than that of the periods table already in ``out_dir``.
+
+    The periods table is cumulative: a second one in the other format beside it
+    would split the directory's rows in two tables (as ``grace-bias`` refuses a
+    second ``bias_drift`` table).
+
+    Raises
+    ------
+    ValidationError
+        One line naming the existing table.
+    """
+    other = "csv" if fmt == "parquet" else "parquet"
+    table = Path(out_dir) / f"periods.{other}"
+    if table.exists():
+        raise ValidationError(
+            f"{table}: the periods table of this --out is in --format {other}; use --format "
+            f"{other} there, or another --out for --format {fmt}"
+        )
+
+
+def load_summary(path: Path) -> tuple[str, dict[str, Any]] | None:
+    """(run file name, content) of a demod ``summary.json``, or None if it is not one."""
+    try:
+        s = json.loads(Path(path).read_text())
+        if isinstance(s, dict) and isinstance(s.get("options"), dict):
+            return Path(s["source"]).name, s
+    except (OSError, ValueError, KeyError, TypeError):
+        pass
+    return None
+
+
+def summary_source(path: Path) -> str | None:
+    """File name of the run a ``summary.json`` is about, or None if it is not a demod summary."""
+    got = load_summary(path)
+    return None if got is None else got[0]
+
+
+def remove_stale_summaries(out_dir: Path, source: str, keep: Path) -> list[Path]:
+    """Remove the summaries of ``source`` in ``out_dir`` other than ``keep`` (and their .md).
+
+    A run that is re-run into the same directory under another summary name
+    (``summary.json`` alone, ``<stem>.summary.json`` with others) replaces its
+    rows in the periods table; its old summaries describe rows that are gone.
+
+    Returns
+    -------
+    list of Path
+        The files removed.
+    """
+    gone = []
+    for sp in sorted(Path(out_dir).glob("*summary.json")):
+        if sp.name == keep.name or summary_source(sp) != source:
+            continue
+        md = sp.with_name(sp.name[: -len(".json")] + ".md")
+        for f in (sp, md):
+            with contextlib.suppress(FileNotFoundError):
+                f.unlink()
+                gone.append(f)
+    return gone
