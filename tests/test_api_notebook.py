@@ -190,6 +190,11 @@ def test_demodulate_equals_the_cli(tmp_path: Path) -> None:
     assert np.array_equal(plain.a_Y, table["a_Y_before"].to_numpy())
     assert np.array_equal(plain.to_dataframe()["sigma_Z"], table["sigma_Z_before"])
     assert closed.closure is not None and closed.closure.fit is closed
+    summary = json.loads((out / "summary.json").read_text())  # the extended model's mean
+    assert [closed.summary["mean"][k] for k in ("a_Y", "a_Z", "model")] == [
+        summary["mean"][k] for k in ("a_Y", "a_Z", "model")
+    ]
+    assert closed.summary["declared"]["mean"]["a_Y"] == plain.summary["mean"]["a_Y"]
     assert closed.closure.model == {"run.parquet": table["model"].iloc[0]}
     effects = closed.closure.to_dataframe()
     assert "auxiliary" in set(effects["name"])  # the temperature coupling

@@ -676,7 +676,9 @@ class Demodulation:
     units : dict of str to str
         Units of the columns.
     summary : dict
-        The run summary (``summary.json``: Rd, σ(T), noise, leakage, masking).
+        The run summary (``summary.json``: Rd, σ(T), noise, leakage, masking; with
+        ``close_loop`` the mean of the extended model, the declared one in
+        ``summary["declared"]``, as the CLI writes it).
     result : accal.estimators.demod.DemodResult
         The estimator's result.
     closure : Closure or None
@@ -863,6 +865,7 @@ def demodulate(
     (14, 'ls', 'auto')
     """
     arguments = {k: v for k, v in locals().items() if k not in ("run", "close_loop")}
+    from accal.demodjob.summary import summary_of_extended
     from accal.pipeline_demod import (
         CHUNK_ROWS,
         DemodOptions,
@@ -890,6 +893,7 @@ def demodulate(
         rows, units = apply_closure(rows, units, extended)
         keys = ("effects", "unexplained", "rms_before", "rms_after", "model")
         summary["closure"] = {k: entry[k] for k in keys}
+        summary_of_extended(summary, rows, entry["model"])  # the mean of the extended model
         closure = Closure({path.name: entry}, gps_time=False)
     result = Demodulation(
         source=path.name,
