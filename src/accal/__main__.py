@@ -2,11 +2,17 @@
 
 from __future__ import annotations
 
+import contextlib
+import logging
+import os
+import signal
 import sys
 
-from accal._runtime import single_threaded_blas
+from accal._runtime import ignore_late_signals, single_threaded_blas
 
 single_threaded_blas()  # before numpy is loaded: see accal._runtime
+
+EXIT_INTERRUPTED = 130  # 128 + SIGINT, as a shell reports a Ctrl-C
 
 
 class Terminated(KeyboardInterrupt):
@@ -14,7 +20,37 @@ class Terminated(KeyboardInterrupt):
 
 
 def _on_sigterm(signum: int, frame: object) -> None:
+    ignore_late_signals()
     raise Terminated(f"signal {signum}")
+
+
+def _on_sigint(signum: int, frame: object) -> None:
+    """Ctrl-C: stop, once.  Further Ctrl-C while the run removes its temporaries and
+    releases its lock would interrupt that clean-up (a user pressing it again, or
+    pyarrow delivering the same one twice); they are ignored from here on (Ctrl-\\,
+    SIGQUIT, still kills at once)."""
+    ignore_late_signals()
+    raise KeyboardInterrupt
+
+
+def _exit_interrupted() -> None:
+    """Leave with status 130 whatever further SIGINT/SIGTERM arrive on the way out.
+
+    One Ctrl-C can be delivered twice: pyarrow re-sends a signal that cancelled one
+    of its readers to the main thread (``pyarrow.lib.SignalStopHandler``), after
+    Python's own handler has tripped.  The second one arrived after the interpreter
+    had put back the default action during finalization (``_PySignal_Fini``) and
+    killed the process with SIGINT after ``accal: interrupted`` was printed (status
+    -2 instead of 130 in 4 of 30 interrupted ``accal demod`` runs).  So: a no-op
+    handler for any late signal, the log handlers flushed, and ``os._exit`` once
+    every ``finally`` block (temporaries removed, lock released) has run.
+    """
+    ignore_late_signals()
+    logging.shutdown()
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(OSError, ValueError):  # a closed pipe: nothing to say
+            stream.flush()
+    os._exit(EXIT_INTERRUPTED)
 
 
 def main() -> None:
@@ -25,15 +61,21 @@ def main() -> None:
     exit status is 130.  Worker processes keep the default action (see
     :func:`accal.batch._worker_init`).
     """
-    import signal
-
     signal.signal(signal.SIGTERM, _on_sigterm)
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # not if ignored (nohup, &)
+        signal.signal(signal.SIGINT, _on_sigint)
     try:
-        from accal.cli import main as cli
-    except KeyboardInterrupt:
-        sys.stderr.write("accal: interrupted\n")
-        sys.exit(130)
-    cli()
+        try:
+            from accal.cli import main as cli
+        except KeyboardInterrupt:
+            ignore_late_signals()
+            sys.stderr.write("accal: interrupted\n")
+            sys.exit(EXIT_INTERRUPTED)
+        cli()
+    except SystemExit as exc:
+        if exc.code == EXIT_INTERRUPTED:
+            _exit_interrupted()
+        raise
 
 
 if __name__ == "__main__":  # pragma: no cover

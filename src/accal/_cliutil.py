@@ -9,6 +9,8 @@ from typing import Any
 
 import click
 
+from accal._runtime import keep_signals_in_python
+
 
 class OutPath(click.Path):
     """A ``click.Path`` that refuses an empty or blank value.
@@ -135,6 +137,8 @@ class Group(click.Group):
         import os
 
         try:
+            if ctx.invoked_subcommand:
+                keep_signals_in_python()
             return super().invoke(ctx)
         except click.UsageError as exc:  # an option value, a missing argument: one line
             if os.environ.get("ACCAL_DEBUG"):

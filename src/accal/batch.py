@@ -42,6 +42,7 @@ from pathlib import Path
 from typing import Any
 
 from accal import __version__
+from accal._runtime import interrupted
 from accal.errors import AccalError
 from accal.io.writers import TEMP_MARK
 
@@ -155,9 +156,19 @@ def internal_error_message(path: Path | str, exc: BaseException) -> str:
 
     A worker that died (:class:`WorkerDied`) is not a bug of accal: its line says
     what ended it.
+
+    Raises
+    ------
+    KeyboardInterrupt
+        The process was interrupted (:func:`accal._runtime.interrupted`): the error
+        is the interruption's doing, and the run stops as on Ctrl-C.
     """
     if isinstance(exc, WorkerDied):
         return f"{path}: {exc}"
+    if interrupted():  # a Ctrl-C that landed in an import or a C extension and came out as
+        # ImportError ("initialization failed") or a partially initialised module: the run
+        # was interrupted, it is not a bug (issue 23 finding 5)
+        raise KeyboardInterrupt from exc
     msg = (
         f"{path}: internal error ({type(exc).__name__}: {exc}); "
         "please report it with the output of 'accal --debug ...'"
@@ -878,6 +889,8 @@ def _worker_init() -> None:
     # the batch process turns SIGTERM into an interrupt (accal.__main__); a worker
     # keeps the default, so the pool's terminate() ends it at once
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    if callable(signal.getsignal(signal.SIGINT)):  # Ctrl-C: KeyboardInterrupt, each time
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     tune_allocator()
     pa.set_cpu_count(1)
     pa.set_io_thread_count(1)
