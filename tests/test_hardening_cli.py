@@ -11,6 +11,21 @@ from click.testing import CliRunner
 
 from accal.cli import main
 
+
+def _terminal_signals() -> None:
+    """In the child: SIGINT/SIGTERM as a terminal gives them.
+
+    An ignored disposition is inherited across exec (a test run started in the
+    background ignores SIGINT: the demod then never saw it; tests/test_batch.py's
+    _terminal_signals likewise).
+    """
+    import signal
+
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT, signal.SIGTERM})
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
 SAMPLE = Path(__file__).resolve().parents[1] / "data" / "samples" / "ACC1B_2003-09-14_A_00.asc"
 
 
@@ -102,20 +117,12 @@ def test_demod_interrupted_says_so_and_exits_130(tmp_path, sig):
     run = write_platform_run(platform_run(3, days=2.0), tmp_path / "run.parquet")
     out = tmp_path / "o"
 
-    def terminal_signals() -> None:
-        # in the child: SIGINT/SIGTERM as a terminal gives them; an ignored disposition
-        # is inherited across exec (a test run started in the background ignores SIGINT:
-        # the demod then never saw it; tests/test_batch.py's _terminal_signals likewise)
-        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT, signal.SIGTERM})
-        signal.signal(signal.SIGINT, signal.SIG_DFL)
-        signal.signal(signal.SIGTERM, signal.SIG_DFL)
-
     proc = subprocess.Popen(
         [sys.executable, "-m", "accal", "demod", str(run), "--tau", "600", "--mask", "200",
          "--close-loop", "--out", str(out), "-q"],
         stderr=subprocess.PIPE,
         text=True,
-        preexec_fn=terminal_signals,
+        preexec_fn=_terminal_signals,
     )  # fmt: skip
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline and not (out / "accal.log").exists():
@@ -146,3 +153,75 @@ def test_zero_filled_inputs_fail_at_once(tmp_path):
     assert code == 1
     assert f"{sparse}: the first 65,536 bytes are NUL" in msg
     assert f"{bomb}: the first 65,536 bytes after gunzip are NUL" in msg
+
+
+def test_demod_repeated_ctrl_c_still_exits_130(tmp_path):
+    """Ctrl-C pressed again while the run is stopping (or one Ctrl-C that pyarrow
+    delivers a second time, ``pyarrow.lib.SignalStopHandler``): still one line and
+    status 130, never Click's ``Aborted!``, a traceback or a death by SIGINT (status
+    -2; 4 of 30 single interrupts of ``accal demod`` before the late signals were
+    ignored)."""
+    import signal
+    import time
+
+    from tests.indep import platform_run, write_platform_run
+
+    run = write_platform_run(platform_run(4, days=2.0), tmp_path / "run.parquet")
+    codes = []
+    for trial in range(3):
+        out = tmp_path / f"o{trial}"
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "accal", "demod", str(run), "--tau", "600", "--mask", "200",
+             "--close-loop", "--out", str(out), "-q"],
+            stderr=subprocess.PIPE,
+            text=True,
+            preexec_fn=_terminal_signals,
+        )  # fmt: skip
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and not (out / "accal.log").exists():
+            time.sleep(0.05)
+        time.sleep(0.3 + 0.4 * trial)
+        assert proc.poll() is None, "the run finished before it could be interrupted"
+        for _ in range(40):  # a user hammering Ctrl-C: every 5 ms for 0.2 s
+            if proc.poll() is not None:
+                break
+            proc.send_signal(signal.SIGINT)
+            time.sleep(0.005)
+        _, err = proc.communicate(timeout=60)
+        codes.append(proc.returncode)
+        assert proc.returncode == 130, err
+        assert err.strip().splitlines()[-1] == "accal: interrupted", err
+        assert "Traceback" not in err and "Aborted" not in err, err
+        assert not [p for p in out.iterdir() if ".tmp" in p.name]
+    assert codes == [130, 130, 130]
+
+
+def test_an_l1b_file_larger_than_its_record_count_is_refused_before_it_is_read(tmp_path):
+    """Issue 23 finding 9: memory is bounded by the header's record count.  A real
+    header announcing 60 records followed by 70 MB of records (plain, and gzipped:
+    ~0.2 MB inflating to 70 MB) is refused from its first MiB, naming the count; the
+    same header with its 60 real records is still read; the failed inputs' memory is
+    in the summary's peak RSS."""
+    import gzip
+
+    from accal.io import read
+    from accal.pipeline import GraceBiasOptions, process_one
+
+    text = SAMPLE.read_bytes()
+    end = text.index(b"END OF HEADER")
+    body = text[text.index(b"\n", end) + 1 :]
+    padded = tmp_path / "ACC1B_2003-09-14_A_00.asc"
+    with open(padded, "wb") as fh:
+        fh.write(text)
+        for _ in range((70 << 20) // len(body)):
+            fh.write(body)
+    bomb = tmp_path / "ACC1B_2003-09-15_A_00.asc.gz"
+    bomb.write_bytes(gzip.compress(padded.read_bytes(), compresslevel=9))
+    code, msg = _run("grace-bias", padded, bomb, "--out", tmp_path / "o", "-q")
+    assert code == 1
+    assert f"{padded}: file larger than 67,108,864 bytes (more than its header's 60 records" in msg
+    assert f"{bomb}: gzip stream decompresses to more than 67,108,864 bytes" in msg
+    assert "60 records can fill" in msg.split(str(bomb))[1]
+    assert read(SAMPLE).time.size == 60  # the bound does not touch a right file
+    outcome = process_one(padded, tmp_path / "p", GraceBiasOptions())
+    assert not outcome.ok and outcome.peak_rss > 0

@@ -1232,6 +1232,13 @@ def process_one(
 
 
 def _process_one(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutcome:
+    # the peak memory of a failed input counts too: a hostile file that fails late is
+    # exactly the one whose memory the summary must show (issue 23, finding 9)
+    outcome = _try_one(path, out_dir, opts)
+    return dataclasses.replace(outcome, peak_rss=_peak_rss_mb())
+
+
+def _try_one(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutcome:
     try:
         check_input(path)
         if path.is_dir():
@@ -1241,7 +1248,7 @@ def _process_one(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutco
         except OSError:
             before = None
         outcome = process_file(path, Path(out_dir), opts)
-        return dataclasses.replace(outcome, peak_rss=_peak_rss_mb(), signature=before)
+        return dataclasses.replace(outcome, signature=before)
     except AccalError as exc:
         return FileOutcome(path, False, failure_message(path, exc))
     except MemoryError:

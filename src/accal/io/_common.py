@@ -79,25 +79,39 @@ def missing(path: str | Path) -> str:
     return "no such file"
 
 
-def read_bytes(path: str | Path) -> bytes:
+def read_bytes(path: str | Path, limit: int | None = None, why: str = "") -> bytes:
     """Return the (decompressed) content of ``path``, without a leading UTF-8 BOM.
 
     Gzip is detected by its magic bytes, not by the file name.  A UTF-8
     byte-order mark (:data:`UTF8_BOM`) at the start of the text is dropped
     (without copying the content of an uncompressed file).
 
+    Parameters
+    ----------
+    path : str or Path
+        The input.
+    limit : int, optional
+        Most bytes accepted, on disk and after decompression: a reader that knows
+        its record count passes a tighter bound; never more than
+        :data:`MAX_INPUT_BYTES` (the default).
+    why : str, optional
+        What ``limit`` is, for the message (default: "not an input file?").
+
     Raises
     ------
     FormatError
         Missing file, directory, unreadable file, corrupt gzip stream, empty file,
-        or more than :data:`MAX_INPUT_BYTES` on disk or after decompression.
+        or more than ``limit`` bytes on disk or after decompression.
     """
     p = Path(path)
     if p.is_dir():
         raise FormatError("is a directory, not a file", p)
+    if limit is None or limit >= MAX_INPUT_BYTES:
+        limit, why = MAX_INPUT_BYTES, ""
+    why = why or "not an input file?"
     try:
-        if p.stat().st_size > MAX_INPUT_BYTES:
-            raise FormatError(f"file larger than {MAX_INPUT_BYTES:,} bytes (not an input file?)", p)
+        if p.stat().st_size > limit:
+            raise FormatError(f"file larger than {limit:,} bytes ({why})", p)
         # Unbuffered: readall() sizes its one read by fstat (a buffered read() after a
         # small read is ~25x slower).  A BOM is skipped by reading after it: no copy.
         with open(p, "rb", buffering=0) as fh:
@@ -115,7 +129,7 @@ def read_bytes(path: str | Path) -> bytes:
             raise FormatError(missing(p), p) from None
         raise FormatError(f"cannot read file: {exc.strerror or exc}", p) from None
     if raw[:2] == GZIP_MAGIC:
-        raw = gunzip(raw, p)
+        raw = gunzip(raw, p, limit, why)
         if raw.startswith(UTF8_BOM):
             raw = raw[len(UTF8_BOM) :]
     if not raw or raw.isspace():
@@ -138,7 +152,26 @@ def _refuse_nul_start(head: bytes, path: str | Path, where: str = "") -> None:
         )
 
 
-def gunzip(raw: bytes, path: str | Path, limit: int = MAX_INPUT_BYTES) -> bytes:
+def read_head(path: str | Path, size: int) -> bytes:
+    """The first ``size`` bytes of the (decompressed) content of ``path``, no UTF-8 BOM.
+
+    What a reader needs to look at a header before it decides how much of the
+    file it will read (:func:`read_bytes` with a ``limit``).  Returns ``b""`` when the
+    file cannot be read or its gzip stream is corrupt: the full read that follows
+    says what is wrong.
+    """
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(size)
+            if head[:2] == GZIP_MAGIC:
+                d = zlib.decompressobj(wbits=31)
+                head = d.decompress(head, size)
+    except (OSError, zlib.error):
+        return b""
+    return head[len(UTF8_BOM) :] if head.startswith(UTF8_BOM) else head
+
+
+def gunzip(raw: bytes, path: str | Path, limit: int = MAX_INPUT_BYTES, why: str = "") -> bytes:
     """Decompress a (multi-member) gzip stream, refusing more than ``limit`` bytes of output.
 
     Same semantics as :func:`gzip.decompress` (members are concatenated, NUL
@@ -169,7 +202,8 @@ def gunzip(raw: bytes, path: str | Path, limit: int = MAX_INPUT_BYTES) -> bytes:
             total += len(chunk)
             if total > limit:
                 raise FormatError(
-                    f"gzip stream decompresses to more than {limit:,} bytes (not an input file?)",
+                    f"gzip stream decompresses to more than {limit:,} bytes "
+                    f"({why or 'not an input file?'})",
                     path,
                 )
             out.append(chunk)

@@ -92,7 +92,6 @@ from accal.io._common import (
     bits_from_strings,
     check_binary,
     check_gps_time,
-    read_bytes,
     tidy,
 )
 from accal.io.grace_l1b import (
@@ -106,6 +105,7 @@ from accal.io.grace_l1b import (
     _yaml_line,
     header_satellite,
     load_yaml_header,
+    read_l1b_bytes,
     refuse_binary,
 )
 from accal.series import UNITS
@@ -701,7 +701,7 @@ def read_attitude(path: str | Path) -> Attitude:
     deviation are in ``meta["attitude"]``.
     """
     path = Path(path)
-    raw = read_bytes(path)
+    raw = read_l1b_bytes(path)
     flavour, header, data_start, first_line = _split_header(raw, path)
     info = (_interpret_gracefo if flavour == "gracefo" else _interpret_grace)(header, path)
     cols = _parse_records(raw[data_start:], first_line, path)

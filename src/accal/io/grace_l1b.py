@@ -50,6 +50,7 @@ from accal.io._common import (
     one_line,
     peek,
     read_bytes,
+    read_head,
     row_to_line,
     string_at,
     tidy,
@@ -237,6 +238,42 @@ def sniff_grace_acc1b(path: str | Path) -> bool:
 
 
 # --------------------------------------------------------------------------- header
+
+
+#: Most bytes a data record of any L1B product takes, ASCII or binary (the longest
+#: line of the bundled real ACC, ACT, AHK, GNV, SCA and THR samples is 346 bytes).
+MAX_RECORD_BYTES = 1024
+#: Below this size a file is read whatever its header announces: a wrong record
+#: count stays a warning (:func:`read_grace_acc1b`), not a refusal.
+L1B_SIZE_FLOOR = 64 << 20
+_RECORD_COUNT_RE = re.compile(rb"(?:NUMBER OF DATA RECORDS|\bnum_records)\s*:\s*(\d{1,12})\b")
+
+
+def read_l1b_bytes(path: str | Path) -> bytes:
+    """The content of an L1B file, read only if its size fits the header's record count.
+
+    A file larger than :data:`MAX_RECORD_BYTES` per record the header announces
+    (and than :data:`L1B_SIZE_FLOOR`) is refused after reading its first MiB, before
+    gigabytes of a wrong or padded file are read and parsed (issue 23, finding 9: a
+    2 GB file reached 4.3 GB of memory and 30 s before failing).  Without a record
+    count in the first MiB, :func:`accal.io._common.read_bytes` and its global
+    limit decide.
+
+    Raises
+    ------
+    FormatError
+        As :func:`accal.io._common.read_bytes`, or the file is larger than its
+        header's record count allows.
+    """
+    head = read_head(path, _HEADER_SEARCH)
+    m = _RECORD_COUNT_RE.search(head)
+    if m is None:
+        return read_bytes(path)
+    n = int(m.group(1))
+    limit = max(m.end() + n * MAX_RECORD_BYTES + (1 << 20), L1B_SIZE_FLOOR)
+    return read_bytes(
+        path, limit, f"more than its header's {n:,} records can fill: padded, or not one L1B file?"
+    )
 
 
 def _split_header(raw: bytes, path: Path) -> tuple[str, bytes, int, int]:
@@ -948,7 +985,7 @@ def read_grace_acc1b(path: str | Path, *, invalid_bits: int = DEFAULT_INVALID_BI
             f"invalid_bits must be an 8-bit qualflg mask (0-255), got {invalid_bits}"
         )
     path = Path(path)
-    raw = read_bytes(path)
+    raw = read_l1b_bytes(path)
     flavour, header, data_start, first_line = _split_header(raw, path)
     info = (_interpret_gracefo if flavour == "gracefo" else _interpret_grace)(header, path)
     cols = (

@@ -75,7 +75,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from accal.errors import AccalError, FormatError, UnsupportedFormatError, ValidationError
-from accal.io._common import PARQUET_MAGIC, check_binary, check_gps_time, read_bytes
+from accal.io._common import PARQUET_MAGIC, check_binary, check_gps_time
 from accal.io.grace_l1b import (
     _GRACE_END_RE,
     _GRACE_KEY_RE,
@@ -85,6 +85,7 @@ from accal.io.grace_l1b import (
     _split_header,
     header_satellite,
     load_yaml_header,
+    read_l1b_bytes,
     refuse_binary,
 )
 from accal.series import UNITS
@@ -947,7 +948,7 @@ def read_housekeeping(path: str | Path) -> Housekeeping:
     day (864,000 records) takes a few seconds, a GRACE day (8,640) a fraction.
     """
     path = Path(path)
-    raw = read_bytes(path)
+    raw = read_l1b_bytes(path)
     if _flavour(raw) == "table":
         return _read_table(raw, path)
     return _read_ahk1b(raw, path)

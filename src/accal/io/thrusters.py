@@ -88,7 +88,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from accal.errors import FormatError, UnsupportedFormatError, ValidationError
-from accal.io._common import check_gps_time, one_line, read_bytes
+from accal.io._common import check_gps_time, one_line
 from accal.io.grace_l1b import (
     SATELLITES,
     _grace_int,
@@ -96,6 +96,7 @@ from accal.io.grace_l1b import (
     _split_header,
     header_satellite,
     load_yaml_header,
+    read_l1b_bytes,
     refuse_binary,
 )
 
@@ -532,7 +533,7 @@ def read_thrusters(path: str | Path) -> ThrusterFirings:
     samples are cut after 100 records).
     """
     path = Path(path)
-    raw = read_bytes(path)
+    raw = read_l1b_bytes(path)
     flavour, header, data_start, first_line = _split_header(raw, path)
     info = (_interpret_gracefo if flavour == "gracefo" else _interpret_grace)(header, path)
     rec = _parse_records(raw[data_start:], first_line, path)
