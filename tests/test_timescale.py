@@ -102,3 +102,26 @@ def test_errors():
         gps_day_start("2003-09-14", scale="tai")
     with pytest.raises(TypeError, match="datetime64"):
         utc_to_gps(np.array([1.0]))
+
+
+def test_conversions_past_the_leap_second_table_warn():
+    """Issue 21: the leap-second table has a "valid until" date and a warning past it;
+    the last valid day and everything before it convert silently."""
+    import warnings
+
+    from accal.timescale import (
+        LEAP_SECONDS_VALID_UNTIL,
+        LeapSecondTableWarning,
+        gps_to_utc,
+        utc_to_gps,
+    )
+
+    last = np.datetime64(LEAP_SECONDS_VALID_UNTIL) + np.timedelta64(86399, "s")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        g = utc_to_gps([np.datetime64("2003-09-14T00:00:00"), last])
+        assert gps_to_utc(g)[1] == last
+    with pytest.warns(LeapSecondTableWarning, match=LEAP_SECONDS_VALID_UNTIL):
+        later = utc_to_gps([last + np.timedelta64(1, "s")])
+    with pytest.warns(LeapSecondTableWarning, match="update accal"):
+        assert gps_to_utc(later)[0] == last + np.timedelta64(1, "s")

@@ -24,6 +24,7 @@ References
 
 from __future__ import annotations
 
+import warnings
 from typing import Any
 
 import numpy as np
@@ -63,6 +64,17 @@ LEAP_SECONDS: tuple[tuple[str, int], ...] = (
     ("2017-01-01", 37),
 )
 
+#: Last UTC day the table is known to hold: IERS Bulletin C 70 (July 2025) announced no
+#: leap second at the end of December 2025, and the IERS ``Leap_Second.dat`` of that
+#: bulletin expires on this date.  A conversion of a later instant warns
+#: (:class:`LeapSecondTableWarning`): a leap second announced since is not in the table.
+LEAP_SECONDS_VALID_UNTIL = "2026-06-28"
+
+
+class LeapSecondTableWarning(UserWarning):
+    """A UTC conversion beyond :data:`LEAP_SECONDS_VALID_UNTIL`."""
+
+
 #: TAI − GPS [s] (constant by definition of GPS time).
 TAI_MINUS_GPS = 19
 
@@ -76,6 +88,23 @@ _LEAP_UTC_NS = np.array([np.datetime64(d, "ns").astype(np.int64) for d, _ in LEA
 _LEAP_GPS_UTC = np.array([v - TAI_MINUS_GPS for _, v in LEAP_SECONDS], dtype=np.int64)
 # The same transitions expressed in accal GPS seconds.
 _LEAP_GPS_S = (_LEAP_UTC_NS - _EPOCH_NS) // _NS + _LEAP_GPS_UTC
+# end of the table's validity (UTC ns since 1970; the day after the last valid day)
+_VALID_UNTIL_NS = (np.datetime64(LEAP_SECONDS_VALID_UNTIL, "ns") + np.timedelta64(1, "D")).astype(
+    np.int64
+)
+
+
+def _warn_past_table(utc_ns: NDArray[np.int64]) -> None:
+    """Warn when an instant lies after :data:`LEAP_SECONDS_VALID_UNTIL`."""
+    if utc_ns.size and int(utc_ns.max()) >= _VALID_UNTIL_NS:
+        last = np.datetime64(int(utc_ns.max()), "ns").astype("datetime64[s]")
+        warnings.warn(
+            f"UTC {last} is after {LEAP_SECONDS_VALID_UNTIL}, the last day of accal's "
+            "leap-second table (IERS Bulletin C 70): a leap second announced since is "
+            "not applied (GPS-UTC taken as 18 s); update accal",
+            LeapSecondTableWarning,
+            stacklevel=3,
+        )
 
 
 def _as_datetime_ns(values: Any) -> NDArray[np.datetime64]:
@@ -138,10 +167,12 @@ def utc_to_gps(utc: ArrayLike) -> NDArray[np.float64]:
     -----
     ``gps = (utc − 2000-01-01T12:00:00) + (GPS−UTC)(utc)`` where the first term is
     the naive calendar difference.  The result is exact to the nanosecond before
-    the conversion to float64 (≈ 0.1 µs resolution in 2024).
+    the conversion to float64 (≈ 0.1 µs resolution in 2024).  Instants after
+    :data:`LEAP_SECONDS_VALID_UNTIL` warn (:class:`LeapSecondTableWarning`).
     """
     ns = _as_datetime_ns(utc).astype(np.int64)
     offset = _gps_minus_utc_ns(ns)
+    _warn_past_table(ns)
     d = ns - _EPOCH_NS
     whole, frac = np.divmod(d, _NS)
     return (whole + offset).astype(np.float64) + frac / _NS
@@ -165,6 +196,11 @@ def gps_to_utc(seconds: ArrayLike) -> NDArray[np.datetime64]:
     ------
     ValueError
         For non-finite input or instants before 1972-01-01.
+
+    Warns
+    -----
+    LeapSecondTableWarning
+        For instants after :data:`LEAP_SECONDS_VALID_UNTIL`.
     """
     g = np.asarray(seconds, dtype=np.float64)
     if not np.all(np.isfinite(g)):
@@ -176,6 +212,7 @@ def gps_to_utc(seconds: ArrayLike) -> NDArray[np.datetime64]:
     if np.any(idx < 0):
         raise ValueError("GPS time before 1972-01-01 is not supported (no leap-second table)")
     ns = (whole - _LEAP_GPS_UTC[idx]) * _NS + frac_ns + _EPOCH_NS
+    _warn_past_table(ns)
     return ns.astype("datetime64[ns]")
 
 
