@@ -9,8 +9,9 @@ export OMP_NUM_THREADS ?= 1
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 OUT    ?= out
+FUZZ_MINUTES ?= 10
 
-.PHONY: install run demo test test-all lint bench bench-readers bench-archive bench-demod-year bench-closure closure-detection mc-sigma mc-sigma-indep mc-sigma-demod mc-reference bench-reference clean
+.PHONY: install run demo test test-all lint bench bench-readers bench-archive bench-demod-year bench-closure closure-detection fuzz-cli mc-sigma mc-sigma-indep mc-sigma-demod mc-reference bench-reference clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -98,6 +99,11 @@ bench-closure: $(STAMP)
 ##                    size, the real Swarm day (~45 min on 2 idle cores); QUICK=1: a few cases (~2 min)
 closure-detection: $(STAMP)
 	$(BIN)/python benchmarks/closure_detection.py $(if $(QUICK),--quick) --out $(OUT)/closure-detection
+
+## fuzz-cli: black-box mutation fuzzing of the CLI on mutated sample files (issue 23): cases,
+##           outcomes by kind, every BAD case with its reproduction, peak RSS; FUZZ_MINUTES=10
+fuzz-cli: $(STAMP)
+	$(BIN)/python benchmarks/fuzz_cli.py --minutes $(FUZZ_MINUTES) --out $(OUT)/fuzz-cli
 
 ## bench-archive: 200 synthetic 1 Hz days, 1 and 2 workers, vs raw pyarrow parse (~4 GB in /tmp)
 bench-archive: $(STAMP)
