@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import datetime as dt
 import math
 import sys
 from pathlib import Path
@@ -10,6 +11,9 @@ from typing import Any
 import click
 
 from accal._runtime import keep_signals_in_python
+
+#: Context settings of the ``accal`` group and of the commands built on their own.
+CONTEXT_SETTINGS: dict[str, Any] = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
 
 
 class OutPath(click.Path):
@@ -133,6 +137,10 @@ class Group(click.Group):
     status 1.
     """
 
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        """The commands in the order they were registered (workflow order, not A-Z)."""
+        return list(self.commands)
+
     def invoke(self, ctx: click.Context) -> Any:
         import os
 
@@ -227,6 +235,26 @@ def check_files(**named: Path | None) -> None:
             usage_fail(f"{path}: no such file (--{option.replace('_', '-')})")
         if Path(path).is_dir():
             usage_fail(f"{path}: a directory, not a file (--{option.replace('_', '-')})")
+
+
+def is_date(text: str) -> bool:
+    """True for a calendar day written ``YYYY-MM-DD`` (ten characters, a real date).
+
+    Parameters
+    ----------
+    text : str
+        The option value.
+
+    Returns
+    -------
+    bool
+        Whether ``text`` is an ISO day such as ``2005-01-31``.
+    """
+    try:
+        dt.date.fromisoformat(text)
+    except ValueError:
+        return False
+    return len(text) == 10
 
 
 def fmt_number(value: float) -> str:
@@ -367,4 +395,16 @@ def plots_option(f: Any) -> Any:
         is_flag=True,
         help="With --close-loop: PNG plots of each residual before/after, its spectrum and "
         "the effects found (off by default: on an archive they cost more than the closure).",
+    )(f)
+
+
+def quiet_option(f: Any) -> Any:
+    """``--quiet``/``-q``: no progress bar or summary (grace-bias, diagnose)."""
+    return click.option("--quiet", "-q", is_flag=True, help="No progress bar or summary.")(f)
+
+
+def fs_option(f: Any) -> Any:
+    """``--fs``: sampling frequency of the rotating-platform commands (design, budget, gap)."""
+    return click.option(
+        "--fs", type=float, default=1.0, show_default=True, help="Sampling frequency [Hz]."
     )(f)

@@ -885,6 +885,50 @@ def arc_paths(out: str | Path, date: str, days: int) -> list[Path]:
     return [out.with_name(out.name.replace(date, str(start + k))) for k in range(days)]
 
 
+def arc_files(
+    out: str | Path,
+    date: str,
+    days: int,
+    satellite: str,
+    *,
+    coupling: bool = False,
+    thrusters: bool = False,
+    reference_out: str | Path | None = None,
+) -> list[Path]:
+    """The files a :func:`write_simulated_arc` call wrote, besides the truth files.
+
+    Parameters
+    ----------
+    out, date, days
+        As given to :func:`write_simulated_arc`.
+    satellite : str
+        ``A``, ``B``, ``C`` or ``D`` (names the THR1B files).
+    coupling : bool
+        A ``coupling`` effect was injected: each day's auxiliary table
+        (:func:`aux_path`) is listed when it exists.
+    thrusters : bool
+        Thruster pulses were simulated: each day's THR1B file is listed.
+    reference_out : str or Path, optional
+        The reference table, listed last.
+
+    Returns
+    -------
+    list of Path
+        For each day its data file, then its auxiliary table and THR1B file; then
+        the reference table.
+    """
+    written: list[Path] = []
+    for path in arc_paths(out, date, days):
+        written.append(path)
+        if coupling and aux_path(path).exists():
+            written.append(aux_path(path))
+        if thrusters:
+            written.append(thruster_path(path, satellite))
+    if reference_out is not None:
+        written.append(Path(reference_out))
+    return written
+
+
 def write_simulated_arc(
     out: str | Path,
     *,

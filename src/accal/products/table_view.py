@@ -1,0 +1,211 @@
+"""The cumulative bias/drift table of an output directory, filtered, printed or exported.
+
+What ``accal table`` does with the table (:mod:`accal.cli.table` parses the options
+and reports errors): select rows by satellite, date, method, axis and day status,
+pick columns, write the rows to a file or format them for a terminal.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from accal.batch import MANIFEST
+from accal.io.writers import write_table
+from accal.pipeline import BIAS_DRIFT_UNITS, find_bias_drift, read_bias_drift
+
+#: Columns printed when none are asked for (``day_status`` and ``model`` when present).
+PRINTED_COLUMNS = (
+    "source", "satellite", "date", "axis", "method", "bias", "bias_sigma",
+    "drift", "drift_sigma", "n", "rms",
+)  # fmt: skip
+OPTIONAL_PRINTED_COLUMNS = ("day_status", "model")
+
+
+def load(directory: Path) -> tuple[Path, pd.DataFrame]:
+    """The cumulative table of an output directory and the file it was read from.
+
+    Parameters
+    ----------
+    directory : Path
+        An ``accal grace-bias`` output directory.
+
+    Returns
+    -------
+    path : Path
+        ``DIRECTORY/bias_drift.parquet`` or ``.csv``.
+    table : pandas.DataFrame
+        Its rows.
+
+    Raises
+    ------
+    accal.errors.AccalError
+        No table, or one that cannot be read.
+    """
+    path = find_bias_drift(directory)
+    return path, read_bias_drift(path)
+
+
+def short_satellite(name: str) -> str:
+    """``GRACE-A``, ``grace-a``, ``a`` → ``A``; ``GRACE-FO-C`` → ``C`` (others: upper case)."""
+    return name.upper().removeprefix("GRACE-FO-").removeprefix("GRACE-")
+
+
+def _short_names(table: pd.DataFrame) -> pd.Series:
+    return table["satellite"].astype(str).str.upper().str.split("-").str[-1]
+
+
+def held_satellites(table: pd.DataFrame) -> list[str]:
+    """The satellites of the table's rows, sorted, as written (``GRACE-A``)."""
+    return sorted(set(table["satellite"].astype(str)))
+
+
+def unknown_satellites(table: pd.DataFrame, satellites: Sequence[str]) -> list[str]:
+    """The ``satellites`` asked for that no row of ``table`` has, in the order given.
+
+    A satellite is known by its full name (``GRACE-A``) or its letter in any case
+    (``a``, ``grace-a``): a typo would otherwise select nothing, silently.
+    """
+    known = set(_short_names(table)) | set(held_satellites(table))
+    return [s for s in satellites if short_satellite(s) not in known and s not in known]
+
+
+def select_rows(
+    table: pd.DataFrame,
+    *,
+    satellites: Sequence[str] = (),
+    start: str | None = None,
+    end: str | None = None,
+    methods: Sequence[str] = (),
+    axes: Sequence[str] = (),
+    statuses: Sequence[str] = (),
+) -> pd.DataFrame:
+    """The rows that match every filter given (an empty filter keeps everything).
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        The cumulative table.
+    satellites : sequence of str
+        Full names or letters, any case.
+    start, end : str or None
+        First and last day kept, ``YYYY-MM-DD``.
+    methods, axes : sequence of str
+        Estimators (``wavelet``, ``lsq``) and axes (``x``, ``y``, ``z``), any case.
+    statuses : sequence of str
+        Day statuses (``nominal``, ``degraded``, ``transplant``, ``off``).
+
+    Returns
+    -------
+    pandas.DataFrame
+        The rows kept, in the table's order.
+    """
+    keep = np.ones(len(table), dtype=bool)
+    if satellites:
+        want = {short_satellite(s) for s in satellites}
+        keep &= (
+            _short_names(table).isin(want).to_numpy()
+            | table["satellite"].isin(satellites).to_numpy()
+        )
+    if start:
+        keep &= (table["date"] >= start).to_numpy()
+    if end:
+        keep &= (table["date"] <= end).to_numpy()
+    if methods:
+        keep &= table["method"].isin([m.lower() for m in methods]).to_numpy()
+    if axes:
+        keep &= table["axis"].isin([a.lower() for a in axes]).to_numpy()
+    if statuses:
+        keep &= table["day_status"].isin(statuses).to_numpy()
+    return table[keep]
+
+
+def column_names(table: pd.DataFrame) -> list[str]:
+    """The table's columns, in order."""
+    return [str(c) for c in table.columns]
+
+
+def export_conflict(export: Path) -> str | None:
+    """Why ``export`` may not be written, or None.
+
+    QA: ``accal table OUT --export OUT/bias_drift.parquet --satellite B`` replaced
+    the cumulative table with B's rows; the next runs skipped A's inputs as current,
+    so their rows were lost until ``--force``.  A ``bias_drift.csv`` beside a
+    Parquet table made every later run refuse the directory.  A missing directory
+    is refused too, not created (a typo in the path would go unnoticed).
+
+    Parameters
+    ----------
+    export : Path
+        The file asked for.
+
+    Returns
+    -------
+    str or None
+        The one-line message, or None when the file may be written.
+    """
+    parent = export.parent
+    if not parent.is_dir():
+        return f"--export {export}: directory {parent} does not exist"
+    stem = export.name.lower().rsplit(".", 1)[0]
+    if stem == "bias_drift" and ((parent / MANIFEST).exists() or any(parent.glob("bias_drift.*"))):
+        return (
+            f"--export {export} is the name of the cumulative table of the output "
+            f"directory {parent}; export to another name or directory"
+        )
+    return None
+
+
+def export_rows(
+    table: pd.DataFrame, export: Path, source: Path, columns: Sequence[str] | None = None
+) -> None:
+    """Write rows to ``export`` (``.parquet`` → Parquet, else CSV), atomically, with units.
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        The rows.
+    export : Path
+        The file written.
+    source : Path
+        The table they come from (``exported_from`` in the file's metadata).
+    columns : sequence of str, optional
+        The columns written (default: all).
+    """
+    if columns:
+        table = table[list(columns)]
+    write_table(
+        {c: table[c].to_numpy() for c in table.columns},
+        export,
+        fmt="parquet" if export.suffix.lower() == ".parquet" else "csv",
+        units={c: BIAS_DRIFT_UNITS.get(c, "") for c in table.columns},
+        meta={"exported_from": str(source)},
+    )
+
+
+def table_text(table: pd.DataFrame, columns: Sequence[str] | None = None) -> str:
+    """The rows as a terminal table (``(no rows)`` when there are none).
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        The rows.
+    columns : sequence of str, optional
+        The columns shown (default: :data:`PRINTED_COLUMNS` and those of
+        :data:`OPTIONAL_PRINTED_COLUMNS` the table has).
+
+    Returns
+    -------
+    str
+        One line a row under a header, numbers to 6 significant digits.
+    """
+    if not columns:
+        columns = [*PRINTED_COLUMNS]
+        columns += [c for c in OPTIONAL_PRINTED_COLUMNS if c in table.columns]
+    table = table[list(columns)]
+    with pd.option_context("display.width", 250, "display.max_rows", None):
+        text = table.to_string(index=False, float_format=lambda v: f"{v:.6g}")
+    return text if len(table) else "(no rows)"
