@@ -19,22 +19,18 @@ from accal import __version__
 from accal.batch import check_input, failure_message, file_signature, write_error_message
 from accal.degraded import classify_day, load_periods
 from accal.errors import AccalError, ValidationError
-from accal.io.writers import write_table
-from accal.pipeline import (
+from accal.gracejob.fit import row_source, signal_share
+from accal.gracejob.options import GraceBiasOptions
+from accal.gracejob.outcome import FileOutcome, peak_rss_mb
+from accal.gracejob.outputs import (
     CALIBRATED_UNITS,
-    FileOutcome,
-    GraceBiasOptions,
-    _peak_rss_mb,
-    _read_with_reference,
-    _row_source,
-    _size,
-    _with_warnings,
-    _write_json,
     calibrated_frame,
+    file_size,
     output_stem,
-    read_input,
-    signal_share,
+    write_json,
 )
+from accal.gracejob.reading import read_input, read_with_reference, with_warnings
+from accal.io.writers import write_table
 from accal.pipeline_reference import (
     PARAMETER_UNITS,
     fit_arc,
@@ -65,14 +61,14 @@ def reference_outputs(
     arc it was fitted in (sources, parameter table), None for a day fitted alone.
     """
     stem = output_stem(path)
-    series = _with_warnings(series, *day.warnings)
+    series = with_warnings(series, *day.warnings)
     t = series.time
     date = gps_to_date(0.5 * (float(t[0]) + float(t[-1])))
     periods = load_periods(opts.degraded_days) if opts.degraded_days else None
     status = classify_day(series.satellite, date, series.meta, periods=periods)
     rows = []
     for ax in series.axes:
-        row = {**_row_source(path, series, opts, date, ax), **row_fields(day, ax, t, opts.scale)}
+        row = {**row_source(path, series, opts, date, ax), **row_fields(day, ax, t, opts.scale)}
         row.update(signal_share(series, minus_ref, ax, day.use))
         row["day_status"], row["day_status_reason"] = status
         rows.append(row)
@@ -119,7 +115,7 @@ def reference_outputs(
     if arc is not None:
         report["reference_fit"]["arc"] = arc
     rep_path = out_dir / f"{stem}.report.json"
-    _write_json(rep_path, report, sync=False)
+    write_json(rep_path, report, sync=False)
     return FileOutcome(
         path,
         True,
@@ -129,7 +125,7 @@ def reference_outputs(
         outputs=(cal_path, rep_path)
         if arc is not None
         else (cal_path, par_path, cov_path, rep_path),
-        n_bytes=_size(path),
+        n_bytes=file_size(path),
         warnings=tuple(report["read_report"]["warnings"]),
     )
 
@@ -166,7 +162,7 @@ def arc_outcomes(
         try:
             check_input(p)
             before = file_signature(p)
-            series, _, minus_ref = _read_with_reference(p, opts, reference)
+            series, _, minus_ref = read_with_reference(p, opts, reference)
             loaded[j] = (series, minus_ref, before)
         except AccalError as exc:
             yield j, FileOutcome(p, False, failure_message(p, exc))
@@ -202,9 +198,9 @@ def arc_outcomes(
             write_covariance(out_dir / f"arc_{who}_{first}_{last}.reference_cov.npz", days[0].fit)
             for j, day in zip(js, days, strict=True):
                 series, minus_ref, before = loaded[j]
-                series = _with_warnings(series, *(n for n in notes if first in n))
+                series = with_warnings(series, *(n for n in notes if first in n))
                 out = reference_outputs(paths[j], out_dir, opts, series, minus_ref, day, info)
-                yield j, dataclasses.replace(out, peak_rss=_peak_rss_mb(), signature=before)
+                yield j, dataclasses.replace(out, peak_rss=peak_rss_mb(), signature=before)
         except AccalError as exc:
             for j in js:
                 msg = f"arc of {len(js)} inputs ({names[0]} .. {names[-1]}): {exc}"

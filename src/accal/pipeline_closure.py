@@ -7,7 +7,7 @@ housekeeping; never the target itself or a copy of it), removes the instrument
 effects it accepts from the series to refit, and reports what it found, what it
 rejected and why, and how much the closure moved each estimate (do no harm).
 
-Imported by :mod:`accal.pipeline` only when closure is asked for (the closure
+Imported by :mod:`accal.gracejob.fit` only when closure is asked for (the closure
 modules pull in scipy's signal processing, ~0.4 s at start-up).
 """
 
@@ -25,15 +25,10 @@ import numpy as np
 from accal import __version__
 from accal.batch import failure_message, write_error_message
 from accal.errors import AccalError, ValidationError
-from accal.pipeline import (
-    FileOutcome,
-    GraceBiasOptions,
-    _internal_error,
-    _write_json,
-    output_stem,
-    read_input,
-    subtract_reference,
-)
+from accal.gracejob.options import GraceBiasOptions
+from accal.gracejob.outcome import FileOutcome, internal_error
+from accal.gracejob.outputs import output_stem, write_json
+from accal.gracejob.reading import read_input, subtract_reference
 from accal.series import AccSeries
 
 #: Effects removed from the calibrated series (instrument effects).  Periodic
@@ -564,7 +559,7 @@ def write_closure_reports(
         for f in (jpath, mpath):
             f.unlink(missing_ok=True)
         return jpath, mpath
-    _write_json(jpath, {"accal_version": __version__, "sources": sources})
+    write_json(jpath, {"accal_version": __version__, "sources": sources})
     lines = [
         "# accal closure report",
         "",
@@ -774,5 +769,5 @@ def diagnose_dir(
         except OSError as exc:  # writing the plots (read-only or full output directory)
             outcomes.append(FileOutcome(p, False, write_error_message(p, exc)))
         except Exception as exc:
-            outcomes.append(_internal_error(p, exc))
+            outcomes.append(internal_error(p, exc))
     return outcomes
