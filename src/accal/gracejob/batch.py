@@ -417,7 +417,7 @@ def _pool_table(out_dir: Path, opts: GraceBiasOptions, table_path: Path | None, 
     """Give the ``bias_drift`` rows pooled σ (``--pool-days``, :mod:`accal.pooling`)."""
     if table_path is None:
         return
-    # imported here: accal.pooling imports scipy (~1 s of start-up), for --pool-days only
+    # imported here: accal.pooling imports scipy (~0.3 s of start-up), for --pool-days only
     from accal.pooling import pool_rows
 
     table = read_bias_drift_arrow(table_path)

@@ -147,7 +147,7 @@ class GraceBiasOptions:
 
     def _check_reference_fit(self) -> None:
         """Usage errors of ``--bias-basis`` / ``--scale fit|fit-matrix``, up front."""
-        # imported here: the bias bases are B-splines of scipy (~0.3 s of start-up)
+        # imported here: the bias bases are B-splines of scipy (~0.6 s of start-up)
         from accal.estimators.refbasis import parse_bias_basis
 
         what = f"--bias-basis {self.bias_basis}" if self.bias_basis else f"--scale {self.scale}"

@@ -105,7 +105,7 @@ def _save_spectra(
     fits: dict[tuple[str, str], Any],
 ) -> Path:
     """Write ``<stem>.noise.npz``: the residual spectra of ``fits`` (``--pool-days``)."""
-    # imported here: accal.pooling imports scipy (~1 s of start-up), for --pool-days only
+    # imported here: accal.pooling imports scipy (~0.3 s of start-up), for --pool-days only
     from accal.pooling import day_spectra, spectra_path, write_spectra
 
     base = np.ones(len(fit_series), bool) if opts.keep_flagged else fit_series.valid

@@ -20,8 +20,9 @@ from accal.errors import FormatError, ValidationError
 from accal.io._common import arrow_to_numpy, csv_read_options, one_line
 from accal.io.writers import arrow_column, write_table
 
-# pyarrow is imported in the functions that use it, as in accal.io.writers (~0.2 s of
-# start-up, measured, that reading an input or ``accal --help`` does not need)
+# pyarrow is imported in the functions that use it, as in accal.io.writers: its import
+# (with pyarrow.csv/.parquet) costs ~0.1 s and starts jemalloc's thread (measured), which
+# reading an input (accal.api.read) does not need
 
 #: Columns the reference fit adds to ``bias_drift`` (NaN/"" for the wavelet/lsq methods;
 #: :mod:`accal.pipeline_reference`).
