@@ -5,6 +5,7 @@ from __future__ import annotations
 import datetime as dt
 import math
 import sys
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -396,6 +397,30 @@ def plots_option(f: Any) -> Any:
         help="With --close-loop: PNG plots of each residual before/after, its spectrum and "
         "the effects found (off by default: on an archive they cost more than the closure).",
     )(f)
+
+
+def option_stack(options: Sequence[Callable[[Any], Any]]) -> Callable[[Any], Any]:
+    """One decorator attaching ``options`` to a command function, listed in that order.
+
+    Parameters
+    ----------
+    options : sequence of callable
+        Option decorators (``click.option(...)``, :func:`config_option`, ...), in
+        the order ``--help`` lists them (first = top), as if stacked above the
+        function in that order.
+
+    Returns
+    -------
+    callable
+        The decorator (apply it before ``click.command``).
+    """
+
+    def decorate(f: Any) -> Any:
+        for option in reversed(options):
+            f = option(f)
+        return f
+
+    return decorate
 
 
 def quiet_option(f: Any) -> Any:

@@ -50,7 +50,18 @@ def load(directory: Path) -> tuple[Path, pd.DataFrame]:
 
 
 def short_satellite(name: str) -> str:
-    """``GRACE-A``, ``grace-a``, ``a`` → ``A``; ``GRACE-FO-C`` → ``C`` (others: upper case)."""
+    """The letter a satellite is known by in the table's rows.
+
+    Parameters
+    ----------
+    name : str
+        ``GRACE-A``, ``grace-a``, ``a``, ``GRACE-FO-C``, ...
+
+    Returns
+    -------
+    str
+        ``A`` for the first three, ``C`` for the last; other names in upper case.
+    """
     return name.upper().removeprefix("GRACE-FO-").removeprefix("GRACE-")
 
 
@@ -59,7 +70,18 @@ def _short_names(table: pd.DataFrame) -> pd.Series:
 
 
 def held_satellites(table: pd.DataFrame) -> list[str]:
-    """The satellites of the table's rows, sorted, as written (``GRACE-A``)."""
+    """The satellites of the table's rows, sorted, as written (``GRACE-A``).
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        The cumulative table.
+
+    Returns
+    -------
+    list of str
+        Each satellite once.
+    """
     return sorted(set(table["satellite"].astype(str)))
 
 
@@ -68,6 +90,18 @@ def unknown_satellites(table: pd.DataFrame, satellites: Sequence[str]) -> list[s
 
     A satellite is known by its full name (``GRACE-A``) or its letter in any case
     (``a``, ``grace-a``): a typo would otherwise select nothing, silently.
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        The cumulative table.
+    satellites : sequence of str
+        The satellites asked for.
+
+    Returns
+    -------
+    list of str
+        Those not in the table (empty when all are).
     """
     known = set(_short_names(table)) | set(held_satellites(table))
     return [s for s in satellites if short_satellite(s) not in known and s not in known]
@@ -124,7 +158,18 @@ def select_rows(
 
 
 def column_names(table: pd.DataFrame) -> list[str]:
-    """The table's columns, in order."""
+    """The table's columns, in order.
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        The (selected) table.
+
+    Returns
+    -------
+    list of str
+        Its column names.
+    """
     return [str(c) for c in table.columns]
 
 
