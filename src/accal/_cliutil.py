@@ -423,6 +423,29 @@ def option_stack(options: Sequence[Callable[[Any], Any]]) -> Callable[[Any], Any
     return decorate
 
 
+def format_option(help: str | None = None) -> Callable[[Any], Any]:
+    """``--format parquet|csv`` (the value is ``fmt``), shared by grace-bias and demod.
+
+    Parameters
+    ----------
+    help : str, optional
+        Its help text (demod's has none).
+
+    Returns
+    -------
+    callable
+        The option decorator.
+    """
+    return click.option(
+        "--format",
+        "fmt",
+        type=click.Choice(["parquet", "csv"]),
+        default="parquet",
+        show_default=True,
+        help=help,
+    )
+
+
 def quiet_option(f: Any) -> Any:
     """``--quiet``/``-q``: no progress bar or summary (grace-bias, diagnose)."""
     return click.option("--quiet", "-q", is_flag=True, help="No progress bar or summary.")(f)

@@ -1,7 +1,7 @@
 """``accal budget``: uncertainty budget of the rotating-platform measurement.
 
 The budget is :func:`accal.pipeline_demod.budget_report`, imported when the
-command runs (~0.5 s, not for ``accal --help``).
+command runs (~0.3 s, not for ``accal --help``).
 """
 
 from __future__ import annotations

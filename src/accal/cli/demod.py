@@ -2,7 +2,7 @@
 
 The options are declared in :mod:`accal.cli.demod_options`; the work is
 :func:`accal.pipeline_demod.run_demod`, imported when the command runs
-(~0.5 s, not for ``accal --help``).
+(with accal.run_sampling: ~0.5 s, not for ``accal --help``).
 """
 
 from __future__ import annotations

@@ -8,7 +8,14 @@ from typing import Any
 
 import click
 
-from accal._cliutil import OutPath, alpha_option, config_option, option_stack, plots_option
+from accal._cliutil import (
+    OutPath,
+    alpha_option,
+    config_option,
+    format_option,
+    option_stack,
+    plots_option,
+)
 
 DEMOD_PSD_HELP = (
     "Noise PSD behind sigma, Rd[k] and GLS: 'auto' estimates it from the run's own residual "
@@ -49,13 +56,7 @@ _OPTIONS: list[Callable[[Any], Any]] = [
         help="Bias basis: affine, optionally plus auxiliary channels of the run file "
         "(affine+temperature).",
     ),
-    click.option(
-        "--format",
-        "fmt",
-        type=click.Choice(["parquet", "csv"]),
-        default="parquet",
-        show_default=True,
-    ),
+    format_option(),
     click.option(
         "--sinusoid-period",
         type=float,

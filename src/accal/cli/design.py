@@ -1,7 +1,7 @@
 """``accal design``: a θ(t) calibration pattern for the rotating platform.
 
 The pattern is made and written by :func:`accal.pipeline_demod.write_design`,
-imported when the command runs (~0.5 s, not for ``accal --help``).
+imported when the command runs (~0.3 s, not for ``accal --help``).
 """
 
 from __future__ import annotations

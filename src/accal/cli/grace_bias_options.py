@@ -14,6 +14,7 @@ from accal._cliutil import (
     alpha_option,
     aux_option,
     config_option,
+    format_option,
     option_stack,
     plots_option,
     quiet_option,
@@ -97,14 +98,7 @@ _OPTIONS: list[Callable[[Any], Any]] = [
         show_default=True,
         help="Estimator; with 'both' the wavelet fit calibrates the series.",
     ),
-    click.option(
-        "--format",
-        "fmt",
-        type=click.Choice(["parquet", "csv"]),
-        default="parquet",
-        show_default=True,
-        help="Output format.",
-    ),
+    format_option("Output format."),
     click.option(
         "--order",
         type=click.Choice(["1", "2"]),

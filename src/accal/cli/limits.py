@@ -90,7 +90,7 @@ def check_budget_size(
         The (finite, positive) options of ``budget``: TM [s], τ [s] or None (scan),
         fs [Hz], ``"ls"``/``"gls"``, T [s] and the ``--taus`` spec.
     """
-    import numpy as np  # ~0.15 s: not for `accal --help`
+    import numpy as np  # ~0.2 s: not for `accal --help`
 
     from accal.errors import AccalError
     from accal.pipeline_demod import parse_taus

@@ -1,7 +1,7 @@
 """``accal simulate gap``: a synthetic rotating-platform run and its truth table.
 
 The run is :func:`accal.pipeline_demod.write_simulated_gap`, imported when the
-command runs (~0.5 s, not for ``accal --help``).
+command runs (~0.3 s, not for ``accal --help``).
 """
 
 from __future__ import annotations

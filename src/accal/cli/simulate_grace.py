@@ -2,7 +2,7 @@
 
 The options are declared in :mod:`accal.cli.simulate_grace_options`; the files are
 written by :func:`accal.simulate.grace.write_simulated_arc`, imported when the
-command runs (numpy and scipy: ~0.3 s, not for ``accal --help``).
+command runs (~0.2 s, not for ``accal --help``).
 """
 
 from __future__ import annotations
