@@ -21,6 +21,9 @@ References
    Oceanic Technol. 14, 554–564 (1997).
 .. [2] "Calibration of the accelerometers on board GRACE satellites using discrete
    wavelet transform" (``shared/papers/grace_wavelet_calibration.txt``), eqs. 1–11.
+.. [3] D. B. Percival & A. T. Walden, *Spectral Analysis for Physical Applications*,
+   Cambridge University Press (1993): the variance of a linear functional of a
+   stationary process, ``∫ |G(f)|² S(f) df`` over the DTFT ``G`` of its weights.
 """
 
 from __future__ import annotations
@@ -374,9 +377,15 @@ def linear_estimator_covariance(
     Notes
     -----
     For stationary noise with two-sided PSD ``S``, ``Cov(g_j'e, g_k'e) =
-    (1/N) Σ_f G_j(f) G_k(f)* S(f)`` (Parseval; ``G`` the DFT of the weights on the
-    nominal sampling grid of ``N`` points, gaps as zeros).  ``S`` is estimated from
-    the residual's periodogram in three steps:
+    ∫ G_j(f) G_k(f)* S(f) df`` over the DTFT ``G`` of the weights on the nominal
+    sampling grid of ``N`` points, gaps as zeros (Percival & Walden 1993, module
+    references).
+    The integral is taken on a grid twice finer than the Fourier frequencies (the
+    weights' DFT zero-padded to ``2N``: exact for a PSD known on that grid, the
+    circulant embedding of the ``N × N`` Toeplitz form); the sum over the ``N``
+    Fourier frequencies alone treats the noise as periodic with the record and put
+    σ 1.5× too high under a noise band near 1/rev.  ``S`` is estimated from the
+    residual's periodogram in three steps:
 
     1. periodogram ``P_f = |R(f)|²/n`` of the residual on the grid (``n`` used
        samples);
@@ -385,7 +394,8 @@ def linear_estimator_covariance(
        where ``Q_j`` are the DFTs of an orthonormal basis of the polynomial on the
        used samples; ``P_f`` is divided by that factor (floored at 0.2);
     3. log-spaced binning: bins of ``min_bin`` Fourier bins at the low end,
-       growing by 25 % per bin; ``S(0)`` takes the lowest bin's value.
+       growing by 25 % per bin; ``S`` below ``f_1`` takes the lowest bin's value,
+       between Fourier frequencies the value of the bin of the one below.
 
     This resolves the noise PSD down to ``min_bin/T``, where the estimators'
     weights have their power, unlike a lag-window estimate whose resolution is
@@ -399,6 +409,10 @@ def linear_estimator_covariance(
     return _CovarianceKernel(t, g, order, min_bin).covariances(
         np.asarray(residual, dtype=np.float64)[None, :]
     )[0]
+
+
+#: Grid refinement of the frequency integral of :class:`_CovarianceKernel`.
+_OVERSAMPLE = 2
 
 
 class _CovarianceKernel:
@@ -416,12 +430,9 @@ class _CovarianceKernel:
         self.idx, self.ngrid = _grid_index(t)
         u, _, _ = _scaled_time(t)
         q = _orthonormal_columns(np.vander(u, order + 1, increasing=True))
-        rows = np.empty((order + 1 + g.shape[0], self.n))
-        rows[: order + 1] = q.T
-        rows[order + 1 :] = g
-        spec = np.fft.rfft(_on_grid(rows, self.idx, self.ngrid), axis=1)
-        nf = spec.shape[1]
-        suppress = 1.0 - np.sum(np.abs(spec[: order + 1]) ** 2, axis=0) / self.n
+        qspec = np.fft.rfft(_on_grid(q.T, self.idx, self.ngrid), axis=1)
+        nf = qspec.shape[1]
+        suppress = 1.0 - np.sum(np.abs(qspec) ** 2, axis=0) / self.n
         self.inv_suppress = 1.0 / np.clip(suppress, 0.2, None)
         # log-spaced bins over f_k, k = 1 .. nf-1
         edges = [1]
@@ -432,25 +443,36 @@ class _CovarianceKernel:
         self.nbins = edges_arr.size - 1
         self.counts = np.diff(edges_arr)  # every bin holds >= 1 frequency
         self.starts = edges_arr[:-1] - 1  # bin starts as indices into f_1 .. f_nf-1
-        two_sided = np.full(nf, 2.0)
+        # Var(g'e) = ∫ |G(f)|² S(f) df over the DTFT of the weights (Percival &
+        # Walden 1993, module references), not the sum over the N Fourier
+        # frequencies, which treats the noise as periodic with the record: |G|² of
+        # a polynomial weight has its sidelobe peaks at the Fourier frequencies, so
+        # a PSD concentrated away from f = 0 (a band near 1/rev) came out 1.5x too
+        # large in σ.  The integral is taken on a grid OVERSAMPLE times finer (zero padding),
+        # with the estimate of S constant over each bin (f below f_1 takes the lowest
+        # bin's value, as S(0) did); for a flat PSD the two sums agree exactly.
+        m = _OVERSAMPLE * self.ngrid
+        gs = np.fft.rfft(_on_grid(g, self.idx, self.ngrid), n=m, axis=1)
+        nfm = gs.shape[1]
+        two_sided = np.full(nfm, 2.0)
         two_sided[0] = 1.0
-        if self.ngrid % 2 == 0:
+        if m % 2 == 0:
             two_sided[-1] = 1.0
+        k = np.clip(np.arange(nfm) // _OVERSAMPLE, 1, nf - 1)  # Fourier bin below each f
+        bin_of = np.searchsorted(edges_arr, k, side="right") - 1
         # The PSD estimate is constant over each bin, so
-        #   Re(G diag(w) G^H)_ij = w_0 P_ij(f_0) + Σ_b S_b Σ_{f in b} P_ij(f),
+        #   Re(G diag(w) G^H)_ij = Σ_b S_b Σ_{f in b} P_ij(f),
         #   P_ij(f) = two_sided(f) · Re(G_i(f) conj(G_j(f))):
         # the residual-independent sums over each bin are formed once here.
-        gs = spec[order + 1 :]
         p = gs.shape[0]
         self.p = p
-        self.pair0 = np.empty((p, p))
+        self.scale = float(m)
         self.pair_bins = np.empty((p, p, self.nbins))
         for i in range(p):
             for j in range(i + 1):
                 prod = gs[i].real * gs[j].real + gs[i].imag * gs[j].imag
                 prod *= two_sided
-                self.pair0[i, j] = self.pair0[j, i] = prod[0]
-                summed = np.add.reduceat(prod[1:], self.starts)
+                summed = np.bincount(bin_of, weights=prod, minlength=self.nbins)
                 self.pair_bins[i, j] = self.pair_bins[j, i] = summed
 
     def covariances(self, residuals: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -459,11 +481,9 @@ class _CovarianceKernel:
         pgram = (rspec.real**2 + rspec.imag**2) * (self.inv_suppress / self.n)  # (k, nf)
         # mean over each log-spaced bin of f_1 .. f_nf-1 (bins are contiguous runs)
         sbin = np.add.reduceat(pgram[:, 1:], self.starts, axis=1) / self.counts  # (k, nbins)
-        # f_0 takes the lowest bin's value (see __init__ for the bin sums)
         p = self.p
         cov = (sbin @ self.pair_bins.reshape(p * p, self.nbins).T).reshape(-1, p, p)
-        cov += sbin[:, 0, None, None] * self.pair0
-        return cov / self.ngrid
+        return cov / self.scale
 
 
 # --------------------------------------------------------------------------------------
