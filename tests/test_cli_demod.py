@@ -727,6 +727,11 @@ def test_tail_shorter_than_a_period_is_a_warning(tmp_path):
     assert "warning: the last 300 s (300 samples) are less than one period" in err
     code, _, err = invoke("demod", full, "--tau", 600, "--mask", 200, "--out", tmp_path / "p")
     assert code == 0 and "less than one period" not in err
+    # -q is errors only, as in grace-bias (the fuzzer found demod printing warnings
+    # under -q); the warning is in the run's log
+    code, _, err = invoke("demod", run, "--tau", 600, "--mask", 200, "--out", tmp_path / "q", "-q")
+    assert code == 0 and err == "", err
+    assert "less than one period" in (tmp_path / "q" / "accal.log").read_text()
 
 
 def test_lagged_coupling_to_a_declared_channel_is_searched(tmp_path):

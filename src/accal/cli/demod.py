@@ -106,11 +106,12 @@ def demod(
         if not o.ok:
             err(o.message)
             continue
+        if quiet:  # as grace-bias: -q is errors only; the warnings are in accal.log
+            continue
         for w in o.warnings:
             err(f"{o.path}: warning: {w}")
-        if not quiet:
-            for line in _run_lines(o.path, o.summary, o.outputs[0]):
-                click.echo(line, err=True)
+        for line in _run_lines(o.path, o.summary, o.outputs[0]):
+            click.echo(line, err=True)
     if not quiet:
         click.echo(
             f"accal demod: {summary.n_ok} ok, {summary.n_failed} failed in {summary.seconds:.2f} s",

@@ -116,7 +116,12 @@ _OPTIONS: list[Callable[[Any], Any]] = [
     ),
     alpha_option,
     plots_option,
-    click.option("--quiet", "-q", is_flag=True, help="No progress bar or summary lines."),
+    click.option(
+        "--quiet",
+        "-q",
+        is_flag=True,
+        help="No progress bar, summary lines or warnings (in accal.log).",
+    ),
     config_option,
 ]
 

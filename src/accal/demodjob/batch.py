@@ -203,6 +203,8 @@ def run_demod(
                     outcomes.append(RunOutcome(path, False, internal_error_message(path, exc)))
                 o = outcomes[-1]
                 log(f"ok {path}" if o.ok else f"FAILED {o.message}")
+                for w in o.warnings:  # in the log too: `-q` keeps them off the terminal
+                    log(f"warning {path}: {w}")
             summary = DemodRunSummary(outcomes, _time.perf_counter() - start)
             log(
                 f"accal demod: {summary.n_ok} ok, {summary.n_failed} failed in {summary.seconds:.2f} s"
