@@ -13,7 +13,7 @@ from click.testing import CliRunner
 
 from accal.cli import main
 
-COMMANDS = ["grace-bias", "table", "diagnose", "demod", "design", "budget", "simulate"]
+COMMANDS = ["grace-bias", "table", "plot", "diagnose", "demod", "design", "budget", "simulate"]
 
 
 def _help(args: list[str], width: int) -> str:

@@ -28,6 +28,7 @@ from accal.cli.demod import demod
 from accal.cli.design import design
 from accal.cli.diagnose import diagnose
 from accal.cli.grace_bias import grace_bias
+from accal.cli.plot import plot_cmd
 from accal.cli.simulate import simulate, simulate_gap, simulate_grace
 from accal.cli.table import table_cmd
 
@@ -64,6 +65,7 @@ def main(debug: bool) -> None:
 
 main.add_command(grace_bias)
 main.add_command(table_cmd)
+main.add_command(plot_cmd)
 main.add_command(diagnose)
 main.add_command(demod)
 main.add_command(design)
