@@ -316,3 +316,21 @@ def test_an_absurd_acceleration_is_damage_with_its_line(tmp_path):
         read_rawlog(p)
     p.write_text(CSV.replace("\n2,1e-6", "\n2,999.0"))  # large but within the bound: read
     assert read_rawlog(p).axis("y")[2] == 999.0
+
+
+@pytest.mark.parametrize("column", ["m_y", "m_z", "theta", "m_x"])
+def test_a_boolean_time_acceleration_or_angle_column_is_refused(tmp_path, column):
+    """The mutation fuzzer (issue 23): a Boolean m_y was read as 0/1 m/s² and
+    demodulated without a word.  A Boolean auxiliary channel (a flag) is still read."""
+    df = pd.DataFrame(
+        {"time": np.arange(8.0), "m_x": 1e-7, "m_y": 1e-6, "m_z": 2e-6,
+         "theta": np.repeat([0.0, np.pi], 4), "flag": [True, False] * 4}
+    )  # fmt: skip
+    df[column] = df[column] > 0
+    p = tmp_path / "run.parquet"
+    df.to_parquet(p)
+    with pytest.raises(FormatError, match=f"{column}: a Boolean column, not a number in"):
+        read_rawlog(p)
+    ok = df.assign(**{column: 1e-6 if column != "theta" else df["theta"] * 0.0})
+    ok.to_parquet(p)
+    assert read_rawlog(p).aux["flag"].tolist() == [1.0, 0.0] * 4

@@ -26,6 +26,7 @@ from __future__ import annotations
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -217,6 +218,8 @@ class RawlogStream:
 
             line_of = csv_line if self.first_line else None  # Parquet: the message names rows
 
+            axes_cols = ("m_x", *REQUIRED_COLUMNS) if "x" in self.axes else REQUIRED_COLUMNS
+            _refuse_boolean(table, axes_cols, path)
             cols = {
                 c: numeric_column(table.column(c), c, path, line_of, locate=True).astype(np.float64)
                 for c in REQUIRED_COLUMNS
@@ -271,6 +274,20 @@ class RawlogStream:
                     self.warnings.append(f"non-numeric columns ignored: {column_list(skipped)}")
             aux = {k: numeric_column(table.column(k), k, path) for k in aux_names}
             yield RawlogChunk(row0, time, np.column_stack(acc), cols["theta"], aux, self.axes)
+
+
+def _refuse_boolean(table: Any, names: tuple[str, ...], path: Path) -> None:
+    """FormatError for a Boolean time, acceleration or angle column.
+
+    A flag column is numeric to :func:`numeric_column` (the auxiliary channels may be
+    flags), but a Boolean ``m_y`` had been read as 0/1 m/s² and demodulated without a
+    word (issue 23, the mutation fuzzer: a_Y ≈ -4.6e-17).
+    """
+    for name in names:
+        # the type's name, not pyarrow.types: pyarrow is imported lazily (accal.io.tables)
+        if name in table.column_names and str(table.column(name).type) == "bool":
+            unit = UNITS["acc"] if name.startswith("m_") else UNITS[name]
+            raise FormatError(f"{name}: a Boolean column, not a number in {unit}", path)
 
 
 def name_mismatch(path: str | Path, *, parquet: bool) -> str | None:
