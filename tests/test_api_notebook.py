@@ -97,7 +97,9 @@ def test_fit_bias_equals_the_cli_on_the_five_real_samples(grace_cli: Path) -> No
         stem = name.split(".")[0]
         cal = pd.read_parquet(grace_cli / f"{stem}.calibrated.parquet")
         df = fit.to_dataframe()
-        assert df.columns.tolist() == cal.columns.tolist()
+        # the file has time_utc beside gps_time: the frame's UTC index
+        assert ["gps_time", "time_utc", *df.columns[1:]] == cal.columns.tolist()
+        assert cal["time_utc"].tolist() == df.index.tolist()
         for c in df.columns:
             assert np.array_equal(df[c].to_numpy(), cal[c].to_numpy()), (name, c)
     assert worst == 0.0  # bit for bit

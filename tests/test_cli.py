@@ -70,6 +70,7 @@ def test_real_samples_end_to_end(tmp_path):
     cal = pd.read_parquet(tmp_path / "ACC1B_2003-09-14_A_00.calibrated.parquet")
     assert list(cal.columns) == [
         "gps_time",
+        "time_utc",
         "lin_accl_x",
         "lin_accl_y",
         "lin_accl_z",

@@ -758,22 +758,69 @@ class Demodulation:
         source are attributes (example: :class:`Demodulation`).
         """
         coords: dict[str, Any] = {"period": ("period", np.asarray(self.periods["period"]))}
-        data_vars: dict[str, Any] = {}
-        for k, v in self.periods.items():
-            if k in ("source", "period"):
-                continue
-            text = self.units.get(k, "")
-            attrs = {"long_name": text or k}
-            if np.asarray(v).dtype.kind in "fiu":
-                attrs["units"] = _cf_unit(text)
-            target = coords if k in ("t_start", "t_mid") else data_vars
-            target[k] = ("period", np.asarray(v), attrs)
+        columns = {k: v for k, v in self.periods.items() if k not in ("source", "period")}
+        data_vars = table_variables(
+            columns, self.units, "period", coords=coords, coord_names=("t_start", "t_mid")
+        )
         models = {k: str(self.arguments.get(k, "")) for k in ("psd", "signal_model", "bias_model")}
         title = f"accal demod: {self.source}"
         return _dataset(
             data_vars, coords, title=title, source=self.source, tau=self.tau, mask=self.mask,
             method=self.method, **models,
         )  # fmt: skip
+
+
+def table_variables(
+    columns: Mapping[str, Any],
+    units: Mapping[str, str],
+    dim: str,
+    *,
+    coords: dict[str, Any],
+    coord_names: Sequence[str] = (),
+) -> dict[str, Any]:
+    """A table's columns as xarray variables over ``dim``, with CF attributes.
+
+    Each variable's ``long_name`` is its accal unit text (the column name without
+    one) and a numeric one has CF ``units`` (:func:`_cf_unit`); a datetime column
+    (a UTC column, naive or time-zone aware) becomes naive UTC ``datetime64[ns]``
+    with ``standard_name = "time"``, which xarray encodes as CF time.
+
+    Parameters
+    ----------
+    columns : mapping of str to array
+        The columns, in order.
+    units : mapping of str to str
+        accal's unit text of each column.
+    dim : str
+        The dimension (``period``, ``row``).
+    coords : dict
+        Receives the columns named in ``coord_names`` (and every datetime column)
+        as coordinates.
+    coord_names : sequence of str
+        Columns that are coordinates.
+
+    Returns
+    -------
+    dict
+        The data variables, ``name -> (dim, values, attrs)``.
+    """
+    data_vars: dict[str, Any] = {}
+    for k, v in columns.items():
+        text = units.get(k, "")
+        attrs = {"long_name": text or k}
+        values = np.asarray(v)
+        if hasattr(v, "dt") and getattr(v.dt, "tz", None) is not None:  # pandas, tz-aware
+            values = v.dt.tz_convert(None).to_numpy(dtype="datetime64[ns]")
+        if values.dtype.kind in "fiu":
+            attrs["units"] = _cf_unit(text)
+        target = data_vars
+        if values.dtype.kind == "M":
+            attrs = {"standard_name": "time", "long_name": f"{k}: {text}" if text else k}
+            target = coords
+        elif k in coord_names:
+            target = coords
+        target[k] = (dim, values, attrs)
+    return data_vars
 
 
 def _cf_unit(text: str) -> str:

@@ -24,7 +24,7 @@ from accal.gracejob.options import GraceBiasOptions
 from accal.gracejob.outcome import FileOutcome, peak_rss_mb
 from accal.gracejob.outputs import (
     CALIBRATED_UNITS,
-    calibrated_frame,
+    calibrated_file_columns,
     file_size,
     output_stem,
     write_json,
@@ -82,7 +82,7 @@ def reference_outputs(
         "input_meta": series.meta,
     }
     cal_path = write_table(
-        calibrated_frame(day.calibrated, day.use),
+        calibrated_file_columns(day.calibrated, day.use, opts.fmt),
         out_dir / f"{stem}.calibrated.{opts.fmt}",
         fmt=opts.fmt,
         units=CALIBRATED_UNITS,

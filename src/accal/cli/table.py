@@ -54,7 +54,8 @@ from accal._cliutil import err, is_date, usage_fail
     "export",
     type=click.Path(dir_okay=False, path_type=Path),
     default=None,
-    help="Write the rows to FILE (.csv or .parquet, atomic) instead of printing them.",
+    help="Write the rows to FILE (.csv, .parquet or .nc: CF netCDF 3; atomic) instead of "
+    "printing them.",
 )
 def table_cmd(
     directory: Path,
@@ -105,8 +106,8 @@ def table_cmd(
         if unknown:
             raise click.BadParameter(f"unknown columns {unknown}; known: {known}")
         if export is not None:
-            if export.suffix.lower() not in (".csv", ".parquet"):
-                raise click.BadParameter("--export FILE must end in .csv or .parquet")
+            if export.suffix.lower() not in table_view.EXPORT_FORMATS:
+                raise click.BadParameter("--export FILE must end in .csv, .parquet or .nc")
             problem = table_view.export_conflict(export)
             if problem:
                 usage_fail(problem)

@@ -48,7 +48,7 @@ from accal.demodjob.outputs import (
 from accal.demodjob.reading import estimate, load_psd
 from accal.demodjob.report import summary_markdown, summary_warnings
 from accal.demodjob.summary import summarise, summary_of_extended
-from accal.demodjob.table import period_rows
+from accal.demodjob.table import add_utc_columns, period_rows
 from accal.errors import AccalError, ValidationError
 from accal.io.merge import merge_table
 from accal.io.writers import atomic_path
@@ -123,6 +123,7 @@ def process_run(
             meta=table_meta,
             out=tmp[0],
         )
+        add_utc_columns(tmp[0], p_path, opts.fmt)
         tmp[1].write_text(json_text(summary))
         tmp[2].write_text(summary_markdown(summary))
     remove_stale_summaries(targets[1].parent, path.name, targets[1])

@@ -2,9 +2,17 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from accal.products.utc import utc_units, with_utc_columns
+
+#: The period time columns, which the periods file carries in UTC too (``t_start_utc``,
+#: ``t_mid_utc``: the instants when the run's time is GPS seconds since 2000-01-01
+#: 12:00:00 GPS, as accal's own tables; a run timed from 0 starts at 2000-01-01T11:59:47Z).
+PERIOD_TIME_COLUMNS = ("t_start", "t_mid")
 
 PERIOD_UNITS = {
     "source": "input file name",
@@ -62,3 +70,41 @@ def period_rows(
     data["leakage"] = res.leakage
     units.update({k: PERIOD_UNITS[k] for k in ("n_used", "masked_time", "leakage")})
     return data, units
+
+
+def add_utc_columns(written: Path, path: Path, fmt: str) -> None:
+    """Give the periods table just merged into ``written`` its UTC columns, for every row.
+
+    ``t_start_utc`` and ``t_mid_utc`` (:data:`PERIOD_TIME_COLUMNS`) are computed anew
+    from ``t_start`` and ``t_mid`` after each merge, so the rows of a table of an older
+    version, which has none, get them too; each follows its GPS-seconds column
+    (``timestamp[ns, tz=UTC]`` in Parquet, ISO 8601 text in CSV:
+    :func:`accal.products.utc.utc_arrow`).  The table is rewritten in place with the
+    units and metadata the merge gave it.
+
+    Parameters
+    ----------
+    written : Path
+        The merged table (the temporary name of ``path`` that the caller renames).
+    path : Path
+        The periods table it becomes (its CSV sidecar holds the units and metadata).
+    fmt : {"parquet", "csv"}
+        Its format.
+    """
+    from accal.io.tables import read_table_arrow
+    from accal.io.writers import read_table_metadata, write_table
+
+    table, units, meta, _ = read_table_arrow(written)
+    if fmt == "csv":  # the merge wrote the sidecar under the final name
+        units, meta = read_table_metadata(path)
+    columns = with_utc_columns(
+        dict(zip(table.column_names, table.columns, strict=True)), PERIOD_TIME_COLUMNS, fmt
+    )
+    write_table(
+        columns,
+        written,
+        fmt=fmt,
+        units=utc_units(units, PERIOD_TIME_COLUMNS),
+        meta=meta,
+        csv_name=path if fmt == "csv" else None,
+    )

@@ -1,7 +1,8 @@
 """The per-input files of ``accal grace-bias``: names, calibrated columns, JSON.
 
-:func:`output_stem` names an input's outputs, :func:`calibrated_frame` and
-:data:`CALIBRATED_UNITS` are the columns of ``<stem>.calibrated.<fmt>``, and
+:func:`output_stem` names an input's outputs, :func:`calibrated_frame` (in memory),
+:func:`calibrated_file_columns` (with ``time_utc``) and :data:`CALIBRATED_UNITS` are
+the columns of ``<stem>.calibrated.<fmt>``, and
 :func:`write_json` writes the standard JSON of ``<stem>.report.json`` (non-finite
 floats as null, atomically).
 """
@@ -15,10 +16,15 @@ from typing import Any
 import numpy as np
 
 from accal.io.writers import _json_default, atomic_path
+from accal.products.utc import utc_unit, with_utc_columns
 from accal.series import AccSeries
+
+#: The GPS-seconds column of the calibrated series, which the files carry in UTC too.
+CALIBRATED_TIME_COLUMNS = ("gps_time",)
 
 CALIBRATED_UNITS = {
     "gps_time": "s (GPS seconds since 2000-01-01 12:00:00)",
+    "time_utc": utc_unit("gps_time"),
     "lin_accl_x": "m/s^2 (trend removed, scale applied)",
     "lin_accl_y": "m/s^2 (trend removed, scale applied)",
     "lin_accl_z": "m/s^2 (trend removed, scale applied)",
@@ -45,6 +51,27 @@ def calibrated_frame(series: AccSeries, use: np.ndarray) -> dict[str, np.ndarray
     data["valid"] = use
     data["qualflg"] = series.quality
     return data
+
+
+def calibrated_file_columns(series: AccSeries, use: np.ndarray, fmt: str) -> dict[str, Any]:
+    """The columns of ``<stem>.calibrated.<fmt>``: :func:`calibrated_frame` and ``time_utc``.
+
+    Parameters
+    ----------
+    series : AccSeries
+        The calibrated series.
+    use : ndarray of bool
+        The samples used in the fit (``valid``).
+    fmt : {"parquet", "csv"}
+        The file format: ``time_utc`` is ``timestamp[ns, tz=UTC]`` in Parquet, ISO 8601
+        text in CSV (:func:`accal.products.utc.utc_arrow`).
+
+    Returns
+    -------
+    dict of str to array
+        ``gps_time``, ``time_utc``, ``lin_accl_*``, ``valid``, ``qualflg``.
+    """
+    return with_utc_columns(calibrated_frame(series, use), CALIBRATED_TIME_COLUMNS, fmt)
 
 
 def file_size(path: Path) -> int:

@@ -21,7 +21,7 @@ from accal.gracejob.options import GraceBiasOptions
 from accal.gracejob.outcome import FileOutcome, internal_error, peak_rss_mb
 from accal.gracejob.outputs import (
     CALIBRATED_UNITS,
-    calibrated_frame,
+    calibrated_file_columns,
     file_size,
     output_stem,
     write_json,
@@ -61,7 +61,7 @@ def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutco
         "input_meta": series.meta,
     }
     cal_path = write_table(
-        calibrated_frame(cal, use),
+        calibrated_file_columns(cal, use, opts.fmt),
         out_dir / f"{stem}.calibrated.{opts.fmt}",
         fmt=opts.fmt,
         units=CALIBRATED_UNITS,

@@ -19,6 +19,7 @@ from accal import __version__
 from accal.errors import FormatError, ValidationError
 from accal.io._common import arrow_to_numpy, csv_read_options, one_line
 from accal.io.writers import arrow_column, write_table
+from accal.products.utc import utc_arrow, utc_unit
 
 # pyarrow is imported in the functions that use it, as in accal.io.writers: its import
 # (with pyarrow.csv/.parquet) costs ~0.1 s and starts jemalloc's thread (measured), which
@@ -54,6 +55,7 @@ BIAS_DRIFT_UNITS = {
     "drift": "m/s^3",
     "quadratic": "m/s^4 (order 2 only, else NaN)",
     "t0": "s (GPS seconds of the first sample used)",
+    "t0_utc": utc_unit("t0"),
     "bias_sigma": "m/s^2 (1 sigma, coloured-noise aware)",
     "drift_sigma": "m/s^3 (1 sigma)",
     "quadratic_sigma": "m/s^4 (1 sigma)",
@@ -87,6 +89,11 @@ BIAS_DRIFT_UNITS = {
 }
 
 KEY_COLUMNS = ["source", "axis", "method"]
+
+#: Columns computed from another one when the table is read or written, never merged:
+#: ``t0_utc`` is ``t0`` in UTC (a table of an older version, without it, gets it from
+#: its ``t0`` at the next merge).
+DERIVED_COLUMNS = {"t0_utc": "t0"}
 
 
 _NP_TYPES = {"string": object, "int64": np.int64, "double": np.float64}
@@ -128,18 +135,43 @@ def _bias_drift_schema():
         [
             (c, pa.string() if c in strings else pa.int64() if c in ints else pa.float64())
             for c in BIAS_DRIFT_UNITS
+            if c not in DERIVED_COLUMNS
         ]
     )
 
 
+def _with_derived(table: Any, fmt: str) -> Any:
+    """``table`` (stored columns) with each derived column after its source column.
+
+    ``t0_utc``: ``timestamp[ns, tz=UTC]`` for Parquet (and in memory), ISO 8601 text
+    for CSV (:func:`accal.products.utc.utc_arrow`).
+    """
+    import pyarrow as pa
+
+    names, cols = list(table.column_names), list(table.columns)
+    for derived, source in DERIVED_COLUMNS.items():
+        at = names.index(source) + 1
+        names.insert(at, derived)
+        cols.insert(at, utc_arrow(arrow_to_numpy(table.column(source)), fmt))
+    return pa.Table.from_arrays(cols, names=names)
+
+
 def read_bias_drift_arrow(path: Path):
     """Read a ``bias_drift`` table as a pyarrow Table in the current schema.
+
+    ``t0_utc`` is computed from ``t0`` (``timestamp[ns, tz=UTC]``), also for a
+    table of an older version, which has no ``t0_utc``.
 
     Raises
     ------
     FormatError
         The table is damaged (truncated, ragged, a value of the wrong type).
     """
+    return _with_derived(_read_bias_drift_stored(path), "parquet")
+
+
+def _read_bias_drift_stored(path: Path):
+    """The stored columns of a ``bias_drift`` table (without the derived ones), checked."""
     import pyarrow as pa
 
     try:
@@ -155,7 +187,11 @@ def read_bias_drift_arrow(path: Path):
 #: Columns every ``bias_drift`` table has had since the first version: a table without
 #: one is damaged (issue 23: a dropped ``drift`` column was read as NaN for every row,
 #: which then stayed "current").  Columns added later may be absent (older tables).
-CORE_COLUMNS = tuple(BIAS_DRIFT_UNITS)[: tuple(BIAS_DRIFT_UNITS).index("accal_version") + 1]
+CORE_COLUMNS = tuple(
+    c
+    for c in tuple(BIAS_DRIFT_UNITS)[: tuple(BIAS_DRIFT_UNITS).index("accal_version") + 1]
+    if c not in DERIVED_COLUMNS
+)
 
 
 def _read_bias_drift_unchecked(path: Path):
@@ -216,7 +252,8 @@ def merge_bias_drift(
     Rows of an existing table with the same (source, axis, method) are replaced,
     and every row of ``drop_sources`` is removed (inputs whose outputs a new input
     took over); all others are kept, so the table accumulates every input
-    processed there.
+    processed there.  ``t0_utc`` is computed anew from ``t0`` for every row (a row
+    of an older table, without it, gets it too; a row's own ``t0_utc`` is ignored).
     """
     import pyarrow as pa
 
@@ -235,7 +272,7 @@ def merge_bias_drift(
     )
     drop = set(drop_sources)
     if path.exists():
-        old = read_bias_drift_arrow(path)
+        old = _read_bias_drift_stored(path)
         if new.num_rows or drop:
             replaced = set(_keys(new))
             keep = np.array(
@@ -248,7 +285,7 @@ def merge_bias_drift(
     # sort by satellite, date, source, axis, method (numpy: pyarrow.compute imports pandas)
     cols = [np.array(new.column(c).to_pylist(), dtype=str) for c in reversed(_SORT_COLUMNS)]
     order = np.lexsort(cols) if new.num_rows else np.zeros(0, np.int64)
-    new = _take(new, order)
+    new = _with_derived(_take(new, order), fmt)
     return write_table(
         new, path, fmt=fmt, units=BIAS_DRIFT_UNITS, meta={"accal_version": __version__}
     )

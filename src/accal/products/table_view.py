@@ -13,9 +13,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from accal import __version__
 from accal.batch import MANIFEST
-from accal.io.writers import write_table
+from accal.io.writers import atomic_path, write_table
 from accal.pipeline import BIAS_DRIFT_UNITS, find_bias_drift, read_bias_drift
+from accal.products.utc import instants_arrow
+
+#: Suffixes ``--export`` writes, and the format of each.
+EXPORT_FORMATS = {".csv": "csv", ".parquet": "parquet", ".nc": "netcdf"}
 
 #: Columns printed when none are asked for (``day_status`` and ``model`` when present).
 PRINTED_COLUMNS = (
@@ -207,7 +212,11 @@ def export_conflict(export: Path) -> str | None:
 def export_rows(
     table: pd.DataFrame, export: Path, source: Path, columns: Sequence[str] | None = None
 ) -> None:
-    """Write rows to ``export`` (``.parquet`` → Parquet, else CSV), atomically, with units.
+    """Write rows to ``export``, atomically, with units: Parquet, CSV or netCDF.
+
+    ``.parquet`` → Parquet, ``.nc`` → netCDF (:func:`write_netcdf`), else CSV.  A UTC
+    column (``t0_utc``) is ``timestamp[ns, tz=UTC]`` in Parquet and ISO 8601 text in
+    CSV, as in the table itself.
 
     Parameters
     ----------
@@ -222,13 +231,72 @@ def export_rows(
     """
     if columns:
         table = table[list(columns)]
+    fmt = EXPORT_FORMATS.get(export.suffix.lower(), "csv")
+    units = {c: BIAS_DRIFT_UNITS.get(c, "") for c in table.columns}
+    if fmt == "netcdf":
+        write_netcdf(table, export, units, source)
+        return
     write_table(
-        {c: table[c].to_numpy() for c in table.columns},
+        {c: _file_column(table[c], fmt) for c in table.columns},
         export,
-        fmt="parquet" if export.suffix.lower() == ".parquet" else "csv",
-        units={c: BIAS_DRIFT_UNITS.get(c, "") for c in table.columns},
+        fmt=fmt,
+        units=units,
         meta={"exported_from": str(source)},
     )
+
+
+def _file_column(column: pd.Series, fmt: str) -> object:
+    """A column as written: numpy values, or a UTC column as :func:`instants_arrow` makes it."""
+    if isinstance(column.dtype, pd.DatetimeTZDtype):
+        return instants_arrow(column.dt.tz_convert(None).to_numpy(dtype="datetime64[ns]"), fmt)
+    return column.to_numpy()
+
+
+def write_netcdf(table: pd.DataFrame, export: Path, units: dict[str, str], source: Path) -> None:
+    """Write rows as a CF netCDF file (netCDF 3, 64-bit offsets: xarray's scipy engine).
+
+    One dimension ``row``; each column a variable with CF ``units`` (numbers) and its
+    accal unit text as ``long_name`` (:func:`accal.api.table_variables`, as
+    :meth:`accal.Demodulation.to_xarray`); a UTC column (``t0_utc``) is a time
+    coordinate (CF ``microseconds since 1970-01-01``, float64: netCDF 3 has no 64-bit
+    integers); the provenance (``Conventions``, accal version, the table exported,
+    ``history``) in the global attributes.  Integer columns are stored as 32-bit
+    integers (netCDF 3).
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        The rows.
+    export : Path
+        The ``.nc`` file, written atomically.
+    units : dict of str to str
+        accal's unit text of each column.
+    source : Path
+        The table the rows come from.
+    """
+    from accal.api import _dataset, table_variables
+
+    coords: dict[str, object] = {"row": ("row", np.arange(len(table), dtype=np.int32))}
+    columns = {c: table[c] for c in table.columns}
+    data_vars = table_variables(columns, units, "row", coords=coords)
+    for name, (dim, values, attrs) in list(data_vars.items()):
+        if values.dtype.kind == "O":  # text: fixed-width str, which netCDF 3 stores as chars
+            data_vars[name] = (dim, values.astype(str), attrs)
+        elif values.dtype.kind in "iu":
+            data_vars[name] = (dim, values.astype(np.int32), attrs)
+    ds = _dataset(
+        data_vars,
+        coords,
+        title=f"accal bias_drift table: {len(table)} rows of {source}",
+        exported_from=str(source),
+        history=f"accal {__version__}: accal table --export {export.name}",
+    )
+    times = [n for n, v in ds.variables.items() if v.dtype.kind == "M"]
+    encoding = {
+        n: {"units": "microseconds since 1970-01-01 00:00:00", "dtype": "float64"} for n in times
+    }
+    with atomic_path(export) as tmp:
+        ds.to_netcdf(tmp, engine="scipy", format="NETCDF3_64BIT", encoding=encoding)
 
 
 def table_text(table: pd.DataFrame, columns: Sequence[str] | None = None) -> str:
