@@ -221,3 +221,25 @@ def test_utc_columns_are_total_and_follow_the_leap_seconds():
         "2016-12-31 23:59:59+00:00",
         "2017-01-01 00:00:00+00:00",
     ]
+
+
+def test_accal_table_reads_a_demod_directory(runs, tmp_path):
+    xr = pytest.importorskip("xarray")
+    d = runs["csv"][1]
+    text = _invoke("table", d)
+    assert text.split()[:3] == ["source", "period", "t_mid_utc"]
+    assert "2003-09-14 00:04:46.500+00:00" in text  # t_mid 299.5 s after 00:00 GPS
+    _invoke("table", d, "--export", tmp_path / "p.nc")
+    per = pd.read_csv(d / "periods.csv")
+    with xr.open_dataset(tmp_path / "p.nc") as ds:
+        assert {"t_start_utc", "t_mid_utc"} <= set(ds.coords)
+        want = _expected(per["t_mid"]).dt.tz_convert(None).to_numpy(dtype="datetime64[ns]")
+        assert np.array_equal(ds["t_mid_utc"].to_numpy(), want)
+        assert ds["a_Y"].attrs["units"] == "m s-2" and ds["t_mid"].attrs["units"] == "s"
+        assert np.array_equal(ds["a_Y"].to_numpy(), per["a_Y"].to_numpy())
+    _invoke("table", d, "--export", tmp_path / "p.csv", "--columns", "source,t_mid,t_mid_utc")
+    got = pd.read_csv(tmp_path / "p.csv")
+    assert _same(pd.to_datetime(got["t_mid_utc"], utc=True), got["t_mid"])
+    # the bias/drift filters do not apply: a usage error, not a traceback
+    res = CliRunner().invoke(main, ["table", str(d), "--method", "lsq"])
+    assert res.exit_code == 2 and "periods table of accal demod" in res.output

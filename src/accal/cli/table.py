@@ -68,18 +68,28 @@ def table_cmd(
     columns: str | None,
     export: Path | None,
 ) -> None:
-    """Print or export the cumulative bias/drift table of an output DIRECTORY."""
+    """Print or export the cumulative bias/drift table of an output DIRECTORY.
+
+    In an ``accal demod`` output directory: its periods table, whole.
+    """
     from accal.errors import AccalError
     from accal.products import table_view
 
     try:
         path, df = table_view.load(directory)
+        units = df.attrs.get("units")
+        filters = satellites or start or end or methods or axes or statuses
+        if table_view.is_periods(path) and filters:
+            usage_fail(
+                f"{path} is the periods table of accal demod: --satellite, --start, --end, "
+                "--method, --axis and --status select rows of a bias_drift table"
+            )
         for d in (start, end):
             if d is not None and not is_date(d):
                 raise click.BadParameter(f"expected YYYY-MM-DD, got {d!r}")
         if start and end and start > end:
             raise click.BadParameter(f"--start {start} is after --end {end}")
-        unknown = table_view.unknown_satellites(df, satellites)
+        unknown = table_view.unknown_satellites(df, satellites) if satellites else []
         if unknown:  # a typo would otherwise match nothing, silently
             held = table_view.held_satellites(df)
             usage_fail(
@@ -111,7 +121,7 @@ def table_cmd(
             problem = table_view.export_conflict(export)
             if problem:
                 usage_fail(problem)
-            table_view.export_rows(df, export, path, cols)
+            table_view.export_rows(df, export, path, cols, units)
             click.echo(f"wrote {len(df)} rows to {export}", err=True)
             return
         click.echo(table_view.table_text(df, cols))

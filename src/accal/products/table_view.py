@@ -2,12 +2,14 @@
 
 What ``accal table`` does with the table (:mod:`accal.cli.table` parses the options
 and reports errors): select rows by satellite, date, method, axis and day status,
-pick columns, write the rows to a file or format them for a terminal.
+pick columns, write the rows to a file or format them for a terminal.  A directory of
+``accal demod`` (no ``bias_drift`` table, a ``periods`` table) is read too: its rows
+are printed or exported whole (the filters are the bias/drift table's).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -15,9 +17,10 @@ import pandas as pd
 
 from accal import __version__
 from accal.batch import MANIFEST
+from accal.errors import ValidationError
 from accal.io.writers import atomic_path, write_table
 from accal.pipeline import BIAS_DRIFT_UNITS, find_bias_drift, read_bias_drift
-from accal.products.utc import instants_arrow
+from accal.products.utc import instants_arrow, utc_units, with_utc_columns
 
 #: Suffixes ``--export`` writes, and the format of each.
 EXPORT_FORMATS = {".csv": "csv", ".parquet": "parquet", ".nc": "netcdf"}
@@ -28,6 +31,12 @@ PRINTED_COLUMNS = (
     "drift", "drift_sigma", "n", "rms",
 )  # fmt: skip
 OPTIONAL_PRINTED_COLUMNS = ("day_status", "model")
+#: ... and of a demod ``periods`` table.
+PERIODS_PRINTED_COLUMNS = (
+    "source", "period", "t_mid_utc", "a_Y", "a_Z", "sigma_Y", "sigma_Z", "leakage",
+)  # fmt: skip
+#: The GPS-seconds columns of a demod ``periods`` table (:mod:`accal.demodjob.table`).
+PERIOD_TIME_COLUMNS = ("t_start", "t_mid")
 
 
 def load(directory: Path) -> tuple[Path, pd.DataFrame]:
@@ -41,17 +50,59 @@ def load(directory: Path) -> tuple[Path, pd.DataFrame]:
     Returns
     -------
     path : Path
-        ``DIRECTORY/bias_drift.parquet`` or ``.csv``.
+        ``DIRECTORY/bias_drift.parquet`` or ``.csv``; in an ``accal demod`` directory
+        (no ``bias_drift`` table) ``DIRECTORY/periods.parquet`` or ``.csv``.
     table : pandas.DataFrame
-        Its rows.
+        Its rows; the units of its columns in ``table.attrs["units"]``.
 
     Raises
     ------
     accal.errors.AccalError
         No table, or one that cannot be read.
     """
-    path = find_bias_drift(directory)
-    return path, read_bias_drift(path)
+    try:
+        path = find_bias_drift(directory)
+    except ValidationError:
+        periods = [Path(directory) / f"periods.{f}" for f in ("parquet", "csv")]
+        periods = [p for p in periods if p.exists()]
+        if not periods:
+            raise
+        return periods[0], read_periods(periods[0])
+    table = read_bias_drift(path)
+    table.attrs["units"] = {c: BIAS_DRIFT_UNITS.get(c, "") for c in table.columns}
+    return path, table
+
+
+def is_periods(path: Path) -> bool:
+    """Whether :func:`load` read a demod ``periods`` table (not a ``bias_drift`` one)."""
+    return path.name.startswith("periods.")
+
+
+def read_periods(path: Path) -> pd.DataFrame:
+    """A demod ``periods`` table, with ``t_start_utc``/``t_mid_utc`` (UTC, time-zone aware).
+
+    The UTC columns are computed from ``t_start``/``t_mid`` (also for a table of an
+    earlier version, which has none); units in ``attrs["units"]``.
+
+    Raises
+    ------
+    accal.errors.FormatError
+        The table cannot be read.
+    """
+    from accal.io.tables import read_table_arrow
+
+    arrow, units, _, _ = read_table_arrow(path)
+    columns = {c: arrow.column(c).to_pandas() for c in arrow.column_names}
+    instants = with_utc_columns(columns, PERIOD_TIME_COLUMNS, "parquet")
+    table = pd.DataFrame({c: _as_series(v) for c, v in instants.items()})
+    table.attrs["units"] = utc_units(units, PERIOD_TIME_COLUMNS)
+    return table
+
+
+def _as_series(values: object) -> pd.Series:
+    if isinstance(values, pd.Series):
+        return values
+    return values.to_pandas()  # a pyarrow array: a UTC column
 
 
 def short_satellite(name: str) -> str:
@@ -201,7 +252,9 @@ def export_conflict(export: Path) -> str | None:
     if not parent.is_dir():
         return f"--export {export}: directory {parent} does not exist"
     stem = export.name.lower().rsplit(".", 1)[0]
-    if stem == "bias_drift" and ((parent / MANIFEST).exists() or any(parent.glob("bias_drift.*"))):
+    if stem in ("bias_drift", "periods") and (
+        (parent / MANIFEST).exists() or any(parent.glob(f"{stem}.*"))
+    ):
         return (
             f"--export {export} is the name of the cumulative table of the output "
             f"directory {parent}; export to another name or directory"
@@ -210,7 +263,11 @@ def export_conflict(export: Path) -> str | None:
 
 
 def export_rows(
-    table: pd.DataFrame, export: Path, source: Path, columns: Sequence[str] | None = None
+    table: pd.DataFrame,
+    export: Path,
+    source: Path,
+    columns: Sequence[str] | None = None,
+    units: Mapping[str, str] | None = None,
 ) -> None:
     """Write rows to ``export``, atomically, with units: Parquet, CSV or netCDF.
 
@@ -228,11 +285,14 @@ def export_rows(
         The table they come from (``exported_from`` in the file's metadata).
     columns : sequence of str, optional
         The columns written (default: all).
+    units : mapping of str to str, optional
+        The unit texts of the columns (default: :data:`BIAS_DRIFT_UNITS`).
     """
     if columns:
         table = table[list(columns)]
     fmt = EXPORT_FORMATS.get(export.suffix.lower(), "csv")
-    units = {c: BIAS_DRIFT_UNITS.get(c, "") for c in table.columns}
+    known = BIAS_DRIFT_UNITS if units is None else units
+    units = {c: known.get(c, "") for c in table.columns}
     if fmt == "netcdf":
         write_netcdf(table, export, units, source)
         return
@@ -287,7 +347,7 @@ def write_netcdf(table: pd.DataFrame, export: Path, units: dict[str, str], sourc
     ds = _dataset(
         data_vars,
         coords,
-        title=f"accal bias_drift table: {len(table)} rows of {source}",
+        title=f"accal {source.name.split('.')[0]} table: {len(table)} rows of {source}",
         exported_from=str(source),
         history=f"accal {__version__}: accal table --export {export.name}",
     )
@@ -308,14 +368,17 @@ def table_text(table: pd.DataFrame, columns: Sequence[str] | None = None) -> str
         The rows.
     columns : sequence of str, optional
         The columns shown (default: :data:`PRINTED_COLUMNS` and those of
-        :data:`OPTIONAL_PRINTED_COLUMNS` the table has).
+        :data:`OPTIONAL_PRINTED_COLUMNS` the table has; for a demod ``periods``
+        table those of :data:`PERIODS_PRINTED_COLUMNS` it has).
 
     Returns
     -------
     str
         One line a row under a header, numbers to 6 significant digits.
     """
-    if not columns:
+    if not columns and "a_Y" in table.columns:
+        columns = [c for c in PERIODS_PRINTED_COLUMNS if c in table.columns]
+    elif not columns:
         columns = [*PRINTED_COLUMNS]
         columns += [c for c in OPTIONAL_PRINTED_COLUMNS if c in table.columns]
     table = table[list(columns)]
