@@ -21,6 +21,7 @@ from accal.cli import main
 from accal.io.attitude import read_attitude, rotate_to_inertial
 from accal.io.thrusters import read_thrusters
 from accal.pipeline import read_bias_drift
+from accal.products.utc import utc_instants
 
 SAMPLES = Path(__file__).resolve().parents[1] / "data" / "samples"
 T_DAY = 116769600.0  # 2003-09-14 00:00:00 GPS
@@ -86,6 +87,13 @@ def test_scale_fit_recovers_scales_and_bias_and_writes_every_product(tmp_path):
     assert np.sqrt(np.mean(err[:, 0] ** 2)) < 0.01 * np.sqrt(np.mean(true[:, 0] ** 2))
     par = pd.read_parquet(out / "day.bias_basis.parquet")
     assert len(par) == 3 * 2 and set(par["axis"]) == {"x", "y", "z"}
+    assert par.columns.tolist() == [
+        "axis", "index", "node_time", "node_time_utc", "coef", "coef_sigma",
+    ]  # fmt: skip
+    assert str(par["node_time_utc"].dtype) == "datetime64[ns, UTC]"
+    assert par["node_time_utc"].dt.tz_convert(None).tolist() == list(
+        utc_instants(par["node_time"].to_numpy())
+    )
     rep = json.loads((out / "day.report.json").read_text())["reference_fit"]
     assert rep["crosstalk_test"]["dof"] == 6 and 0 <= rep["crosstalk_test"]["p"] <= 1
     assert rep["thrusters"]["file"] is None
@@ -113,6 +121,8 @@ def test_scale_matrix_and_spline_basis_through_the_cli(tmp_path):
     assert abs(x["scale_x"] - SCALE[0]) < 4 * x["scale_x_sigma"]
     par = pd.read_csv(out / "day.bias_basis.csv")
     assert len(par) == 3 * (4 + 3)  # 4 intervals of 3 h in 12 h, cubic: 7 coefficients
+    utc = pd.to_datetime(par["node_time_utc"], utc=True).dt.tz_convert(None)
+    assert utc.dt.as_unit("ns").tolist() == list(utc_instants(par["node_time"].to_numpy()))
 
 
 def test_thruster_firings_of_the_real_thr1b_are_left_out(tmp_path):

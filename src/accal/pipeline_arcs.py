@@ -40,10 +40,28 @@ from accal.pipeline_reference import (
     row_fields,
     write_covariance,
 )
+from accal.products.utc import utc_units, with_utc_columns
 from accal.series import AccSeries
 from accal.timescale import gps_to_date
 
-__all__ = ["arc_outcomes", "redo_all", "reference_outputs"]
+__all__ = [
+    "PARAMETER_FILE_UNITS",
+    "arc_outcomes",
+    "parameter_file_columns",
+    "redo_all",
+    "reference_outputs",
+]
+
+
+#: Units of the columns of ``<stem>.bias_basis.<fmt>``: :data:`PARAMETER_UNITS` with
+#: ``node_time_utc`` after ``node_time``.
+PARAMETER_FILE_UNITS = utc_units(PARAMETER_UNITS, ("node_time",))
+
+
+def parameter_file_columns(fit: Any, fmt: str) -> dict[str, Any]:
+    """The columns of ``<stem>.bias_basis.<fmt>``: :func:`parameter_table` with
+    ``node_time_utc`` (the node epochs in UTC, :mod:`accal.products.utc`)."""
+    return with_utc_columns(parameter_table(fit), ("node_time",), fmt)
 
 
 def reference_outputs(
@@ -92,10 +110,10 @@ def reference_outputs(
     )
     if arc is None:
         par_path = write_table(
-            parameter_table(day.fit),
+            parameter_file_columns(day.fit, opts.fmt),
             out_dir / f"{stem}.bias_basis.{opts.fmt}",
             fmt=opts.fmt,
-            units=PARAMETER_UNITS,
+            units=PARAMETER_FILE_UNITS,
             meta={"source": path.name, **report_entry(day)},
             sync=False,
             required=True,
@@ -189,10 +207,10 @@ def arc_outcomes(
             par_name = f"arc_{who}_{first}_{last}.bias_basis.{opts.fmt}"
             info = {"sources": names, "parameters": par_name, "first": first, "last": last}
             write_table(
-                parameter_table(days[0].fit),
+                parameter_file_columns(days[0].fit, opts.fmt),
                 out_dir / par_name,
                 fmt=opts.fmt,
-                units=PARAMETER_UNITS,
+                units=PARAMETER_FILE_UNITS,
                 meta={"sources": names, **report_entry(days[0])},
             )
             write_covariance(out_dir / f"arc_{who}_{first}_{last}.reference_cov.npz", days[0].fit)
