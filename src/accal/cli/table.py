@@ -76,7 +76,7 @@ def table_cmd(
     from accal.products import table_view
 
     try:
-        path, df = table_view.load(directory)
+        path, df = table_view.load(directory, periods=True)
         units = df.attrs.get("units")
         filters = satellites or start or end or methods or axes or statuses
         if table_view.is_periods(path) and filters:

@@ -39,19 +39,22 @@ PERIODS_PRINTED_COLUMNS = (
 PERIOD_TIME_COLUMNS = ("t_start", "t_mid")
 
 
-def load(directory: Path) -> tuple[Path, pd.DataFrame]:
+def load(directory: Path, *, periods: bool = False) -> tuple[Path, pd.DataFrame]:
     """The cumulative table of an output directory and the file it was read from.
 
     Parameters
     ----------
     directory : Path
         An ``accal grace-bias`` output directory.
+    periods : bool
+        Read the ``periods`` table of an ``accal demod`` directory when there is no
+        ``bias_drift`` table (``accal table``; ``accal plot`` wants a bias_drift table).
 
     Returns
     -------
     path : Path
-        ``DIRECTORY/bias_drift.parquet`` or ``.csv``; in an ``accal demod`` directory
-        (no ``bias_drift`` table) ``DIRECTORY/periods.parquet`` or ``.csv``.
+        ``DIRECTORY/bias_drift.parquet`` or ``.csv``; with ``periods``, in an ``accal
+        demod`` directory, ``DIRECTORY/periods.parquet`` or ``.csv``.
     table : pandas.DataFrame
         Its rows; the units of its columns in ``table.attrs["units"]``.
 
@@ -63,11 +66,11 @@ def load(directory: Path) -> tuple[Path, pd.DataFrame]:
     try:
         path = find_bias_drift(directory)
     except ValidationError:
-        periods = [Path(directory) / f"periods.{f}" for f in ("parquet", "csv")]
-        periods = [p for p in periods if p.exists()]
-        if not periods:
+        found = [Path(directory) / f"periods.{f}" for f in ("parquet", "csv")]
+        found = [p for p in found if p.exists()]
+        if not periods or not found:
             raise
-        return periods[0], read_periods(periods[0])
+        return found[0], read_periods(found[0])
     table = read_bias_drift(path)
     table.attrs["units"] = {c: BIAS_DRIFT_UNITS.get(c, "") for c in table.columns}
     return path, table
