@@ -195,6 +195,8 @@ def test_a_calibrated_file_read_as_input_takes_gps_time_exactly(tmp_path, fmt):
     series = read(cal)
     assert series.time.view(np.int64).tolist() == gps.view(np.int64).tolist()
     assert series.meta["table"]["time_column"] == "gps_time" and "time_utc" not in series.aux
+    # the same instants, not a column "ignored" with a warning on every re-read
+    assert not [w for w in series.report.warnings if "time_utc" in w], series.report.warnings
     written = pd.read_csv(cal) if fmt == "csv" else pd.read_parquet(cal)
     utc = pd.to_datetime(written["time_utc"], utc=True)
     assert _same(utc, written["gps_time"])

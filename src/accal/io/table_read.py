@@ -152,7 +152,9 @@ def read_table_series(path: str | Path, *, columns: dict[str, str] | None = None
 
     warn: list[str] = []
     quality, valid, used = _quality_columns(table, names, path, first_line, line_of)
-    used |= {tname, *acc_cols}
+    # the other time columns are the same instants (an accal series carries time_utc
+    # beside gps_time): not auxiliary channels, and not "non-numeric columns ignored"
+    used |= {tname, *acc_cols, *(c for c in TIME_COLUMNS if c in names)}
     nonfinite = ~np.isfinite(acc).all(axis=1)
     if nonfinite.any():
         warn.append(
