@@ -176,7 +176,7 @@ def gps_to_utc_index(gps: NDArray[np.float64], name: str = "time_utc") -> pd.Dat
     return pd.DatetimeIndex(utc_instants(gps), name=name).tz_localize("UTC")
 
 
-def _dataset(data_vars: dict[str, Any], coords: dict[str, Any], **attrs: Any) -> xr.Dataset:
+def cf_dataset(data_vars: dict[str, Any], coords: dict[str, Any], **attrs: Any) -> xr.Dataset:
     """An :class:`xarray.Dataset` with the provenance every result carries in its attributes
     (CF ``Conventions``, accal version, then ``attrs``; netCDF-friendly: strings and numbers)."""
     import xarray as xr
@@ -482,7 +482,7 @@ class BiasFit:
                 values,
                 {"units": unit, "long_name": long_name},
             )
-        return _dataset(
+        return cf_dataset(
             data_vars,
             coords,
             title=f"accal grace-bias: {self.source}",
@@ -764,7 +764,7 @@ class Demodulation:
         )
         models = {k: str(self.arguments.get(k, "")) for k in ("psd", "signal_model", "bias_model")}
         title = f"accal demod: {self.source}"
-        return _dataset(
+        return cf_dataset(
             data_vars, coords, title=title, source=self.source, tau=self.tau, mask=self.mask,
             method=self.method, **models,
         )  # fmt: skip

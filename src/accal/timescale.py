@@ -88,6 +88,8 @@ _LEAP_UTC_NS = np.array([np.datetime64(d, "ns").astype(np.int64) for d, _ in LEA
 _LEAP_GPS_UTC = np.array([v - TAI_MINUS_GPS for _, v in LEAP_SECONDS], dtype=np.int64)
 # The same transitions expressed in accal GPS seconds.
 _LEAP_GPS_S = (_LEAP_UTC_NS - _EPOCH_NS) // _NS + _LEAP_GPS_UTC
+#: First GPS second the table converts (1972-01-01 UTC) [s, accal GPS seconds].
+GPS_TABLE_START = float(_LEAP_GPS_S[0])
 # end of the table's validity (UTC ns since 1970; the day after the last valid day)
 _VALID_UNTIL_NS = (np.datetime64(LEAP_SECONDS_VALID_UNTIL, "ns") + np.timedelta64(1, "D")).astype(
     np.int64

@@ -16,17 +16,18 @@ from pathlib import Path
 from typing import Any
 
 from accal.errors import ValidationError
-from accal.io.writers import _json_default
-from accal.pipeline import _nan_to_none, output_stem
+from accal.gracejob.outputs import nan_to_none
+from accal.io.writers import json_default
+from accal.pipeline import output_stem
 
 
 def json_text(obj: Any) -> str:
     """``obj`` as the text of a standard JSON file (non-finite floats as null, indented).
 
-    The conventions of the JSON files :mod:`accal.pipeline` writes (its
-    ``_nan_to_none`` and :mod:`accal.io.writers`' ``_json_default``, not public yet).
+    The conventions of the JSON files grace-bias writes
+    (:func:`accal.gracejob.outputs.nan_to_none`, :func:`accal.io.writers.json_default`).
     """
-    return json.dumps(_nan_to_none(obj), indent=2, default=_json_default) + "\n"
+    return json.dumps(nan_to_none(obj), indent=2, default=json_default) + "\n"
 
 
 def check_distinct_runs(paths: Sequence[Path]) -> None:

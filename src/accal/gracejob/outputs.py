@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from accal.io.writers import _json_default, atomic_path
+from accal.io.writers import atomic_path, json_default
 from accal.products.utc import utc_unit, with_utc_columns
 from accal.series import AccSeries
 
@@ -83,7 +83,7 @@ def file_size(path: Path) -> int:
 
 def write_json(path: Path, obj: Any, *, sync: bool = True) -> None:
     with atomic_path(path, sync=sync) as tmp:
-        tmp.write_text(json.dumps(nan_to_none(obj), indent=2, default=_json_default) + "\n")
+        tmp.write_text(json.dumps(nan_to_none(obj), indent=2, default=json_default) + "\n")
 
 
 def nan_to_none(obj: Any) -> Any:

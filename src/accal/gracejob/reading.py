@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from accal import __version__
-from accal.batch import _L1B_NAME
+from accal.batch_discovery import L1B_NAME
 from accal.errors import ValidationError
 from accal.gracejob.options import GraceBiasOptions
 from accal.io import FORMATS, detect_format, read
@@ -146,7 +146,7 @@ def name_mismatch(path: Path, series: AccSeries) -> list[str]:
     file that holds another satellite or day was probably renamed or mixed up.
     Names that do not follow the L1B pattern are not checked.
     """
-    m = _L1B_NAME.search(path.name)
+    m = L1B_NAME.search(path.name)
     if m is None or len(series) == 0:
         return []
     out = []

@@ -168,12 +168,15 @@ def _libc_syncfs() -> Any:
     return fn
 
 
-def _json_default(obj: Any) -> Any:
+def json_default(obj: Any) -> Any:
     if hasattr(obj, "item"):
         return obj.item()
     if hasattr(obj, "tolist"):
         return obj.tolist()
     return str(obj)
+
+
+_json_default = json_default  # the old name (accal.io.chunked, earlier callers)
 
 
 def arrow_column(values: Any) -> Any:
@@ -280,7 +283,7 @@ def write_table(
         fmt = "csv" if path.suffix.lower() == ".csv" else "parquet"
     check_option("fmt", fmt, FORMATS)
     units = dict(units or {})
-    meta_json = json.dumps(dict(meta or {}), default=_json_default, sort_keys=True)
+    meta_json = json.dumps(dict(meta or {}), default=json_default, sort_keys=True)
     units_json = json.dumps(units, sort_keys=True)
     table = _as_arrow(data)
     with atomic_path(path, sync=sync) as tmp:
@@ -367,7 +370,7 @@ def write_csv_metadata(
     }
     out = csv_metadata_path(path)
     with atomic_path(out, sync=sync) as tmp:
-        tmp.write_text(json.dumps(doc, indent=1, default=_json_default) + "\n")
+        tmp.write_text(json.dumps(doc, indent=1, default=json_default) + "\n")
     return out
 
 

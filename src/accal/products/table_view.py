@@ -337,7 +337,7 @@ def write_netcdf(table: pd.DataFrame, export: Path, units: dict[str, str], sourc
     source : Path
         The table the rows come from.
     """
-    from accal.api import _dataset, table_variables
+    from accal.api import cf_dataset, table_variables
 
     coords: dict[str, object] = {"row": ("row", np.arange(len(table), dtype=np.int32))}
     columns = {c: table[c] for c in table.columns}
@@ -347,7 +347,7 @@ def write_netcdf(table: pd.DataFrame, export: Path, units: dict[str, str], sourc
             data_vars[name] = (dim, values.astype(str), attrs)
         elif values.dtype.kind in "iu":
             data_vars[name] = (dim, values.astype(np.int32), attrs)
-    ds = _dataset(
+    ds = cf_dataset(
         data_vars,
         coords,
         title=f"accal {source.name.split('.')[0]} table: {len(table)} rows of {source}",

@@ -69,10 +69,10 @@ def utc_instants(gps: ArrayLike) -> NDArray[np.datetime64]:
     ndarray of datetime64[ns]
         UTC, NaT where the time cannot be converted.
     """
-    from accal.timescale import _LEAP_GPS_S, LeapSecondTableWarning, gps_to_utc
+    from accal.timescale import GPS_TABLE_START, LeapSecondTableWarning, gps_to_utc
 
     g = np.asarray(gps, dtype=np.float64)
-    ok = np.isfinite(g) & (g >= _LEAP_GPS_S[0])
+    ok = np.isfinite(g) & (g >= GPS_TABLE_START)
     every = bool(ok.all())
     ns = np.full(g.shape, np.iinfo(np.int64).min, dtype=np.int64)
     if every or ok.any():
