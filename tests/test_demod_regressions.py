@@ -331,8 +331,8 @@ def test_jitter_with_resample_keeps_the_last_period(run_csv, tmp_path):
     """The grid ended one point short of the jittered last sample: period 59 vanished."""
     run = _jittered(run_csv, tmp_path / "jit.csv")
     out = tmp_path / "out"
-    args = ("demod", run, "--tau", TAU, "--mask", MASK, "--resample", "--out", out, "-q")
-    code, _, err = invoke(*args)
+    args = ("demod", run, "--tau", TAU, "--mask", MASK, "--resample", "--out", out)
+    code, _, err = invoke(*args)  # no -q: -q is errors only
     assert code == 0, err
     s = json.loads((out / "summary.json").read_text())
     assert (s["n_periods"], s["n_kept"]) == (60, 60)
@@ -424,8 +424,8 @@ def test_simulate_gap_bad_mask_names_the_option(tmp_path, options, message):
 def test_text_run_named_parquet_is_read_with_a_warning(run_csv, tmp_path):
     run = _copy(run_csv, tmp_path / "run.parquet")
     out = tmp_path / "out"
-    code, _, err = invoke("demod", run, "--tau", TAU, "--mask", MASK, "--out", out, "-q")
-    assert code == 0, err
+    code, _, err = invoke("demod", run, "--tau", TAU, "--mask", MASK, "--out", out)
+    assert code == 0, err  # no -q: -q is errors only (the warning is then in accal.log)
     assert f"accal: {run}: warning: named .parquet but is text: read as CSV" in err.splitlines()
     s = json.loads((out / "summary.json").read_text())
     assert s["input"]["warnings"] == ["named .parquet but is text: read as CSV"]
