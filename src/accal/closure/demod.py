@@ -290,32 +290,9 @@ def close_loop_demod(
     """
     check_option("signal_model", signal_model, ("mean", "affine"))
     check_option("bias_model", bias_model, ("affine", "constant"))
-    t = np.asarray(time, dtype=np.float64)
-    my, mz = _as_two_axes(m)
-    th = np.asarray(theta, dtype=np.float64)
+    t, my, mz, th, v, fs, q = _check_record(time, m, theta, valid, tau)
     n = t.size
-    if t.ndim != 1 or my.size != n or th.shape != t.shape:
-        raise ValidationError(
-            f"time, m and theta must have the same length, got {t.shape}, {my.shape}, {th.shape}"
-        )
-    if n < 3:
-        raise ValidationError(f"need at least 3 samples, got {n}")
-    from accal.estimators.demod import regular_step, theta_in_range
-
-    dt, dt_rtol = regular_step(t)
-    fs = 1.0 / dt
-    qf = float(tau) * fs
-    if not np.isfinite(qf) or qf <= 0 or abs(qf - round(qf)) > max(1e-6, qf * dt_rtol):
-        raise ValidationError(f"tau·fs = {qf:g} must be a positive integer (fs = {fs:g} Hz)")
-    q = int(round(qf))
-    th = theta_in_range(th, None, 1e-6)
-    v = np.ones(n, bool) if valid is None else np.asarray(valid, dtype=bool)
-    if v.shape != t.shape:
-        raise ValidationError(f"valid must have shape {t.shape}, got {v.shape}")
     n_per = n // q
-    if n_per < 1:
-        raise ValidationError(f"record of {n} samples is shorter than one period ({q})")
-
     from accal.estimators.design import rest_mask
 
     finite = np.isfinite(my) & np.isfinite(mz) & np.isfinite(th)
@@ -329,22 +306,7 @@ def close_loop_demod(
 
     # columns per time sample (eq. 17): signal (Va) and bias (Vb) kinds
     va = [np.ones(n)] + ([u] if signal_model == "affine" else [])
-    vb = [np.ones(n)] + ([u] if bias_model == "affine" else [])
-    vb_names = ["bias"] + (["drift"] if bias_model == "affine" else [])
-    vb_scale = [1.0] + ([1.0 / tau] if bias_model == "affine" else [])
-    for name, x in (bias_aux or {}).items():
-        a = np.asarray(x, dtype=np.float64)
-        if a.shape != t.shape:
-            raise ValidationError(
-                f"bias_aux channel {name!r} must have shape {t.shape}, got {a.shape}"
-            )
-        sums = np.bincount(period[use_t], weights=a[use_t], minlength=n_per)
-        mean = sums / np.maximum(counts, 1)
-        a = a - np.where(period >= 0, mean[np.maximum(period, 0)], 0.0)
-        sc = float(np.std(a[use_t])) or 1.0
-        vb.append(a / sc)
-        vb_names.append(name)
-        vb_scale.append(1.0 / sc)
+    vb, vb_names, vb_scale = _bias_kinds(bias_model, u, tau, bias_aux, period, use_t, counts)
     need = max(min_fraction * float(np.median(rest_counts)), 2 * (2 * len(va) + 2 * len(vb)))
     good_period = counts >= need
     if not good_period.any():
@@ -354,60 +316,15 @@ def close_loop_demod(
     use_t &= good_period[np.maximum(period, 0)] & (period >= 0)
 
     c, s = np.cos(th), np.sin(th)
-    zero = np.zeros(n)
-    # a_Y, a_Z (then slopes), bias_y..., bias_z...
-    sig_y = [c * va[0], s * va[0]] + ([c * va[1], s * va[1]] if len(va) > 1 else [])
-    sig_z = [-s * va[0], c * va[0]] + ([-s * va[1], c * va[1]] if len(va) > 1 else [])
-    cols_y = sig_y + vb + [zero] * len(vb)
-    cols_z = sig_z + [zero] * len(vb) + vb
-    names = ["a_Y", "a_Z"] + (["slope_Y", "slope_Z"] if len(va) > 1 else [])
-    scale = [1.0, 1.0] + ([1.0 / tau, 1.0 / tau] if len(va) > 1 else [])
-    names += [f"{x}_y" for x in vb_names] + [f"{x}_z" for x in vb_names]
-    scale += vb_scale + vb_scale
-    p = len(names)
-    cols = np.empty((2 * n, p))
-    cols[0::2] = np.column_stack(cols_y)
-    cols[1::2] = np.column_stack(cols_z)
-    t_s = np.repeat(t, 2)
-    chan = np.tile(np.array([0, 1]), n)
+    base, cols, names = _demod_base(c, s, u, va, vb, vb_names, vb_scale, tau, period, n_per)
     y_s = np.empty(2 * n)
     y_s[0::2], y_s[1::2] = my, mz
     use_s = np.repeat(use_t, 2)
-    block = np.repeat(period, 2)
-    base = BlockBase(
-        block,
-        cols,
-        tuple(names),
-        scale=np.asarray(scale),
-        block_labels=tuple(range(n_per)),
-        signal=tuple(range(len(sig_y))),  # a_Y, a_Z (and slopes): the modulated signal
-        signal_extension=_signal_extension(c, s, u, len(va)),
-    )
-
-    # the fitted demodulated signal (base alone) for the platform candidates
-    b0 = Basis(block[use_s], cols[use_s], n_blocks=n_per)
-    beta = b0.fit(np.nan_to_num(y_s[use_s])).beta.reshape(n_per, p)
-    pk = np.maximum(period, 0)
-    ay = beta[pk, 0] + (beta[pk, 2] * u if len(va) > 1 else 0.0)
-    az = beta[pk, 1] + (beta[pk, 3] * u if len(va) > 1 else 0.0)
-    since, direction, angle = _rest_runs(th, rest, fs)
-    info = PlatformInfo(
-        theta=np.repeat(th, 2),
-        signal_y=np.repeat(np.nan_to_num(ay), 2),
-        signal_z=np.repeat(np.nan_to_num(az), 2),
-        axis_index=chan,
-        since_rest=np.repeat(since, 2),
-        direction=np.repeat(direction, 2),
-        rest_angle=np.repeat(angle, 2),
-    )
-    aux_s = {k: np.repeat(np.asarray(x, dtype=np.float64), 2) for k, x in (aux or {}).items()}
-    for k, x in aux_s.items():
-        if x.size != 2 * n:
-            raise ValidationError(
-                f"auxiliary channel {k!r} must have {n} samples, got {x.size // 2}"
-            )
+    chan = np.tile(np.array([0, 1]), n)
+    info = _platform_info(th, rest, fs, u, len(va), period, cols, y_s, use_s, chan, n_per)
+    aux_s = _aux_samples(aux, n)
     res = close_loop(
-        t_s,
+        np.repeat(t, 2),
         y_s,
         base=base,
         aux=aux_s,
@@ -432,6 +349,126 @@ def close_loop_demod(
         resolution=float(np.finfo(np.float64).eps * np.nanmax(np.abs(y_s[use_s]))),
     )
     return DemodClosure(res, _periods(res, names, n_per, q, fs, float(t[0]), counts))
+
+
+def _check_record(time, m, theta, valid, tau: float):
+    """Checked ``(t, m_y, m_z, θ, valid, fs, q)`` of a record, ``q = τ·fs`` samples a period."""
+    t = np.asarray(time, dtype=np.float64)
+    my, mz = _as_two_axes(m)
+    th = np.asarray(theta, dtype=np.float64)
+    n = t.size
+    if t.ndim != 1 or my.size != n or th.shape != t.shape:
+        raise ValidationError(
+            f"time, m and theta must have the same length, got {t.shape}, {my.shape}, {th.shape}"
+        )
+    if n < 3:
+        raise ValidationError(f"need at least 3 samples, got {n}")
+    from accal.estimators.demod import regular_step, theta_in_range
+
+    dt, dt_rtol = regular_step(t)
+    fs = 1.0 / dt
+    qf = float(tau) * fs
+    if not np.isfinite(qf) or qf <= 0 or abs(qf - round(qf)) > max(1e-6, qf * dt_rtol):
+        raise ValidationError(f"tau·fs = {qf:g} must be a positive integer (fs = {fs:g} Hz)")
+    q = int(round(qf))
+    th = theta_in_range(th, None, 1e-6)
+    v = np.ones(n, bool) if valid is None else np.asarray(valid, dtype=bool)
+    if v.shape != t.shape:
+        raise ValidationError(f"valid must have shape {t.shape}, got {v.shape}")
+    if n // q < 1:
+        raise ValidationError(f"record of {n} samples is shorter than one period ({q})")
+    return t, my, mz, th, v, fs, q
+
+
+def _bias_kinds(bias_model: str, u, tau: float, bias_aux, period, use_t, counts):
+    """The bias columns ``Vb`` per time sample (eqs. 18-19), their names and scales.
+
+    A ``bias_aux`` channel enters with its per-period mean removed, scaled to unit
+    standard deviation over the used samples.
+    """
+    n = u.size
+    n_per = counts.size
+    vb = [np.ones(n)] + ([u] if bias_model == "affine" else [])
+    vb_names = ["bias"] + (["drift"] if bias_model == "affine" else [])
+    vb_scale = [1.0] + ([1.0 / tau] if bias_model == "affine" else [])
+    for name, x in (bias_aux or {}).items():
+        a = np.asarray(x, dtype=np.float64)
+        if a.shape != u.shape:
+            raise ValidationError(
+                f"bias_aux channel {name!r} must have shape {u.shape}, got {a.shape}"
+            )
+        sums = np.bincount(period[use_t], weights=a[use_t], minlength=n_per)
+        mean = sums / np.maximum(counts, 1)
+        a = a - np.where(period >= 0, mean[np.maximum(period, 0)], 0.0)
+        sc = float(np.std(a[use_t])) or 1.0
+        vb.append(a / sc)
+        vb_names.append(name)
+        vb_scale.append(1.0 / sc)
+    return vb, vb_names, vb_scale
+
+
+def _demod_base(c, s, u, va, vb, vb_names, vb_scale, tau: float, period, n_per: int):
+    """The eq. 17 block base (one block a period), the two axes interleaved in time.
+
+    Returns the base, its columns (2N, p) and the names of its parameters.
+    """
+    n = c.size
+    zero = np.zeros(n)
+    # a_Y, a_Z (then slopes), bias_y..., bias_z...
+    sig_y = [c * va[0], s * va[0]] + ([c * va[1], s * va[1]] if len(va) > 1 else [])
+    sig_z = [-s * va[0], c * va[0]] + ([-s * va[1], c * va[1]] if len(va) > 1 else [])
+    cols_y = sig_y + vb + [zero] * len(vb)
+    cols_z = sig_z + [zero] * len(vb) + vb
+    names = ["a_Y", "a_Z"] + (["slope_Y", "slope_Z"] if len(va) > 1 else [])
+    scale = [1.0, 1.0] + ([1.0 / tau, 1.0 / tau] if len(va) > 1 else [])
+    names += [f"{x}_y" for x in vb_names] + [f"{x}_z" for x in vb_names]
+    scale += vb_scale + vb_scale
+    p = len(names)
+    cols = np.empty((2 * n, p))
+    cols[0::2] = np.column_stack(cols_y)
+    cols[1::2] = np.column_stack(cols_z)
+    base = BlockBase(
+        np.repeat(period, 2),
+        cols,
+        tuple(names),
+        scale=np.asarray(scale),
+        block_labels=tuple(range(n_per)),
+        signal=tuple(range(len(sig_y))),  # a_Y, a_Z (and slopes): the modulated signal
+        signal_extension=_signal_extension(c, s, u, len(va)),
+    )
+    return base, cols, names
+
+
+def _platform_info(th, rest, fs, u, n_va, period, cols, y_s, use_s, chan, n_per):
+    """θ, the base-alone fitted signal and the rest runs, per interleaved sample."""
+    block = np.repeat(period, 2)
+    p = cols.shape[1]
+    b0 = Basis(block[use_s], cols[use_s], n_blocks=n_per)
+    beta = b0.fit(np.nan_to_num(y_s[use_s])).beta.reshape(n_per, p)
+    pk = np.maximum(period, 0)
+    ay = beta[pk, 0] + (beta[pk, 2] * u if n_va > 1 else 0.0)
+    az = beta[pk, 1] + (beta[pk, 3] * u if n_va > 1 else 0.0)
+    since, direction, angle = _rest_runs(th, rest, fs)
+    return PlatformInfo(
+        theta=np.repeat(th, 2),
+        signal_y=np.repeat(np.nan_to_num(ay), 2),
+        signal_z=np.repeat(np.nan_to_num(az), 2),
+        axis_index=chan,
+        since_rest=np.repeat(since, 2),
+        direction=np.repeat(direction, 2),
+        rest_angle=np.repeat(angle, 2),
+    )
+
+
+def _aux_samples(aux, n: int) -> dict[str, _F64]:
+    """The ``aux`` channels repeated onto the interleaved samples, each checked for length."""
+    aux_s = {k: np.repeat(np.asarray(x, dtype=np.float64), 2) for k, x in (aux or {}).items()}
+    for k, x in aux_s.items():
+        if x.size != 2 * n:
+            raise ValidationError(
+                f"auxiliary channel {k!r} must have {n} samples, got {x.size // 2}"
+            )
+    return aux_s
 
 
 def _signal_extension(c, s, u, n_va: int) -> NDArray[np.float64]:
