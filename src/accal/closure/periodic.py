@@ -241,6 +241,90 @@ MAX_LINES = 2
 """Most ``line`` effects one selection adds (option ``max_lines``), strongest first."""
 
 
+def _line_band(ctx: Context, freqs, df: float, fmax: float) -> NDArray[np.bool_]:
+    """DFT frequencies searched for a line: ≥ 4/T, ≤ fmax, off excluded/rejected/modulated ones."""
+    band = (np.arange(freqs.size) >= 4) & (freqs <= fmax)
+    for g in ctx.excluded_freqs:
+        band &= np.abs(freqs - g) > 1.5 * df
+    for key in ctx.blocked:  # rejected lines: not proposed again
+        if len(key) == 3 and key[0] == "periodic" and key[1] == "line":
+            band &= np.abs(freqs - float(key[2])) > 1.5 * df
+    for g in ctx.cache.get("modulated_freqs", ()):  # the signal's own variation (periodic)
+        band &= np.abs(freqs - g) > 1.5 * df
+    return band
+
+
+def _clear_at(f: float, rat: NDArray[np.float64], level: float, df: float, n_freqs: int) -> bool:
+    """Whether a DFT ordinate next to ``f`` has its ratio to the background above ``level``."""
+    k = f / df
+    ks = [j for j in (int(np.floor(k)), int(np.ceil(k))) if 0 < j < n_freqs]
+    return any(rat[j] > level for j in ks)
+
+
+def _orbit_harmonics(ctx: Context, tau, masks, f, n_max: int, fmax, df: float) -> list[int]:
+    """The orbit harmonics ``n`` (of ``f``) taken in the orbit effect."""
+    # harmonics 1 and 2 always; then, with those fitted out of the residual (their
+    # power and its leakage through the gaps raise the background of the others: on
+    # a simulated half day the 3rd-6th stand 6-23x above it before, 19-86x after),
+    # every harmonic clearly above its background, at twice the Bonferroni level of
+    # the harmonics searched
+    freqs = ctx.grid.freqs
+    r = ctx.residual
+    top = min(fmax, freqs[-1])
+    level = line_threshold(n_max)
+    x = _harmonic_cols(tau, [f, 2 * f])
+    r2 = r.copy()
+    for m in masks:
+        coef, *_ = np.linalg.lstsq(x[m], r[m], rcond=None)
+        r2[m] -= x[m] @ coef
+    pg = np.mean(np.abs(ctx.grid.fft(r2)[0]) ** 2, axis=0)
+    rat = pg / np.maximum(_line_background(pg), 1e-300)
+    return [1, 2] + [
+        n
+        for n in range(3, n_max + 1)
+        if n * f <= top and _clear_at(n * f, rat, level, df, freqs.size)
+    ]
+
+
+def _orbit_proposal(
+    ctx: Context, tau, tau_all, masks, df: float, fmax: float, n_max: int
+) -> Proposal | None:
+    """The orbit effect: cos/sin at ``f``, ``2f`` and the clear higher harmonics, if any."""
+    freqs = ctx.grid.freqs
+    r = ctx.residual
+    f0 = 1.0 / ctx.orbit_period
+    # shorter than a revolution, once/twice-per-revolution terms are a smooth curve
+    # the polynomial base already has: a 100 s record "found" a 1e-3 m/s² orbit term
+    long_enough = ctx.span >= ctx.orbit_period
+    harm: list[int] = []
+    if long_enough and not _excluded(f0, ctx, 0.05 * f0) and 2 * f0 < freqs[-1]:
+        trial = f0 * (1 + np.linspace(-0.03, 0.03, 41))
+        pw = _line_power(tau, r, trial, masks) + _line_power(tau, r, 2 * trial, masks)
+        f = float(trial[int(np.argmax(pw))])
+        harm = _orbit_harmonics(ctx, tau, masks, f, n_max, fmax, df)
+        # harmonics next to a line of the model stay out (nearly collinear columns)
+        harm = [n for n in harm if not any(abs(n * f - g) <= 1.5 * df for g in ctx.model_freqs)]
+    if not harm:
+        return None
+    # no lines are kept off this trial's harmonics: a line competes with it
+    # (QA: a 3e-9 m/s² line at 2500 s pulled this f 2.9 % high, 1.4 bins
+    # from the line's 2f, the line was kept off, the orbit term had p = 1,
+    # and the line was never proposed); once an orbit effect is in the model
+    # its harmonics are kept off (in periodic)
+    m = max(1.0, 0.06 * f0 * ctx.span)
+    labs = tuple(lab for n in harm for lab in (f"cos@{n * f!r}", f"sin@{n * f!r}"))
+    cols, labs, axes = ctx.split(_harmonic_cols(tau_all, [n * f for n in harm]), labs)
+    return Proposal(
+        "periodic",
+        "orbit",
+        cols,
+        labs,
+        m,
+        {"frequency": f, "harmonics": tuple(harm), "local_psd": True},
+        axes,
+    )
+
+
 def periodic(ctx: Context) -> list[Proposal]:
     """Sinusoids: the strongest residual spectral line, and the orbit harmonics.
 
@@ -279,40 +363,9 @@ def periodic(ctx: Context) -> list[Proposal]:
     freqs = ctx.grid.freqs
     fmax = float(ctx.options.get("fmax", freqs[-1]))
     ratio = noise.pgram / np.maximum(_line_background(noise.pgram), 1e-300)
-    band = (np.arange(freqs.size) >= 4) & (freqs <= fmax)
-    for g in ctx.excluded_freqs:
-        band &= np.abs(freqs - g) > 1.5 * df
-    for key in ctx.blocked:  # rejected lines: not proposed again
-        if len(key) == 3 and key[0] == "periodic" and key[1] == "line":
-            band &= np.abs(freqs - float(key[2])) > 1.5 * df
-    for g in ctx.cache.get("modulated_freqs", ()):  # the signal's own variation (below)
-        band &= np.abs(freqs - g) > 1.5 * df
+    band = _line_band(ctx, freqs, df, fmax)
     thr = line_threshold(band.sum())
     r = ctx.residual
-
-    def clear_at(f: float, rat: NDArray[np.float64], level: float) -> bool:
-        k = f / df
-        ks = [j for j in (int(np.floor(k)), int(np.ceil(k))) if 0 < j < freqs.size]
-        return any(rat[j] > level for j in ks)
-
-    def orbit_harmonics(f: float, n_max: int) -> list[int]:
-        # harmonics 1 and 2 always; then, with those fitted out of the residual (their
-        # power and its leakage through the gaps raise the background of the others: on
-        # a simulated half day the 3rd-6th stand 6-23x above it before, 19-86x after),
-        # every harmonic clearly above its background, at twice the Bonferroni level of
-        # the harmonics searched
-        top = min(fmax, freqs[-1])
-        level = line_threshold(n_max)
-        x = _harmonic_cols(tau, [f, 2 * f])
-        r2 = r.copy()
-        for m in masks:
-            coef, *_ = np.linalg.lstsq(x[m], r[m], rcond=None)
-            r2[m] -= x[m] @ coef
-        pg = np.mean(np.abs(ctx.grid.fft(r2)[0]) ** 2, axis=0)
-        rat = pg / np.maximum(_line_background(pg), 1e-300)
-        return [1, 2] + [
-            n for n in range(3, n_max + 1) if n * f <= top and clear_at(n * f, rat, level)
-        ]
 
     n_max = int(ctx.options.get("orbit_harmonics", ORBIT_HARMONICS))
     if ctx.orbit_frequency is not None:
@@ -329,38 +382,9 @@ def periodic(ctx: Context) -> list[Proposal]:
             nearest = np.clip(np.rint(freqs / f_t), 1, n_top) * f_t
             band &= np.abs(freqs - nearest) > 1.5 * df
     elif ctx.orbit_period and ctx.orbit_period > 0 and not ctx.is_blocked("periodic", "orbit"):
-        f0 = 1.0 / ctx.orbit_period
-        # shorter than a revolution, once/twice-per-revolution terms are a smooth curve
-        # the polynomial base already has: a 100 s record "found" a 1e-3 m/s² orbit term
-        long_enough = ctx.span >= ctx.orbit_period
-        harm: list[int] = []
-        if long_enough and not _excluded(f0, ctx, 0.05 * f0) and 2 * f0 < freqs[-1]:
-            trial = f0 * (1 + np.linspace(-0.03, 0.03, 41))
-            pw = _line_power(tau, r, trial, masks) + _line_power(tau, r, 2 * trial, masks)
-            f = float(trial[int(np.argmax(pw))])
-            harm = orbit_harmonics(f, n_max)
-            # harmonics next to a line of the model stay out (nearly collinear columns)
-            harm = [n for n in harm if not any(abs(n * f - g) <= 1.5 * df for g in ctx.model_freqs)]
-        if harm:
-            # no lines are kept off this trial's harmonics: a line competes with it
-            # (QA: a 3e-9 m/s² line at 2500 s pulled this f 2.9 % high, 1.4 bins
-            # from the line's 2f, the line was kept off, the orbit term had p = 1,
-            # and the line was never proposed); once an orbit effect is in the model
-            # its harmonics are kept off (above)
-            m = max(1.0, 0.06 * f0 * ctx.span)
-            labs = tuple(lab for n in harm for lab in (f"cos@{n * f!r}", f"sin@{n * f!r}"))
-            cols, labs, axes = ctx.split(_harmonic_cols(tau_all, [n * f for n in harm]), labs)
-            out.append(
-                Proposal(
-                    "periodic",
-                    "orbit",
-                    cols,
-                    labs,
-                    m,
-                    {"frequency": f, "harmonics": tuple(harm), "local_psd": True},
-                    axes,
-                )
-            )
+        orbit = _orbit_proposal(ctx, tau, tau_all, masks, df, fmax, n_max)
+        if orbit is not None:
+            out.append(orbit)
     if band.any() and ctx.n_lines < int(ctx.options.get("max_lines", MAX_LINES)):
         clear = band & (ratio > thr)
         if clear.any():
