@@ -307,6 +307,23 @@ def close_loop(
         signal_template=st["template"].period if st["template"] is not None else None,
     )
 
+    make = _search_maker(setup, builders, alpha, opts, aux_all, ref_all, proxies, notes)
+    search = make(st, use)
+    stop = _floor_stop(resolution)
+    run(search, max_effects, stop)
+    swap_smooth(search)
+    search, st = _without_unknown_history(search, st, use, setup, make, max_effects, stop)
+    floored = stop is not None and stop(search)
+    return _finish(search, setup, st, catchall_knots, noise_psd, floored, considered, opts)
+
+
+def _search_maker(
+    setup: _Setup, builders, alpha: float, opts, aux_all, ref_all, proxies, notes
+) -> Callable[[dict[str, Any], NDArray[np.bool_]], Search]:
+    """``make(st, use)``: a fresh :class:`Search` of the null fit ``st`` on the samples ``use``."""
+    t_all, y_all, orbit_period = setup.t_all, setup.y_all, setup.orbit_period
+    chan_all, names = setup.chan_all, setup.names
+
     def make(st: dict[str, Any], use: NDArray[np.bool_]) -> Search:
         search = Search(
             grid=st["grid"],
@@ -336,13 +353,7 @@ def close_loop(
         search.cache["null_basis"] = st["basis0"]
         return search
 
-    search = make(st, use)
-    stop = _floor_stop(resolution)
-    run(search, max_effects, stop)
-    swap_smooth(search)
-    search, st = _without_unknown_history(search, st, use, setup, make, max_effects, stop)
-    floored = stop is not None and stop(search)
-    return _finish(search, setup, st, catchall_knots, noise_psd, floored, considered, opts)
+    return make
 
 
 def _floor_stop(resolution: float | None) -> Callable[[Search], bool] | None:
