@@ -449,30 +449,10 @@ def fit_reference(
         ax = _Axis(a, y_all[:, i], pos, basis, chunks, designs)
         mode = scale
         while True:
-            free = np.ones(3 + k, dtype=bool)
-            free[3:] = ~unsupported
-            fixed = np.zeros(3 + k)
-            if mode != "fit-matrix":
-                free[:3] = False
-            if mode == "fit":
-                free[i] = True
-            if mode == "fixed":
-                fixed[i] = apriori[i]
             try:
-                ar = ArModel.white(1.0)
-                var_n = 0.0  # white noise of the raw column i (errors in variables)
-                for _ in range(iterations + 1):
-                    mat = ax.normal(ar)
-                    theta, inv = _solve(mat, free, fixed, _eiv_power(ar, pos, var_n, i))
-                    r = ax.residual(theta)
-                    ar = fit_ar(r, t, max_order)
-                    if free[i]:  # bounded by what the residual holds: −S_ii n_i is in it
-                        var_n = min(noise_var[i], _raw_noise(r[:, None], pos)[0] / theta[i] ** 2)
-                mat = ax.normal(ar, keep=True)
-                eiv = _eiv_power(ar, pos, var_n, i)
-                theta, inv = _solve(mat, free, fixed, eiv)
-                theta, rss = _refine(ax, theta, free, inv, eiv)
-                r = ax.residual(theta)
+                free, theta, inv, rss, r, mat, eiv, ar = _fit_mode(
+                    ax, i, mode, unsupported, apriori, pos, noise_var, t, iterations, max_order
+                )
             except ValidationError as exc:
                 if mode == "fixed":
                     raise
@@ -491,24 +471,10 @@ def fit_reference(
             )
             mode = fallback
         # cross-talk test: the full row against the diagonal one (eq. 2)
-        full = np.ones(3 + k, dtype=bool)
-        full[3:] = ~unsupported
-        try:
-            # a Wald test on the two cross terms of the full row, with their covariance
-            # from the residual's own spectrum (_honest_cov): the likelihood-ratio form
-            # under the AR model alarmed on 40 % of one-day fits with red noise
-            if mode == "fit-matrix":
-                th_f, cov_f = theta, cov
-            else:
-                th_f, inv_f = _solve(mat, full, np.zeros(3 + k), eiv)
-                cov_f, _ = _honest_cov(ax, inv_f, s0, full, ar, t, ax.residual(th_f), basis)
-            cross = [j for j in range(3) if j != i]
-            pos_f = np.cumsum(full) - 1  # parameter index → index among the free ones
-            c = cov_f[np.ix_(pos_f[cross], pos_f[cross])]
-            chi2_total += float(th_f[cross] @ np.linalg.solve(c, th_f[cross]))
+        chi2 = _crosstalk_chi2(ax, i, mode, theta, cov, mat, eiv, s0, ar, t, basis, unsupported)
+        if chi2 is not None:
+            chi2_total += chi2
             chi2_dof += 2
-        except (ValidationError, np.linalg.LinAlgError):
-            pass
         thetas.append(theta)
         invs.append(cov)
         frees.append(free)
@@ -544,6 +510,62 @@ def fit_reference(
         used=use,
         cov=cov,
     )
+
+
+def _fit_mode(ax: _Axis, i, mode, unsupported, apriori, pos, noise_var, t, iterations, max_order):
+    """Iterated AR-weighted least squares of axis ``i`` with the scale model ``mode``.
+
+    Returns ``(free, theta, inv, rss, r, mat, eiv, ar)``: the free parameters, the
+    estimate, its inverse normal matrix, residual sum of squares and residual, the
+    last normal equations, errors-in-variables power and AR noise model.
+    """
+    k = unsupported.size
+    free = np.ones(3 + k, dtype=bool)
+    free[3:] = ~unsupported
+    fixed = np.zeros(3 + k)
+    if mode != "fit-matrix":
+        free[:3] = False
+    if mode == "fit":
+        free[i] = True
+    if mode == "fixed":
+        fixed[i] = apriori[i]
+    ar = ArModel.white(1.0)
+    var_n = 0.0  # white noise of the raw column i (errors in variables)
+    for _ in range(iterations + 1):
+        mat = ax.normal(ar)
+        theta, inv = _solve(mat, free, fixed, _eiv_power(ar, pos, var_n, i))
+        r = ax.residual(theta)
+        ar = fit_ar(r, t, max_order)
+        if free[i]:  # bounded by what the residual holds: −S_ii n_i is in it
+            var_n = min(noise_var[i], _raw_noise(r[:, None], pos)[0] / theta[i] ** 2)
+    mat = ax.normal(ar, keep=True)
+    eiv = _eiv_power(ar, pos, var_n, i)
+    theta, inv = _solve(mat, free, fixed, eiv)
+    theta, rss = _refine(ax, theta, free, inv, eiv)
+    r = ax.residual(theta)
+    return free, theta, inv, rss, r, mat, eiv, ar
+
+
+def _crosstalk_chi2(ax: _Axis, i, mode, theta, cov, mat, eiv, s0, ar, t, basis, unsupported):
+    """Wald χ² (2 dof) of row ``i``'s two cross terms (eq. 2), or None if it cannot be had."""
+    k = unsupported.size
+    full = np.ones(3 + k, dtype=bool)
+    full[3:] = ~unsupported
+    try:
+        # a Wald test on the two cross terms of the full row, with their covariance
+        # from the residual's own spectrum (_honest_cov): the likelihood-ratio form
+        # under the AR model alarmed on 40 % of one-day fits with red noise
+        if mode == "fit-matrix":
+            th_f, cov_f = theta, cov
+        else:
+            th_f, inv_f = _solve(mat, full, np.zeros(3 + k), eiv)
+            cov_f, _ = _honest_cov(ax, inv_f, s0, full, ar, t, ax.residual(th_f), basis)
+        cross = [j for j in range(3) if j != i]
+        pos_f = np.cumsum(full) - 1  # parameter index → index among the free ones
+        c = cov_f[np.ix_(pos_f[cross], pos_f[cross])]
+        return float(th_f[cross] @ np.linalg.solve(c, th_f[cross]))
+    except (ValidationError, np.linalg.LinAlgError):
+        return None
 
 
 def _support(t: NDArray, use: NDArray, basis: BiasBasis, chunk: int):
