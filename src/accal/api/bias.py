@@ -328,35 +328,19 @@ def fit_bias(
     if not isinstance(series, AccSeries):
         raise ValidationError(f"series must be an AccSeries (accal.read), got {type(series)}")
     given = series
-    if isinstance(method, str):
-        methods = ("wavelet", "lsq") if method == "both" else (method,)
-    else:
-        methods = tuple(method)
-    if scale is not None and not isinstance(scale, str):
-        scale = ",".join(repr(float(v)) for v in scale)
-    ref_path = None
-    if reference is not None:
-        ref_path = Path(
-            source_of(reference, "reference") if isinstance(reference, AccSeries) else reference
-        )
-    opts = GraceBiasOptions(
-        methods=methods,
-        order=int(order),
+    methods, ref_path, opts = _grace_bias_options(
+        method,
+        order=order,
         scale=scale,
         keep_flagged=keep_flagged,
-        reference=ref_path,
-        close_loop=close_loop or aux is not None or truth is not None,
-        aux=None if aux is None else Path(aux),
-        truth=None if truth is None else Path(truth),
+        reference=reference,
+        close_loop=close_loop,
+        aux=aux,
+        truth=truth,
         alpha=alpha,
-        orbit_period=GraceBiasOptions.orbit_period if orbit_period is None else orbit_period,
-        degraded_days=None if degraded_days is None else Path(degraded_days),
+        orbit_period=orbit_period,
+        degraded_days=degraded_days,
     )
-    if opts.reference_fit:  # scale "fit"/"fit-matrix": accal.pipeline_reference's job
-        raise ValidationError(
-            f"scale {scale!r}: the reference fit (--scale fit, --bias-basis) is not in the "
-            "Python API yet; use accal grace-bias"
-        )
     name = source or source_of(series)
     path = Path(name)
     fit_series = ref_series = None
@@ -390,3 +374,52 @@ def fit_bias(
     if closure is not None:
         closure.fit = result
     return result
+
+
+def _grace_bias_options(
+    method,
+    *,
+    order,
+    scale,
+    keep_flagged,
+    reference,
+    close_loop,
+    aux,
+    truth,
+    alpha,
+    orbit_period,
+    degraded_days,
+):
+    """``(methods, reference path, GraceBiasOptions)`` of :func:`fit_bias`'s arguments."""
+    from accal.pipeline import GraceBiasOptions
+
+    if isinstance(method, str):
+        methods = ("wavelet", "lsq") if method == "both" else (method,)
+    else:
+        methods = tuple(method)
+    if scale is not None and not isinstance(scale, str):
+        scale = ",".join(repr(float(v)) for v in scale)
+    ref_path = None
+    if reference is not None:
+        ref_path = Path(
+            source_of(reference, "reference") if isinstance(reference, AccSeries) else reference
+        )
+    opts = GraceBiasOptions(
+        methods=methods,
+        order=int(order),
+        scale=scale,
+        keep_flagged=keep_flagged,
+        reference=ref_path,
+        close_loop=close_loop or aux is not None or truth is not None,
+        aux=None if aux is None else Path(aux),
+        truth=None if truth is None else Path(truth),
+        alpha=alpha,
+        orbit_period=GraceBiasOptions.orbit_period if orbit_period is None else orbit_period,
+        degraded_days=None if degraded_days is None else Path(degraded_days),
+    )
+    if opts.reference_fit:  # scale "fit"/"fit-matrix": accal.pipeline_reference's job
+        raise ValidationError(
+            f"scale {scale!r}: the reference fit (--scale fit, --bias-basis) is not in the "
+            "Python API yet; use accal grace-bias"
+        )
+    return methods, ref_path, opts
