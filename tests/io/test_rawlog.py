@@ -334,3 +334,24 @@ def test_a_boolean_time_acceleration_or_angle_column_is_refused(tmp_path, column
     ok = df.assign(**{column: 1e-6 if column != "theta" else df["theta"] * 0.0})
     ok.to_parquet(p)
     assert read_rawlog(p).aux["flag"].tolist() == [1.0, 0.0] * 4
+
+
+def test_a_wild_theta_is_an_error_naming_its_line(tmp_path):
+    """The mutation fuzzer (issue 23): θ = -1e308 rad on ten samples was masked and moved
+    its period by 2.5σ without a word.  A θ beyond 1e7 rad is damage (its CSV line is
+    named); unwrapped θ of many turns and a missing θ (a gap) are still read."""
+    n = 12
+    theta = np.repeat([0.0, np.pi], n // 2) + 2 * np.pi * 1000.0  # unwrapped, 1000 turns
+    df = pd.DataFrame({"time": np.arange(float(n)), "m_y": 1e-6, "m_z": 2e-6, "theta": theta})
+    df.loc[3, "theta"] = np.nan
+    ok = tmp_path / "ok.csv"
+    write_table(df, ok, units={"theta": "rad"})
+    assert np.isnan(read_rawlog(ok).aux["theta"][3])
+    df.loc[7, "theta"] = -1e308
+    bad = tmp_path / "bad.csv"
+    write_table(df, bad, units={"theta": "rad"})
+    lines = bad.read_text().splitlines()
+    line = 1 + next(i for i, text in enumerate(lines) if "-1e+308" in text)
+    with pytest.raises(FormatError, match="theta: -1e\\+308 rad is not a plausible angle") as exc:
+        read_rawlog(bad)
+    assert exc.value.line == line

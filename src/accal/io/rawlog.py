@@ -45,6 +45,11 @@ from accal.series import AccSeries, ReadReport
 
 #: Columns every run file must have.
 REQUIRED_COLUMNS = ("time", "m_y", "m_z", "theta")
+#: Largest |θ| accepted [rad]: 1.6 million turns, over 30 years of a platform turning
+#: every 10 minutes with θ unwrapped (where float64 still resolves 2e-9 rad).  A
+#: larger value is damage: θ = -1e308 on ten samples had only been masked and moved
+#: its period by 2.5 σ (issue 23, the mutation fuzzer).
+MAX_ABS_THETA = 1e7
 #: Optional accelerometer column (the axis along the rotation axis).
 OPTIONAL_COLUMNS = ("m_x",)
 #: Units of the fixed columns (SI; θ in radians).
@@ -260,6 +265,15 @@ class RawlogStream:
                 if big.size:
                     i = int(big[0])
                     raise self._row_error(implausible_message(name, float(a[i])), row0 + i)
+            theta = cols["theta"]
+            wild = np.flatnonzero(np.abs(theta) > MAX_ABS_THETA)  # NaN (a gap) is not wild
+            if wild.size:
+                i = int(wild[0])
+                raise self._row_error(
+                    f"theta: {theta[i]:.6g} rad is not a plausible angle (|theta| > "
+                    f"{MAX_ABS_THETA:g} rad, {MAX_ABS_THETA / (2 * np.pi):,.0f} turns): a damaged value",
+                    row0 + i,
+                )
             if aux_names is None:  # decided on the first chunk (CSV types are fixed there)
                 aux_names, skipped = [], []
                 for name in self.names:
