@@ -11,29 +11,13 @@ from pathlib import Path
 
 import click
 
-from accal._cliutil import OutPath, err, is_date, usage_fail
+from accal._cliutil import OutPath, err
+from accal.cli.table import ROW_OPTIONS, selected_rows
 
 
 @click.command("plot", short_help="Plot the bias and drift of an output directory over time.")
 @click.argument("directory", type=click.Path(exists=True, file_okay=False, path_type=Path))
-@click.option(
-    "--satellite", "satellites", multiple=True, help="Keep these satellites (repeatable)."
-)
-@click.option("--start", default=None, metavar="YYYY-MM-DD", help="First date kept.")
-@click.option("--end", default=None, metavar="YYYY-MM-DD", help="Last date kept.")
-@click.option(
-    "--method", "methods", multiple=True, type=click.Choice(["wavelet", "lsq"]),
-    help="Keep these methods (repeatable).",
-)  # fmt: skip
-@click.option(
-    "--axis", "axes", multiple=True, type=click.Choice(["x", "y", "z"]),
-    help="Keep these axes (repeatable).",
-)  # fmt: skip
-@click.option(
-    "--status", "statuses", multiple=True,
-    type=click.Choice(["nominal", "degraded", "transplant", "off"]),
-    help="Keep days of these statuses (repeatable), e.g. --status nominal.",
-)  # fmt: skip
+@ROW_OPTIONS
 @click.option(
     "--out", "out", type=OutPath(dir_okay=False, path_type=Path), default=None,
     help="PNG to write [DIRECTORY/bias_drift.png].",
@@ -56,17 +40,8 @@ def plot_cmd(
 
     try:
         path, df = table_view.load(directory)
-        for d in (start, end):
-            if d is not None and not is_date(d):
-                raise click.BadParameter(f"expected YYYY-MM-DD, got {d!r}")
-        unknown = table_view.unknown_satellites(df, satellites)
-        if unknown:
-            usage_fail(
-                f"--satellite {unknown[0]!r} is not in {path} (it holds "
-                f"{', '.join(table_view.held_satellites(df)) or 'no rows'})"
-            )
-        df = table_view.select_rows(
-            df, satellites=satellites, start=start, end=end, methods=methods, axes=axes,
+        df = selected_rows(
+            path, df, satellites=satellites, start=start, end=end, methods=methods, axes=axes,
             statuses=statuses,
         )  # fmt: skip
         target = out if out is not None else directory / "bias_drift.png"

@@ -9,40 +9,68 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import Any
 
 import click
 
-from accal._cliutil import err, is_date, usage_fail
+from accal._cliutil import err, is_date, option_stack, usage_fail
+
+#: The row selection of ``accal table`` and ``accal plot``.
+ROW_OPTIONS = option_stack(
+    [
+        click.option(
+            "--satellite", "satellites", multiple=True, help="Keep these satellites (repeatable)."
+        ),
+        click.option("--start", default=None, metavar="YYYY-MM-DD", help="First date kept."),
+        click.option("--end", default=None, metavar="YYYY-MM-DD", help="Last date kept."),
+        click.option(
+            "--method",
+            "methods",
+            multiple=True,
+            type=click.Choice(["wavelet", "lsq"], case_sensitive=False),
+            help="Keep these methods (repeatable).",
+        ),
+        click.option(
+            "--axis",
+            "axes",
+            multiple=True,
+            type=click.Choice(["x", "y", "z"], case_sensitive=False),
+            help="Keep these axes (repeatable).",
+        ),
+        click.option(
+            "--status",
+            "statuses",
+            multiple=True,
+            type=click.Choice(["nominal", "degraded", "transplant", "off"]),
+            help="Keep days of these statuses (repeatable), e.g. --status nominal.",
+        ),
+    ]
+)
+
+
+def selected_rows(path: Path, df: Any, **selection: Any) -> Any:
+    """The rows of a bias_drift table ``df`` (read from ``path``) that :data:`ROW_OPTIONS`
+    keep; a malformed date or an unknown satellite is a usage error."""
+    from accal.products import table_view
+
+    start, end, satellites = selection["start"], selection["end"], selection["satellites"]
+    for d in (start, end):
+        if d is not None and not is_date(d):
+            raise click.BadParameter(f"expected YYYY-MM-DD, got {d!r}")
+    if start and end and start > end:
+        raise click.BadParameter(f"--start {start} is after --end {end}")
+    unknown = table_view.unknown_satellites(df, satellites) if satellites else []
+    if unknown:  # a typo would otherwise match nothing, silently
+        held = table_view.held_satellites(df)
+        usage_fail(
+            f"--satellite {unknown[0]!r} is not in {path} (it holds {', '.join(held) or 'no rows'})"
+        )
+    return table_view.select_rows(df, **selection)
 
 
 @click.command("table", short_help="Print or export the bias/drift table of an output directory.")
 @click.argument("directory", type=click.Path(file_okay=False, exists=True, path_type=Path))
-@click.option(
-    "--satellite", "satellites", multiple=True, help="Keep these satellites (repeatable)."
-)
-@click.option("--start", default=None, metavar="YYYY-MM-DD", help="First date kept.")
-@click.option("--end", default=None, metavar="YYYY-MM-DD", help="Last date kept.")
-@click.option(
-    "--method",
-    "methods",
-    multiple=True,
-    type=click.Choice(["wavelet", "lsq"], case_sensitive=False),
-    help="Keep these methods (repeatable).",
-)
-@click.option(
-    "--axis",
-    "axes",
-    multiple=True,
-    type=click.Choice(["x", "y", "z"], case_sensitive=False),
-    help="Keep these axes (repeatable).",
-)
-@click.option(
-    "--status",
-    "statuses",
-    multiple=True,
-    type=click.Choice(["nominal", "degraded", "transplant", "off"]),
-    help="Keep days of these statuses (repeatable), e.g. --status nominal.",
-)
+@ROW_OPTIONS
 @click.option(
     "--columns",
     default=None,
@@ -84,27 +112,10 @@ def table_cmd(
                 f"{path} is the periods table of accal demod: --satellite, --start, --end, "
                 "--method, --axis and --status select rows of a bias_drift table"
             )
-        for d in (start, end):
-            if d is not None and not is_date(d):
-                raise click.BadParameter(f"expected YYYY-MM-DD, got {d!r}")
-        if start and end and start > end:
-            raise click.BadParameter(f"--start {start} is after --end {end}")
-        unknown = table_view.unknown_satellites(df, satellites) if satellites else []
-        if unknown:  # a typo would otherwise match nothing, silently
-            held = table_view.held_satellites(df)
-            usage_fail(
-                f"--satellite {unknown[0]!r} is not in {path} (it holds "
-                f"{', '.join(held) or 'no rows'})"
-            )
-        df = table_view.select_rows(
-            df,
-            satellites=satellites,
-            start=start,
-            end=end,
-            methods=methods,
-            axes=axes,
+        df = selected_rows(
+            path, df, satellites=satellites, start=start, end=end, methods=methods, axes=axes,
             statuses=statuses,
-        )
+        )  # fmt: skip
         known = table_view.column_names(df)
         cols = [c.strip() for c in columns.split(",") if c.strip()] if columns else []
         if columns and not cols:
