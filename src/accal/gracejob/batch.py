@@ -1,9 +1,10 @@
 """A batch of ``accal grace-bias``: :func:`run`, with its manifest and table commits.
 
-:func:`run` decides which inputs are due (the manifest and the table say which
-are current), runs them (local workers, a dask scheduler, or the arcs of the
-reference fit), and commits their rows and manifest records as they finish
-(:func:`_commit`); :func:`options_key` is what the manifest compares.
+:func:`run` is the shared runner (:func:`accal.batch_runner.run_batch`) with the
+steps of :class:`GraceBiasJob`: it decides which inputs are due (the manifest and
+the table say which are current), runs them (local workers, a dask scheduler, or
+the arcs of the reference fit), and commits their rows and manifest records as
+they finish (:func:`_commit`); :func:`options_key` is what the manifest compares.
 """
 
 from __future__ import annotations
@@ -14,22 +15,13 @@ import functools
 import json
 import os
 import time as _time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-from accal import __version__
-from accal.batch import (
-    Interrupted,
-    Manifest,
-    OutputLock,
-    RunLog,
-    execute,
-    failure_message,
-    file_signature,
-    remove_stale_temporaries,
-)
+from accal.batch import Manifest, RunLog, failure_message, file_signature
+from accal.batch_runner import BatchJob, run_batch
 from accal.errors import AccalError, ValidationError
 from accal.gracejob.options import GraceBiasOptions
 from accal.gracejob.outcome import KEPT_EARLIER, FileOutcome, RunSummary, internal_error
@@ -92,6 +84,9 @@ def run(
 ) -> RunSummary:
     """Process every input into ``out_dir``; failures are recorded, not raised.
 
+    The batch is :func:`accal.batch_runner.run_batch` with the steps of
+    :class:`GraceBiasJob`.
+
     Parameters
     ----------
     paths : iterable of Path
@@ -132,81 +127,153 @@ def run(
     accal.batch.LockedError
         If another run holds the output directory.
     """
-    start = _time.perf_counter()
-    out_dir = Path(out_dir)
-    paths = [Path(p) for p in paths]
-    if not out_dir.exists() and not any(os.path.lexists(p) for p in paths):
-        # nothing to read: each input fails without a new output directory, lock and log
-        # being created for it (issue 23: a failed run left them behind)
-        return _nothing_to_read(paths, unmatched, start)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    if fail_fast:
-        workers, scheduler = 1, None
-    _check_table_format(out_dir, opts.fmt)
-    with OutputLock(out_dir, "accal grace-bias") as lock:
-        remove_stale_temporaries(out_dir)
-        rlog = RunLog(out_dir, enabled=log)
-        try:
-            key = options_key(opts)
-            rlog(
-                f"start accal {__version__} grace-bias: {len(paths)} inputs, workers={workers}, "
-                f"scheduler={scheduler if isinstance(scheduler, str | None) else 'client'}, "
-                f"force={force}, options={json.dumps(key, sort_keys=True)}"
-            )
-            manifest = Manifest.load(out_dir)
-            results, todo, table_path = _plan(
-                paths, unmatched, out_dir, opts, manifest, key, force, checksum, rlog
-            )
-            commits = _Commits(out_dir, opts, manifest, key, checksum, table_path)
-            if opts.arc != "day":
-                # imported here: the reference fit's modules import scipy (~0.3 s of start-up)
-                from accal.pipeline_arcs import arc_outcomes, redo_all
+    return run_batch(
+        GraceBiasJob(opts),
+        paths,
+        out_dir,
+        fail_fast=fail_fast,
+        progress=progress,
+        workers=workers,
+        scheduler=scheduler,
+        force=force,
+        checksum=checksum,
+        commit_seconds=commit_seconds,
+        log=log,
+        unmatched=unmatched,
+    )
 
-                if todo:  # an arc is fitted whole: any input to redo redoes all of them
-                    todo = redo_all(todo, results, paths)
-                gen = arc_outcomes([paths[i] for i in todo], out_dir, opts)
-            else:
-                task = functools.partial(
-                    process_one, out_dir=out_dir, opts=opts, run_token=lock.token
-                )
-                gen = execute(
-                    task,
-                    [paths[i] for i in todo],
-                    workers=workers,
-                    scheduler=scheduler,
-                    on_error=internal_error,
-                    on_note=rlog,
-                )
-            done = gen if progress is None else progress(gen, total=len(todo))
-            interrupted = _collect(
-                done, gen, todo, results, commits, rlog, fail_fast, commit_seconds
+
+class GraceBiasJob(BatchJob):
+    """The steps of a ``grace-bias`` batch (:class:`accal.batch_runner.BatchJob`).
+
+    Parameters
+    ----------
+    opts : GraceBiasOptions
+        Options.
+    """
+
+    command = "grace-bias"
+
+    def __init__(self, opts: GraceBiasOptions) -> None:
+        self.opts = opts
+        self.table_path: Path | None = None
+
+    def options_key(self) -> dict[str, Any]:
+        """:func:`options_key` of the options."""
+        return options_key(self.opts)
+
+    def nothing_to_read(
+        self, paths: list[Path], unmatched: Sequence[tuple[Path, str]], seconds: float
+    ) -> RunSummary:
+        """Each input failed (none exists)."""
+        return _nothing_to_read(paths, unmatched, seconds)
+
+    def check_out_dir(self, out_dir: Path) -> None:
+        """Refuse a directory with a ``bias_drift`` table of the other format."""
+        _check_table_format(out_dir, self.opts.fmt)
+
+    def plan(
+        self,
+        paths: list[Path],
+        unmatched: Sequence[tuple[Path, str]],
+        manifest: Manifest,
+        force: bool,
+        checksum: bool,
+        rlog: RunLog,
+    ) -> tuple[dict[int, FileOutcome], list[int]]:
+        """Unmatched, clashing and current inputs are settled; the others run."""
+        results, todo, self.table_path = _plan(
+            paths, unmatched, self.out_dir, self.opts, manifest, self.key, force, checksum, rlog
+        )
+        if self.opts.arc != "day" and todo:
+            # an arc is fitted whole: any input to redo redoes all of them (imported
+            # here: the reference fit's modules import scipy, ~0.3 s of start-up)
+            from accal.pipeline_arcs import redo_all
+
+            todo = redo_all(todo, results, paths)
+        return results, todo
+
+    def task(self, run_token: str | None) -> Callable[[Path], FileOutcome]:
+        """:func:`accal.gracejob.process.process_one` with the options."""
+        return functools.partial(
+            process_one, out_dir=self.out_dir, opts=self.opts, run_token=run_token
+        )
+
+    def internal_error(self, path: Path, exc: BaseException) -> FileOutcome:
+        """A failed outcome naming the bug or the dead worker."""
+        return internal_error(path, exc)
+
+    def outcomes(
+        self,
+        paths: list[Path],
+        *,
+        workers: int,
+        scheduler: Any,
+        rlog: RunLog,
+        run_token: str | None,
+    ) -> Iterator[tuple[int, FileOutcome]]:
+        """The inputs' outcomes; with ``--arc``, the arcs' (fitted whole, here)."""
+        if self.opts.arc == "day":
+            return super().outcomes(
+                paths, workers=workers, scheduler=scheduler, rlog=rlog, run_token=run_token
             )
-            table_path = commits.commit()
-            if opts.pool_days and not interrupted:
-                _pool_table(out_dir, opts, table_path, rlog)
-            if manifest.changed:  # checksums added to entries recorded without one
-                manifest.save()
-            outcomes = [results[i] for i in sorted(results)]
-            summary = RunSummary(
-                outcomes,
-                table_path,
-                _time.perf_counter() - start,
-                n_inputs=len(paths) + len(unmatched),
-                log_path=rlog.path if log else None,
-                workers=1
-                if opts.arc != "day"
-                else max(1, min(workers, len(todo)))
-                if scheduler is None
-                else workers,
-            )
-            rlog(summary.line())
-            if interrupted:
-                remove_stale_temporaries(out_dir)  # of the workers stopped mid-write
-                rlog("interrupted (Ctrl-C): finished inputs kept; a re-run does the rest")
-                raise Interrupted(summary)
-            return summary
-        finally:
-            rlog.close()
+        # imported here: the reference fit's modules import scipy (~0.3 s of start-up)
+        from accal.pipeline_arcs import arc_outcomes
+
+        return arc_outcomes(paths, self.out_dir, self.opts)
+
+    def write(self, outcome: FileOutcome) -> FileOutcome:
+        """A failed input whose calibrated file is there keeps its earlier outputs."""
+        if (
+            not outcome.ok
+            and (self.out_dir / f"{output_stem(outcome.path)}.calibrated.{self.opts.fmt}").exists()
+        ):
+            # processed by an earlier run: its outputs stay (nothing is lost),
+            # and the user is told they come from the file's earlier version
+            outcome = dataclasses.replace(outcome, kept_earlier=True)
+        return outcome
+
+    def log_outcome(self, outcome: FileOutcome, rlog: RunLog) -> None:
+        """``ok FILE: N samples`` or ``FAILED ...``, and the warnings."""
+        rlog(
+            f"ok {outcome.path}: {outcome.n_samples} samples"
+            if outcome.ok
+            else f"FAILED {outcome.message}"
+            + (f" ({KEPT_EARLIER})" if outcome.kept_earlier else "")
+        )
+        for w in outcome.warnings:
+            rlog(f"warning {outcome.path}: {w}")
+
+    def commit(self, outcomes: list[FileOutcome]) -> None:
+        """Merge the outcomes' rows into the table, then record them (:func:`_commit`)."""
+        self.table_path = (
+            _commit(self.out_dir, self.opts, self.manifest, self.key, outcomes, self.checksum)
+            or self.table_path
+        )
+
+    def finish(self, interrupted: bool, rlog: RunLog) -> None:
+        """``--pool-days``: the pooled σ over the whole table."""
+        if self.opts.pool_days and not interrupted:
+            _pool_table(self.out_dir, self.opts, self.table_path, rlog)
+
+    def summarise(
+        self,
+        outcomes: list[FileOutcome],
+        seconds: float,
+        *,
+        n_inputs: int,
+        log_path: Path | None,
+        workers: int,
+    ) -> RunSummary:
+        """The :class:`RunSummary` (the arcs run in this process: one worker)."""
+        return RunSummary(
+            outcomes,
+            self.table_path,
+            seconds,
+            n_inputs=n_inputs,
+            log_path=log_path,
+            workers=1 if self.opts.arc != "day" else workers,
+        )
 
 
 def _nothing_to_read(
@@ -285,78 +352,6 @@ def _plan(
         else:
             todo.append(i)
     return results, todo, table_path
-
-
-class _Commits:
-    """The outcomes not yet committed (:func:`_commit`), and when the last commit was."""
-
-    def __init__(
-        self,
-        out_dir: Path,
-        opts: GraceBiasOptions,
-        manifest: Manifest,
-        key: dict[str, Any],
-        checksum: bool,
-        table_path: Path | None,
-    ) -> None:
-        self.out_dir, self.opts, self.manifest = out_dir, opts, manifest
-        self.key, self.checksum, self.table_path = key, checksum, table_path
-        self.pending: list[FileOutcome] = []
-        self.last = _time.monotonic()
-
-    def commit(self) -> Path | None:
-        """Commit the pending outcomes; the table's path (the earlier one if none written)."""
-        self.table_path = (
-            _commit(self.out_dir, self.opts, self.manifest, self.key, self.pending, self.checksum)
-            or self.table_path
-        )
-        self.pending, self.last = [], _time.monotonic()
-        return self.table_path
-
-
-def _collect(
-    done: Iterable[tuple[int, FileOutcome]],
-    gen: Any,
-    todo: list[int],
-    results: dict[int, FileOutcome],
-    commits: _Commits,
-    rlog: RunLog,
-    fail_fast: bool,
-    commit_seconds: float,
-) -> bool:
-    """Take the outcomes as they finish, logging them and committing every ``commit_seconds``.
-
-    Returns True when interrupted (Ctrl-C): what finished is kept, for the caller
-    to commit.
-    """
-    opts, out_dir = commits.opts, commits.out_dir
-    try:
-        for j, outcome in done:
-            if (
-                not outcome.ok
-                and (out_dir / f"{output_stem(outcome.path)}.calibrated.{opts.fmt}").exists()
-            ):
-                # processed by an earlier run: its outputs stay (nothing is lost),
-                # and the user is told they come from the file's earlier version
-                outcome = dataclasses.replace(outcome, kept_earlier=True)
-            results[todo[j]] = outcome
-            commits.pending.append(outcome)
-            rlog(
-                f"ok {outcome.path}: {outcome.n_samples} samples"
-                if outcome.ok
-                else f"FAILED {outcome.message}"
-                + (f" ({KEPT_EARLIER})" if outcome.kept_earlier else "")
-            )
-            for w in outcome.warnings:
-                rlog(f"warning {outcome.path}: {w}")
-            if fail_fast and not outcome.ok:
-                break
-            if _time.monotonic() - commits.last > commit_seconds:
-                commits.commit()
-    except KeyboardInterrupt:
-        gen.close()  # stops the worker pool now if Ctrl-C came between results
-        return True  # keep what finished: the caller commits it
-    return False
 
 
 def _table_if_exists(out_dir: Path, fmt: str) -> Path | None:
