@@ -191,7 +191,10 @@ def test_inertial_reference_is_rotated_with_the_real_sca1b(tmp_path):
         (("--bias-basis", "spline:6h"), "give --reference"),
         (("--reference", "REF", "--bias-basis", "spline:0h"), "node step"),
         (("--reference", "REF", "--bias-basis", "poly7"), "expected poly0"),
-        (("--reference", "REF", "--scale", "fit", "--close-loop"), "not available"),
+        (
+            ("--reference", "REF", "--scale", "fit", "--arc", "3d", "--close-loop"),
+            "not available with --arc 3d",
+        ),
         (("--reference", "REF", "--scale", "fit", "--pool-days", "4"), "pool-days"),
         (("--reference-frame", "inertial"), "add --bias-basis"),
         (("--reference", "REF", "--scale", "fit", "--thruster-margins", "1"), "BEFORE,AFTER"),

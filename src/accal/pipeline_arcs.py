@@ -72,11 +72,15 @@ def reference_outputs(
     minus_ref: AccSeries,
     day: Any,
     arc: dict[str, Any] | None = None,
+    closure: Any = None,
 ) -> FileOutcome:
     """Write the outputs of one input's reference fit (``--bias-basis``, ``--scale fit``).
 
     ``day`` is its :class:`accal.pipeline_reference.ReferenceDay`; ``arc`` describes the
-    arc it was fitted in (sources, parameter table), None for a day fitted alone.
+    arc it was fitted in (sources, parameter table), None for a day fitted alone;
+    ``closure`` the :class:`accal.gracejob.reference_closure.ReferenceClosure` of
+    ``--close-loop`` (``day`` is then the refit): the rows' ``model``, the report's
+    ``closure`` entry and the outcome's closure (for ``closure.json``/``closure.md``).
     """
     stem = output_stem(path)
     series = with_warnings(series, *day.warnings)
@@ -89,6 +93,8 @@ def reference_outputs(
         row = {**row_source(path, series, opts, date, ax), **row_fields(day, ax, t, opts.scale)}
         row.update(signal_share(series, minus_ref, ax, day.use))
         row["day_status"], row["day_status_reason"] = status
+        if closure is not None:
+            row["model"] = closure.models[ax]
         rows.append(row)
     meta = {
         "source": path.name,
@@ -132,6 +138,8 @@ def reference_outputs(
     }
     if arc is not None:
         report["reference_fit"]["arc"] = arc
+    if closure is not None:
+        report["closure"] = closure.summaries
     rep_path = out_dir / f"{stem}.report.json"
     write_json(rep_path, report, sync=False)
     return FileOutcome(
@@ -140,10 +148,12 @@ def reference_outputs(
         rows=rows,
         n_samples=len(series),
         # an arc's parameter table is shared by its days: not one input's output
-        outputs=(cal_path, rep_path)
-        if arc is not None
-        else (cal_path, par_path, cov_path, rep_path),
+        outputs=(
+            (cal_path, rep_path) if arc is not None else (cal_path, par_path, cov_path, rep_path)
+        )
+        + (closure.outputs if closure is not None else ()),
         n_bytes=file_size(path),
+        closure=closure.summaries if closure is not None else {},
         warnings=tuple(report["read_report"]["warnings"]),
     )
 

@@ -394,6 +394,12 @@ def _detrended(t: np.ndarray, y: np.ndarray) -> np.ndarray:
     return y - a @ np.linalg.lstsq(a, y, rcond=None)[0]
 
 
+def write_closure_plots(res: Any, prefix: Path, ax: str) -> list[Path]:
+    """Write ``<prefix>.closure{,-psd,-effects}.<ax>.png`` of a closure result (none
+    without matplotlib); returns the paths written."""
+    return _plot_closure(res, prefix, ax)
+
+
 def _plot_closure(res: Any, prefix: Path, ax: str) -> list[Path]:
     try:
         import matplotlib  # noqa: F401

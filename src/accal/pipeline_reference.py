@@ -52,6 +52,10 @@ class ReferenceDay:
     thrusters : dict
         ``file``, ``firings`` in the day and ``n_excluded`` samples.
     warnings : tuple of str
+    reference : ndarray, shape (n, 3), or None
+        The reference the fit used, in the SRF [m/s²] (rotated with the attitude for
+        ``--reference-frame inertial``; NaN where missing): the closure's null model
+        (:mod:`accal.gracejob.reference_closure`).
     """
 
     fit: ReferenceFit
@@ -59,6 +63,7 @@ class ReferenceDay:
     calibrated: AccSeries
     thrusters: dict[str, Any]
     warnings: tuple[str, ...]
+    reference: np.ndarray | None = None
 
 
 def apriori_scale(scale: str | None, satellite: str) -> tuple[float, float, float]:
@@ -175,7 +180,7 @@ def fit_arc(
             ),
         )
         notes = [*parts[k][3], *(f"reference fit: {n}" for n in fit.notes)]
-        days.append(ReferenceDay(fit, fit.used[sl], cal, parts[k][2], tuple(notes)))
+        days.append(ReferenceDay(fit, fit.used[sl], cal, parts[k][2], tuple(notes), parts[k][0]))
     return days
 
 

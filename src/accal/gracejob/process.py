@@ -26,7 +26,7 @@ from accal.gracejob.outputs import (
     output_stem,
     write_json,
 )
-from accal.gracejob.reading import read_with_reference
+from accal.gracejob.reading import read_with_reference, with_warnings
 from accal.io.writers import run_guard, write_table
 from accal.series import AccSeries
 
@@ -47,7 +47,16 @@ def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutco
         from accal.pipeline_reference import fit_day
 
         day = fit_day(path, series, ref_series, opts)
-        return reference_outputs(path, out_dir, opts, series, ref_series, day)
+        closure = None
+        if opts.close_loop:
+            # imported here: the closure modules cost ~0.4 s of start-up (scipy.signal)
+            from accal.gracejob.reference_closure import close_reference_loop
+
+            day, closure, notes = close_reference_loop(
+                path, series, ref_series, day, opts, out_dir / stem
+            )
+            series = with_warnings(series, *notes)
+        return reference_outputs(path, out_dir, opts, series, ref_series, day, closure=closure)
     fitted = fit_input(path, series, fit_series, ref_series, opts, out_dir / stem)
     series, cal, use, rows = fitted.series, fitted.calibrated, fitted.use, fitted.rows
     closure, extra_outputs = fitted.closure, list(fitted.outputs)

@@ -1,0 +1,383 @@
+"""``grace-bias --reference REF --bias-basis ... | --scale fit ... --close-loop``: one day.
+
+Issue 22: the closure runs on the residual of the reference fit.  The fit's model,
+in the raw data's units (eq. 1 of :mod:`accal.estimators.reference` solved for the
+raw acceleration)::
+
+    a_raw = S⁻¹ a_ref + b(t) + n                                              (1)
+
+is, per axis ``i``, linear in the bias basis ``φ_k(t)`` and in the reference
+columns whose scale entries the fit estimated: ``y_i = a_raw,i − a_ref,i =
+Σ_k b_ik φ_k + ((S⁻¹)_ii − 1) a_ref,i (+ Σ_j≠i (S⁻¹)_ij a_ref,j)``, or, for an
+axis whose scale is fixed, ``y_i = a_raw,i − (S⁻¹ a_ref)_i = Σ_k b_ik φ_k``.
+That design is the declared base of :func:`accal.closure.close_loop` (its
+``base`` accepts a :class:`~accal.closure.basis.BlockBase`), so every candidate
+(steps, couplings to the data's channels, polynomial and exponential drifts,
+and the scale where the fit did not estimate it) is tested, validated and
+estimated against the reference fit's null model, with the closure's own
+machinery deciding what is an instrument effect.  The effects it accepts are
+subtracted from the raw data and the reference fit is made again
+(:func:`accal.pipeline_reference.fit_day`); the covariance of the refit gets
+what estimating the effects adds (as :func:`accal.pipeline_closure.with_effect_uncertainty`
+does for the wavelet/lsq fits).
+
+Per day only: an arc of several days (``--arc 30d``, ``month``) is one fit
+whose closure would need one base over the arc; refused up front
+(:class:`accal.gracejob.options.GraceBiasOptions`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from accal import __version__
+from accal.gracejob.options import GraceBiasOptions
+from accal.series import AccSeries
+
+__all__ = ["ReferenceClosure", "close_reference_loop", "null_design"]
+
+AXES = "xyz"
+
+
+@dataclass(frozen=True)
+class ReferenceClosure:
+    """What the closure of one day's reference fit found and did.
+
+    Attributes
+    ----------
+    summaries : dict
+        ``{axis: closure.json entry}`` (:meth:`accal.closure.ClosureResult.to_dict`
+        plus ``model``, ``removed_from_calibrated``, ``estimates``, ``markdown``).
+    models : dict
+        ``{axis: model label}`` for the ``bias_drift`` table's ``model`` column, e.g.
+        ``poly1+bias_step@2005-01-01T09:36:00GPS``.
+    outputs : tuple of Path
+        Plots written (``--plots``).
+    """
+
+    summaries: dict[str, dict[str, Any]]
+    models: dict[str, str]
+    outputs: tuple[Path, ...] = ()
+
+
+def null_design(
+    fit: Any, axis: int, time: np.ndarray, raw: np.ndarray, reference: np.ndarray
+) -> tuple[np.ndarray, Any, np.ndarray | None]:
+    """The data and base of the closure of one axis of a reference fit (eq. 1).
+
+    Parameters
+    ----------
+    fit : ReferenceFit
+        The day's fit (:func:`accal.estimators.reference.fit_reference`).
+    axis : int
+        0, 1, 2 for x, y, z.
+    time : ndarray, shape (n,)
+        GPS seconds.
+    raw, reference : ndarray, shape (n, 3)
+        Raw accelerometer data and the reference in the SRF [m/s²].
+
+    Returns
+    -------
+    y : ndarray, shape (n,)
+        ``a_raw,i − a_ref,i`` (scale fitted on this axis) or ``a_raw,i − (S⁻¹ a_ref)_i``
+        (scale fixed) [m/s²].
+    base : BlockBase
+        The bias basis columns (``bias[k]``, labelled with the powers of ``t`` they
+        span: a Legendre ``polyN`` spans ``t^0..t^N``, a clamped cubic B-spline every
+        cubic, de Boor 2001, ch. IX) and the reference columns of the fitted scale
+        entries (``Sinv_<i><j>``: coefficient ``(S⁻¹)_ij − δ_ij`` [1], each column
+        normalised to unit RMS with the factor in ``BlockBase.scale``); the diagonal
+        one labelled ``scale`` (the closure's ``scale`` candidate is then not proposed).
+        The reference columns are the base's ``signal`` part: a candidate they could
+        mimic is not identifiable (:func:`accal.closure.validation.identifiability`).
+    scale_reference : ndarray or None
+        The reference column of the ``scale`` candidate (``(S⁻¹ a_ref)_i``) where the
+        fit held the scale fixed; also the closure's ``reference`` otherwise.
+    """
+    from accal.closure.basis import BlockBase
+
+    mode = fit.modes[axis]
+    ref = np.nan_to_num(np.asarray(reference, dtype=np.float64))
+    phi, first = fit.basis.design(time)
+    keep = ~fit.unsupported[first : first + phi.shape[1]] if fit.unsupported.size else None
+    k_idx = np.arange(first, first + phi.shape[1])
+    if keep is not None:
+        phi, k_idx = phi[:, keep], k_idx[keep]
+    if fit.basis.kind == "poly":
+        labels = [f"t^{k}" for k in k_idx]
+    else:  # the clamped cubic spline reproduces every cubic over the arc
+        labels = [f"t^{j}" if j < 4 else f"bspline[{k}]" for j, k in enumerate(k_idx)]
+    names = [f"bias[{k}]" for k in k_idx]
+    cols = [phi]
+    scale = [np.ones(phi.shape[1])]
+    s_inv = np.linalg.inv(fit.scale)
+    if mode == "fixed":
+        expected = ref @ s_inv.T  # (S⁻¹ a_ref) of every axis
+        y = raw[:, axis] - expected[:, axis]
+        scale_ref = expected[:, axis]
+    else:
+        y = raw[:, axis] - ref[:, axis]
+        scale_ref = ref[:, axis]
+        js = range(3) if mode == "fit-matrix" else (axis,)
+        for j in js:
+            r = ref[:, j]
+            rms = float(np.sqrt(np.mean(r**2))) or 1.0
+            cols.append((r / rms)[:, None])
+            scale.append(np.array([1.0 / rms]))
+            names.append(f"Sinv_{AXES[axis]}{AXES[j]}")
+            labels.append("scale" if j == axis else f"crosstalk_{AXES[axis]}{AXES[j]}")
+    x = np.column_stack(cols)
+    # the reference columns model the signal: a candidate is told from it by how much
+    # of it lies outside their span (accal.closure.validation.identifiability)
+    signal = tuple(range(phi.shape[1], x.shape[1]))
+    base = BlockBase(
+        np.zeros(x.shape[0], dtype=np.int64),
+        x,
+        tuple(names),
+        tuple(labels),
+        np.concatenate(scale),
+        signal=signal,
+    )
+    return y, base, scale_ref
+
+
+def _resolution(raw: np.ndarray, y: np.ndarray) -> float:
+    """float64 epsilon times the largest magnitude of the raw axis and of ``y`` [m/s²]
+    (as :mod:`accal.pipeline_closure`: a text file resolves no better)."""
+    big = max((float(np.nanmax(np.abs(a))) for a in (raw, y) if np.isfinite(a).any()), default=0)
+    return float(np.finfo(np.float64).eps * big)
+
+
+def _row_estimates(day: Any, axis: str, time: np.ndarray, scale_given: str | None) -> dict:
+    """Bias and drift at the first used sample and the diagonal scale, with their σ."""
+    from accal.pipeline_reference import row_fields
+
+    r = row_fields(day, axis, time, scale_given or "")
+    return {
+        "t0": r["t0"],
+        "bias": (r["bias"], r["bias_sigma"]),
+        "drift": (r["drift"], r["drift_sigma"]),
+        "scale": (r["scale"], r[f"scale_{axis}_sigma"]),
+    }
+
+
+def before_after(
+    before: Any, after: Any, axis: str, time: np.ndarray, opts: GraceBiasOptions, truth: Any
+) -> dict[str, Any]:
+    """``estimates`` of a closure.json entry: the reference fit's bias, drift and scale
+    before and after closing the loop, ``change_sigmas = |after − before| / σ_after``
+    (as :func:`accal.pipeline_closure.before_after`), and with ``truth`` the true errors
+    of bias and drift (the truth's bias moved to the fit's ``t0`` with its drift)."""
+    b = _row_estimates(before, axis, time, opts.scale)
+    a = _row_estimates(after, axis, time, opts.scale)
+    out: dict[str, Any] = {}
+    for q in ("bias", "drift", "scale"):
+        (vb, sb), (va, sa) = b[q], a[q]
+        e = {
+            "before": vb,
+            "sigma_before": sb,
+            "after": va,
+            "sigma_after": sa,
+            "change_sigmas": abs(va - vb) / sa if sa > 0 else float("inf"),
+        }
+        if truth is not None and q != "scale":
+            true_b = truth["bias"] + truth["drift"] * (b["t0"] - truth["t0"])
+            e["true_error_before"] = vb - (true_b if q == "bias" else truth["drift"])
+            true_a = truth["bias"] + truth["drift"] * (a["t0"] - truth["t0"])
+            e["true_error_after"] = va - (true_a if q == "bias" else truth["drift"])
+        out[q] = e
+    return {"reference": out}
+
+
+def with_effect_uncertainty(fit: Any, summaries: dict[str, dict[str, Any]]) -> Any:
+    """The refitted :class:`ReferenceFit` with the uncertainty of the removed effects.
+
+    The refit subtracts the effects as if known; the closure gives, per base
+    coefficient, what estimating them adds to its variance (``sigma_after² −
+    sigma_plain²``, :class:`accal.closure.BaseCoefficient`).  That is added to the
+    diagonal of the refit's covariance: for ``bias[k]`` to ``bias_coef[i, k]`` (same
+    quantity); for ``Sinv_ij`` (the coefficient of ``a_ref,j`` in eq. 1, ``(S⁻¹)_ij``)
+    to ``S_ij`` with the first-order Jacobian of the inverse, ``dS = −S d(S⁻¹) S``
+    (Petersen & Pedersen, *The Matrix Cookbook*, 2012, eq. 59), i.e. a variance
+    factor ``(S_ii S_jj)²`` for a near-diagonal ``S``.
+    """
+    k = fit.basis.size
+    bias_cov = np.array(fit.bias_cov, dtype=np.float64, copy=True)
+    scale_cov = np.array(fit.scale_cov, dtype=np.float64, copy=True)
+    cov = np.array(fit.cov, dtype=np.float64, copy=True)
+    for ax, entry in summaries.items():
+        if not entry.get("removed_from_calibrated"):
+            continue
+        i = AXES.index(ax)
+        for b in entry.get("base") or []:
+            after, plain = b.get("sigma_after"), b.get("sigma_plain")
+            if after is None or plain is None or not np.isfinite(after * plain):
+                continue
+            dv = max(0.0, after**2 - plain**2)
+            name = str(b.get("name", ""))
+            if name.startswith("bias["):
+                idx = i * k + int(name[5:-1])
+                bias_cov[idx, idx] += dv
+                if cov.size:
+                    cov[9 + idx, 9 + idx] += dv
+            elif name.startswith("Sinv_"):
+                j = AXES.index(name[-1])
+                idx = 3 * i + j
+                ds = dv * (fit.scale[i, i] * fit.scale[j, j]) ** 2
+                scale_cov[idx, idx] += ds
+                if cov.size:
+                    cov[idx, idx] += ds
+    return dataclasses.replace(fit, bias_cov=bias_cov, scale_cov=scale_cov, cov=cov)
+
+
+def _close_axes(
+    path: Path, series: AccSeries, day: Any, opts: GraceBiasOptions, prefix: Path
+) -> tuple[dict[str, Any], list[Path], list[str], np.ndarray]:
+    """Run :func:`accal.closure.close_loop` on each axis' residual of the reference fit.
+
+    Returns ``({axis: {"summary", "instrument", "model", "coupled"}}, plots, warnings,
+    covered)``; ``covered``: the samples every candidate channel covers.
+    """
+    from accal.closure import close_loop, effect_label
+    from accal.closure.report import to_markdown
+    from accal.pipeline_closure import candidate_channels, closure_candidates, write_closure_plots
+
+    aux, units, left_out, warnings = candidate_channels(series, opts)
+    covered = np.ones(len(series), bool)
+    for v in aux.values():
+        covered &= np.isfinite(v)
+    use_cl = day.use & covered
+    candidates, note = closure_candidates(opts)
+    base_name = day.fit.basis.name()
+    out: dict[str, Any] = {}
+    plots: list[Path] = []
+    for i, ax in enumerate(AXES):
+        y, base, scale_ref = null_design(day.fit, i, series.time, series.acc, day.reference)
+        res = close_loop(
+            series.time,
+            y,
+            valid=use_cl,
+            base=base,
+            aux=aux or None,
+            alpha=opts.alpha,
+            orbit_period=opts.orbit_period,
+            candidates=candidates,
+            resolution=_resolution(series.acc[:, i], y),
+            reference=scale_ref,
+            channel_units=units,
+            screened=left_out,
+            options={"orbit_period_fixed": True},
+        )
+        inst = np.zeros(len(series))
+        labels = [base_name]
+        for e, m in res.effect_models():
+            if e.instrument:
+                inst += np.where(covered, m, 0.0)
+                labels.append(effect_label(e))
+        summary = res.to_dict()
+        summary.update(
+            model="+".join(labels),
+            candidates=list(candidates),
+            null_model=f"reference fit: bias {base_name}, scale {day.fit.modes[i]} "
+            f"({', '.join(base.names)})",
+            removed_from_calibrated=labels[1:],
+            markdown=to_markdown(res, title=f"{path.name} axis {ax} (reference fit)"),
+        )
+        if note:
+            summary["note"] = note
+        coupled = any(lb.startswith("auxiliary(") for lb in labels[1:])
+        out[ax] = {"summary": summary, "instrument": inst, "model": summary["model"]}
+        out[ax]["coupled"] = coupled
+        if opts.plots:
+            plots += write_closure_plots(res, prefix, ax)
+    return out, plots, warnings, covered
+
+
+def close_reference_loop(
+    path: Path,
+    series: AccSeries,
+    minus_ref: AccSeries,
+    day: Any,
+    opts: GraceBiasOptions,
+    prefix: Path,
+) -> tuple[Any, ReferenceClosure | None, list[str]]:
+    """Close the loop on one day's reference fit; refit when instrument effects are removed.
+
+    Parameters
+    ----------
+    path : Path
+        The input (names it in the reports).
+    series, minus_ref : AccSeries
+        The input as read and ``series − reference`` (reference holes invalid).
+    day : ReferenceDay
+        Its reference fit (:func:`accal.pipeline_reference.fit_day`).
+    opts : GraceBiasOptions
+    prefix : Path
+        Where the plots go (``<prefix>.closure.<axis>.png``).
+
+    Returns
+    -------
+    day : ReferenceDay
+        The refit without the instrument effects (``day`` itself when none was removed).
+    closure : ReferenceClosure or None
+        None when the day is too short for the residual analysis (said in the warnings).
+    warnings : list of str
+    """
+    from accal.closure.select import MIN_SAMPLES
+    from accal.pipeline_closure import load_truth
+    from accal.pipeline_reference import fit_day
+
+    n_use = int(np.count_nonzero(day.use))
+    if n_use < MIN_SAMPLES:  # the reference fit stands; say why there is no closure
+        return (
+            day,
+            None,
+            [
+                f"too short to close the loop ({n_use} usable samples, the residual analysis "
+                f"needs {MIN_SAMPLES}): reference fit {day.fit.basis.name()} only"
+            ],
+        )
+    found, plots, warnings, covered = _close_axes(path, series, day, opts, prefix)
+    removed = {ax: c for ax, c in found.items() if c["summary"]["removed_from_calibrated"]}
+    after = day
+    if removed:
+        inst = np.column_stack([found[ax]["instrument"] for ax in AXES])
+        valid = minus_ref.valid
+        n_out = int(np.count_nonzero(day.use & ~covered))
+        if any(c["coupled"] for c in removed.values()) and n_out:
+            # a coupling is not removed where its channel is missing: out of the refit
+            valid = valid & covered
+            warnings.append(
+                f"a coupling was removed and its channel misses {n_out} used samples: they "
+                "are left out of the refit and marked invalid in the calibrated file"
+            )
+        history = (
+            f"accal {__version__}: close_loop(alpha={opts.alpha}) on the reference fit's "
+            "residual removed " + "; ".join(f"{ax}: {found[ax]['model']}" for ax in AXES)
+        )
+        after = fit_day(
+            path,
+            series.replace(acc=series.acc - inst).with_history(history),
+            minus_ref.replace(acc=minus_ref.acc - inst, valid=valid),
+            opts,
+        )
+        after = dataclasses.replace(
+            after,
+            fit=with_effect_uncertainty(after.fit, {a: c["summary"] for a, c in removed.items()}),
+        )
+    truth = load_truth(opts.truth, series, True) if opts.truth else {}
+    for ax in AXES:
+        found[ax]["summary"]["estimates"] = before_after(
+            day, after, ax, series.time, opts, truth.get(ax)
+        )
+    closure = ReferenceClosure(
+        summaries={ax: c["summary"] for ax, c in found.items()},
+        models={ax: c["model"] for ax, c in found.items()},
+        outputs=tuple(plots),
+    )
+    return after, closure, warnings

@@ -1,0 +1,211 @@
+"""``grace-bias --reference REF --scale fit --bias-basis ... --close-loop`` (issue 22).
+
+The closure runs on the residual of the reference fit, with the fit's model (bias
+basis, reference columns of the fitted scales) as its null model.  Days drawn here
+with numpy (not ``accal simulate``): 1 Hz, a drag-like along-track reference of
+~2e-7 m/s² with once- and twice-per-revolution and slow (6-17 h) parts, smaller
+cross-track and radial signals, raw = signal / S + bias + drift·t + noise, the
+reference = signal + its own white noise.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from click.testing import CliRunner
+
+from accal.cli import main
+from accal.estimators.refbasis import parse_bias_basis
+from accal.estimators.reference import fit_reference
+from accal.gracejob.reference_closure import null_design
+from accal.pipeline import read_bias_drift
+
+T_DAY = 158976000.0  # 2005-01-14 12:00:00 GPS
+N_DAY = 86_400
+BIAS = np.array([-1.1e-6, 2.7e-5, -5.6e-7])  # m/s²
+DRIFT = np.array([2e-13, -1e-13, 3e-13])  # m/s³
+SCALE = np.array([0.96, 0.98, 0.95])
+ORBIT = 5600.0  # s
+STEP = ("y", 0.4, 1e-8)  # axis, fraction of the day, size [m/s²]
+
+
+def _signal(t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """A non-gravitational acceleration in the SRF (x along track) [m/s²]."""
+    ph = 2 * np.pi * (t - t[0]) / ORBIT
+    slow = sum(
+        np.sin(2 * np.pi * (t - t[0]) / p + rng.uniform(0, 2 * np.pi))
+        for p in (6 * 3600.0, 9 * 3600.0, 17 * 3600.0)
+    )
+    slow /= slow.std()
+    drag = 2e-7 * (1 + 0.3 * np.sin(ph) + 0.1 * np.sin(2 * ph + 0.4) + 0.2 * slow)
+    return np.column_stack(
+        [-drag, 2e-8 * np.cos(ph) + 0.02 * drag, 3e-8 * np.sin(ph + 1) + 5e-9 * slow]
+    )
+
+
+def _draw(n: int, seed: int, step: tuple[str, float, float] | None = None):
+    """(t, true signal, raw, reference); ``step`` adds a bias step to the raw data."""
+    rng = np.random.default_rng(seed)
+    t = T_DAY + np.arange(n, dtype=float)
+    true = _signal(t, rng)
+    raw = true / SCALE + BIAS + DRIFT * (t - t[0])[:, None] + 1e-10 * rng.normal(size=(n, 3))
+    if step is not None:
+        ax, frac, size = step
+        raw[int(frac * n) :, "xyz".index(ax)] += size
+    ref = true + 3e-10 * rng.normal(size=(n, 3))
+    return t, true, raw, ref
+
+
+def _write(path: Path, t: np.ndarray, acc: np.ndarray) -> Path:
+    pd.DataFrame(
+        {"gps_time": t, "lin_accl_x": acc[:, 0], "lin_accl_y": acc[:, 1], "lin_accl_z": acc[:, 2]}
+    ).to_csv(path, index=False, float_format="%.17g")
+    return path
+
+
+def _run(*args) -> tuple[int, str]:
+    res = CliRunner().invoke(main, ["grace-bias", *map(str, args)], catch_exceptions=False)
+    return res.exit_code, res.output
+
+
+COMMON = ("--scale", "fit", "--bias-basis", "poly1", "-q", "-j", "1")
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory) -> dict[str, dict]:
+    """A clean day and one with a bias step, each run without and with --close-loop."""
+    base = tmp_path_factory.mktemp("refcl")
+    out: dict[str, dict] = {}
+    for name, step in (("clean", None), ("step", STEP)):
+        t, true, raw, ref = _draw(N_DAY, 1, step)
+        day = _write(base / f"{name}.csv", t, raw)
+        ref_path = _write(base / f"{name}_ref.csv", t, ref)
+        res = {"t": t, "true": true}
+        for key, extra in (("plain", ()), ("closed", ("--close-loop",))):
+            o = base / f"{name}_{key}"
+            code, msg = _run(day, "--reference", ref_path, *COMMON, *extra, "--out", o)
+            assert code == 0, msg
+            res[key] = o
+        out[name] = res
+    return out
+
+
+def _table(out: Path) -> pd.DataFrame:
+    return read_bias_drift(out / "bias_drift.parquet").set_index("axis")
+
+
+def _calibrated_error(out: Path, stem: str, true: np.ndarray, axis: str) -> float:
+    cal = pd.read_parquet(out / f"{stem}.calibrated.parquet")
+    ok = cal["valid"].to_numpy(bool)
+    err = cal[f"lin_accl_{axis}"].to_numpy()[ok] - true[ok, "xyz".index(axis)]
+    return float(np.sqrt(np.mean(err**2)))
+
+
+def test_clean_day_nothing_removed_estimates_unchanged(runs):
+    r = runs["clean"]
+    plain, closed = _table(r["plain"]), _table(r["closed"])
+    summary = json.loads((r["closed"] / "closure.json").read_text())["sources"]["clean.csv"]
+    for ax in "xyz":
+        assert summary[ax]["removed_from_calibrated"] == []
+        assert closed.loc[ax, "model"] == "poly1"
+        sigma = {"bias": "bias_sigma", "drift": "drift_sigma", "scale": f"scale_{ax}_sigma"}
+        for q, sig in sigma.items():
+            assert abs(closed.loc[ax, q] - plain.loc[ax, q]) <= closed.loc[ax, sig]
+            assert closed.loc[ax, sig] == plain.loc[ax, sig]
+            est = summary[ax]["estimates"]["reference"][q]
+            assert est["change_sigmas"] == 0.0
+    # σ unchanged: nothing was removed, the fit is the same
+    np.testing.assert_array_equal(closed["bias_sigma"], plain["bias_sigma"])
+    assert (closed["scale_mode"] == "fit").all()
+
+
+def test_injected_step_found_and_removed(runs):
+    r = runs["step"]
+    entry = json.loads((r["closed"] / "closure.json").read_text())["sources"]["step.csv"]
+    ax, frac, size = STEP
+    steps = [e for e in entry[ax]["effects"] if e["name"] == "bias_step"]
+    assert len(steps) == 1
+    e = steps[0]
+    assert abs(e["epoch"] - r["t"][int(frac * N_DAY)]) <= 3.0
+    assert abs(e["coefficient"] - size) <= 2 * e["sigma"]
+    assert entry[ax]["removed_from_calibrated"] == entry[ax]["model"].split("+")[1:]
+    for other in "xz":  # nothing removed where nothing was injected
+        assert entry[other]["removed_from_calibrated"] == []
+    tab = _table(r["closed"])
+    assert tab.loc[ax, "model"].startswith("poly1+bias_step@2005-01-14T21:36:00")
+    # the refit: bias back at the truth within its σ (the plain fit took the step in)
+    assert abs(tab.loc[ax, "bias"] - BIAS[1]) < 3 * tab.loc[ax, "bias_sigma"]
+    before = _calibrated_error(r["plain"], "step", r["true"], ax)
+    after = _calibrated_error(r["closed"], "step", r["true"], ax)
+    assert after <= before / 5, (before, after)
+    # the outputs of --close-loop: report entry, closure.md, history of the calibrated file
+    report = json.loads((r["closed"] / "step.report.json").read_text())
+    assert report["closure"][ax]["model"] == tab.loc[ax, "model"]
+    assert "bias_step" in (r["closed"] / "closure.md").read_text()
+    assert any("close_loop" in h for h in report["history"])
+
+
+def test_rerun_without_close_loop_drops_the_closure(runs, tmp_path):
+    r = runs["clean"]
+    src = r["closed"].parent / "clean.csv"
+    ref = r["closed"].parent / "clean_ref.csv"
+    out = tmp_path / "o"
+    assert _run(src, "--reference", ref, *COMMON[:4], "--close-loop", "--out", out, "-q")[0] == 0
+    assert (out / "closure.json").exists()
+    code, msg = _run(src, "--reference", ref, *COMMON[:4], "--out", out, "-q")
+    assert code == 0, msg
+    assert not (out / "closure.json").exists()
+
+
+@pytest.mark.parametrize("arc", ["3d", "month"])
+def test_close_loop_with_multi_day_arcs_is_a_usage_error(tmp_path, arc):
+    t, _, raw, ref = _draw(2000, 3)
+    day, ref = _write(tmp_path / "d.csv", t, raw), _write(tmp_path / "r.csv", t, ref)
+    out = tmp_path / "out"
+    code, msg = _run(day, "--reference", ref, *COMMON, "--arc", arc, "--close-loop", "--out", out)
+    assert code == 2
+    assert f"not available with --arc {arc}" in msg and "use --arc day" in msg
+    assert not out.exists()
+
+
+def test_arc_day_is_the_per_day_closure(tmp_path):
+    t, _, raw, ref = _draw(6000, 4)
+    day, ref = _write(tmp_path / "d.csv", t, raw), _write(tmp_path / "r.csv", t, ref)
+    out = tmp_path / "out"
+    code, msg = _run(day, "--reference", ref, *COMMON, "--arc", "day", "--close-loop", "--out", out)
+    assert code == 0, msg
+    assert set(json.loads((out / "closure.json").read_text())["sources"]["d.csv"]) == set("xyz")
+
+
+@pytest.mark.parametrize(("mode", "spec"), [("fit", "poly1"), ("fit-matrix", "spline:2h")])
+def test_null_design_spans_the_reference_model(mode, spec):
+    """Noise-free data lie in the closure's base (eq. 1 in raw units), with (S⁻¹)_ij − δ_ij
+    and the bias coefficients as its coefficients."""
+    n = 20_000
+    rng = np.random.default_rng(5)
+    t = T_DAY + np.arange(n, dtype=float)
+    true = _signal(t, rng)
+    s = np.diag(SCALE)
+    if mode == "fit-matrix":
+        s = s + np.array([[0, 1e-3, -2e-3], [5e-4, 0, 1e-3], [-1e-3, 2e-3, 0]])
+    raw = true @ np.linalg.inv(s).T + BIAS + DRIFT * (t - t[0])[:, None]
+    basis = parse_bias_basis(spec, float(t[0]), float(t[-1]))
+    fit = fit_reference(t, raw, true, np.ones(n, bool), basis, scale=mode)
+    s_inv = np.linalg.inv(fit.scale)
+    for i in range(3):
+        y, base, scale_ref = null_design(fit, i, t, raw, true)
+        coef, *_ = np.linalg.lstsq(base.columns, y, rcond=None)
+        resid = y - base.columns @ coef
+        assert np.sqrt(np.mean(resid**2)) < 1e-6 * np.sqrt(np.mean(y**2))
+        coef = coef * base.scale
+        k = fit.basis.size
+        np.testing.assert_allclose(coef[:k], fit.bias_coef[i], rtol=1e-6, atol=1e-14)
+        cols = range(3) if fit.modes[i] == "fit-matrix" else (i,)
+        want = [s_inv[i, j] - (i == j) for j in cols]
+        np.testing.assert_allclose(coef[k:], want, rtol=1e-5, atol=1e-9)
+        assert base.signal == tuple(range(k, k + len(want)))
+        np.testing.assert_allclose(scale_ref, true[:, i])
