@@ -209,3 +209,37 @@ def test_null_design_spans_the_reference_model(mode, spec):
         np.testing.assert_allclose(coef[k:], want, rtol=1e-5, atol=1e-9)
         assert base.signal == tuple(range(k, k + len(want)))
         np.testing.assert_allclose(scale_ref, true[:, i])
+
+
+def test_truth_and_a_coupling_to_a_table_channel(tmp_path):
+    """A 5e-9 m/s² step on x and a 2e-9 m/s²/K coupling of z to a temperature column:
+    both found and removed; with ``--truth`` (no reference scale in it) the estimates
+    carry the true errors of bias and drift and closure.md is written."""
+    n = 30_000
+    t, _, raw, ref = _draw(n, 2, ("x", 0.5, 5e-9))
+    temp = 20 + 0.5 * np.sin(2 * np.pi * (t - t[0]) / ORBIT + 0.3)
+    temp += 0.3 * np.sin(2 * np.pi * (t - t[0]) / 20_000.0)
+    raw[:, 2] += 2e-9 * (temp - temp.mean())
+    day = tmp_path / "d.csv"
+    pd.DataFrame(
+        {"gps_time": t, **{f"lin_accl_{a}": raw[:, i] for i, a in enumerate("xyz")}, "temp": temp}
+    ).to_csv(day, index=False, float_format="%.17g")
+    ref = _write(tmp_path / "r.csv", t, ref)
+    truth = tmp_path / "truth.json"
+    truth.write_text(json.dumps({"t0": t[0], "bias": BIAS.tolist(), "drift": DRIFT.tolist()}))
+    out = tmp_path / "out"
+    code, msg = _run(day, "--reference", ref, *COMMON, "--truth", truth, "--out", out)
+    assert code == 0, msg
+    entry = json.loads((out / "closure.json").read_text())["sources"]["d.csv"]
+    (step,) = [e for e in entry["x"]["effects"] if e["name"] == "bias_step"]
+    assert (
+        abs(step["epoch"] - t[n // 2]) <= 3 and abs(step["coefficient"] - 5e-9) < 2 * step["sigma"]
+    )
+    (cpl,) = [e for e in entry["z"]["effects"] if e["name"] == "auxiliary"]
+    assert cpl["channel"] == "temp" and abs(cpl["coefficient"] - 2e-9) < 2 * cpl["sigma"]
+    assert entry["y"]["removed_from_calibrated"] == []
+    est = entry["x"]["estimates"]["reference"]
+    assert set(est) == {"bias", "drift"}  # the truth has no reference scale
+    assert abs(est["bias"]["true_error_after"]) < 3 * est["bias"]["sigma_after"]
+    assert abs(est["bias"]["true_error_before"]) > 100 * abs(est["bias"]["true_error_after"])
+    assert "true error after" in (out / "closure.md").read_text()

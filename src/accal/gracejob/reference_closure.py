@@ -29,6 +29,7 @@ whose closure would need one base over the arc; refused up front
 from __future__ import annotations
 
 import dataclasses
+import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -166,17 +167,32 @@ def _row_estimates(day: Any, axis: str, time: np.ndarray, scale_given: str | Non
     }
 
 
+def _truth_scale(path: Path) -> np.ndarray | None:
+    """``S`` of a simulation's truth (``truth["reference"]["scale"]``, 3×3), or None."""
+    try:
+        s = np.asarray(json.loads(Path(path).read_text())["reference"]["scale"], dtype=float)
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    return s if s.shape == (3, 3) else None
+
+
 def before_after(
     before: Any, after: Any, axis: str, time: np.ndarray, opts: GraceBiasOptions, truth: Any
 ) -> dict[str, Any]:
     """``estimates`` of a closure.json entry: the reference fit's bias, drift and scale
     before and after closing the loop, ``change_sigmas = |after − before| / σ_after``
     (as :func:`accal.pipeline_closure.before_after`), and with ``truth`` the true errors
-    of bias and drift (the truth's bias moved to the fit's ``t0`` with its drift)."""
+    of bias and drift (the truth's bias moved to the fit's ``t0`` with its drift) and,
+    when the truth has the reference's ``S`` (``accal simulate grace --reference-out``),
+    of the scale; a truth without it leaves the scale out (every row of the report's
+    table then has its true errors)."""
     b = _row_estimates(before, axis, time, opts.scale)
     a = _row_estimates(after, axis, time, opts.scale)
+    true_s = _truth_scale(opts.truth) if truth is not None and opts.truth else None
     out: dict[str, Any] = {}
     for q in ("bias", "drift", "scale"):
+        if q == "scale" and truth is not None and true_s is None:
+            continue
         (vb, sb), (va, sa) = b[q], a[q]
         e = {
             "before": vb,
@@ -185,7 +201,11 @@ def before_after(
             "sigma_after": sa,
             "change_sigmas": abs(va - vb) / sa if sa > 0 else float("inf"),
         }
-        if truth is not None and q != "scale":
+        if truth is not None and q == "scale":
+            i = AXES.index(axis)
+            e["true_error_before"] = vb - float(true_s[i, i])
+            e["true_error_after"] = va - float(true_s[i, i])
+        elif truth is not None:
             true_b = truth["bias"] + truth["drift"] * (b["t0"] - truth["t0"])
             e["true_error_before"] = vb - (true_b if q == "bias" else truth["drift"])
             true_a = truth["bias"] + truth["drift"] * (a["t0"] - truth["t0"])
