@@ -75,6 +75,7 @@ def test_simulate_then_demod_recovers_truth(day, tmp_path):
         assert sorted(p.name for p in out.iterdir()) == [
             ".accal.lock",
             "accal.log",
+            "manifest.json",
             "periods.parquet",
             "summary.json",
             "summary.md",
@@ -215,12 +216,13 @@ def test_batch_one_bad_one_good(tmp_path):
     )
     assert code == 1
     assert f"accal: {bad}: m_y has 1 NaN" in err
-    assert "1 ok, 1 failed" in err
+    assert "1 ok, 0 skipped (current), 1 failed" in err
     assert sorted(p.name for p in out.iterdir()) == [
         ".accal.lock",
         "accal.log",
         "good.summary.json",
         "good.summary.md",
+        "manifest.json",  # what was processed with which options (re-runs skip it)
         "periods.csv",
         "periods.csv-metadata.json",  # its units (CSVW sidecar)
     ]
@@ -397,7 +399,7 @@ def test_cumulative_periods_table(tmp_path):
     args = ("--tau", 60, "--mask", 20, "--out", out, "-q")
     assert invoke("demod", r1, r2, *args)[0] == 0
     assert sorted(p.name for p in out.iterdir()) == [
-        ".accal.lock", "accal.log", "periods.parquet", "r1.summary.json", "r1.summary.md", "r2.summary.json", "r2.summary.md",
+        ".accal.lock", "accal.log", "manifest.json", "periods.parquet", "r1.summary.json", "r1.summary.md", "r2.summary.json", "r2.summary.md",
     ]  # fmt: skip
     df = pd.read_parquet(out / "periods.parquet")
     assert df.groupby("source").size().to_dict() == {"r1.parquet": 20, "r2.csv": 20}

@@ -41,6 +41,10 @@ def demod(
     gap_factor: float,
     rest_tol: float,
     chunk_rows: int,
+    workers: int | None,
+    scheduler: str | None,
+    force: bool,
+    checksum: bool,
     close_loop: bool,
     alpha: float,
     plots: bool,
@@ -51,7 +55,11 @@ def demod(
     Every RUN's periods go into the cumulative OUT/periods.<fmt> (a `source`
     column; a re-run replaces that source's rows).  Summaries: OUT/summary.json
     and OUT/summary.md with one RUN, OUT/<stem>.summary.json/.md with several.
+    OUT/manifest.json: re-runs skip RUNs whose file and options did not change;
+    OUT/accal.log: the run log.  Runs go to worker processes (-j) or a Dask
+    cluster (--scheduler).
     """
+    from accal.batch import Interrupted, default_workers
     from accal.errors import AccalError
     from accal.pipeline_demod import (
         DemodOptions,
@@ -99,24 +107,34 @@ def demod(
             f"{fmt_number(step)} s"
         )
     try:
-        summary = run_demod(runs, out, opts, progress=progress(quiet, "demod"), psd=noise)
-    except AccalError as exc:
+        summary = run_demod(
+            runs,
+            out,
+            opts,
+            progress=progress(quiet, "demod"),
+            psd=noise,
+            workers=workers or default_workers(),
+            scheduler=scheduler,
+            force=force,
+            checksum=checksum,
+        )
+    except AccalError as exc:  # the lock of another run, an unreachable scheduler, ...
         fail(str(exc))
+    except Interrupted:  # the runs that finished are written; a re-run does the rest
+        err("interrupted")
+        sys.exit(130)
     for o in summary.outcomes:
         if not o.ok:
             err(o.message)
             continue
-        if quiet:  # as grace-bias: -q is errors only; the warnings are in accal.log
+        if quiet or o.skipped:  # as grace-bias: -q is errors only; warnings in accal.log
             continue
         for w in o.warnings:
             err(f"{o.path}: warning: {w}")
         for line in _run_lines(o.path, o.summary, o.outputs[0]):
             click.echo(line, err=True)
     if not quiet:
-        click.echo(
-            f"accal demod: {summary.n_ok} ok, {summary.n_failed} failed in {summary.seconds:.2f} s",
-            err=True,
-        )
+        click.echo(summary.line(), err=True)
     if summary.n_failed:
         sys.exit(1)
 

@@ -14,6 +14,7 @@ import numpy as np
 
 from accal.batch import Outcome
 from accal.errors import ValidationError, check_option
+from accal.gracejob.outcome import RunSummary
 
 #: Standard integration time for σ(T) in the summary: 3 h, as in the paper (Fig. 5) [s].
 STANDARD_INTEGRATION = 3 * 3600.0
@@ -140,36 +141,79 @@ class DemodOptions:
 class RunOutcome(Outcome):
     """What happened to one run file (:class:`accal.batch.Outcome` plus demod results).
 
-    ``outputs`` are the cumulative periods table, the summary JSON and Markdown.
+    ``outputs`` are the cumulative periods table, the summary JSON and Markdown
+    (and the closure's plots).
 
     Attributes
     ----------
     summary : dict
-        The JSON summary (empty on failure).
+        The JSON summary (empty on failure, and when skipped).
     warnings : tuple of str
         Findings worth telling the user (mask mismatch, dropped periods, ...).
+    skipped : bool
+        True when the manifest says the outputs are current (nothing was done).
+    n_samples : int
+        Samples demodulated.
+    n_bytes : int
+        Size of the run file [bytes].
+    peak_rss : float
+        Peak resident memory of the process that demodulated the run [MB] (0 where
+        unknown).
+    signature : dict or None
+        Size and mtime of the run file before it was read (see
+        :meth:`accal.batch.Manifest.record`).
+    n_rows : int
+        Rows of the run in the periods table.
+    result : DemodResult or None
+        What the worker computed and this process writes
+        (:func:`accal.demodjob.batch.write_run`); None once written.
     """
 
     summary: dict[str, Any] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
+    skipped: bool = False
+    n_samples: int = 0
+    n_bytes: int = 0
+    peak_rss: float = 0.0
+    signature: dict[str, Any] | None = None
+    n_rows: int = 0
+    result: DemodResult | None = None
 
 
 @dataclass(frozen=True)
-class DemodRunSummary:
-    """Result of :func:`run_demod` over a batch."""
+class DemodResult:
+    """A demodulated run not yet written: its periods rows and what goes with them.
 
-    outcomes: list[RunOutcome]
-    seconds: float
+    Attributes
+    ----------
+    rows : dict
+        Columns of the run's rows of the periods table.
+    units : dict
+        Units of those columns.
+    source_meta : dict
+        The run's entry of the table metadata (``accal.meta["sources"]``), without
+        the name of its summary (known where it is written).
+    closure : dict or None
+        The run's entry of ``closure.json`` (``--close-loop``), else None.
+    """
 
-    @property
-    def n_ok(self) -> int:
-        """Inputs processed."""
-        return sum(o.ok for o in self.outcomes)
+    rows: dict[str, Any]
+    units: dict[str, str]
+    source_meta: dict[str, Any]
+    closure: dict[str, Any] | None = None
 
-    @property
-    def n_failed(self) -> int:
-        """Inputs that failed."""
-        return sum(not o.ok for o in self.outcomes)
+
+@dataclass(frozen=True)
+class DemodRunSummary(RunSummary):
+    """Result of :func:`accal.demodjob.batch.run_demod` over a batch.
+
+    :class:`accal.gracejob.outcome.RunSummary` (the same counts and end-of-run
+    line) of :class:`RunOutcome`; ``table_path`` is the periods table.
+    """
+
+    def line(self, command: str = "accal demod") -> str:
+        """The one-line end-of-run summary (as ``grace-bias``'s)."""
+        return super().line(command)
 
 
 @dataclass
