@@ -12,7 +12,7 @@ from there):
 - :mod:`~accal.demodjob.outputs`: file names and checks of the output directory;
 - :mod:`~accal.demodjob.closure`: closing the loop (``--close-loop``);
 - :mod:`~accal.demodjob.closure_outputs`: the closure's rows and ``closure.json``/``.md``;
-- :mod:`~accal.demodjob.batch`: one run file and the batch loop (:func:`run_demod`);
+- :mod:`~accal.demodjob.batch`: one run file and the batch on the shared runner (:func:`run_demod`);
 - :mod:`~accal.demodjob.diagnose`: ``accal diagnose`` on a demod output directory;
 - :mod:`~accal.demodjob.planning`: ``accal design`` and ``accal budget``;
 - :mod:`~accal.demodjob.simulate`: ``accal simulate gap``.
