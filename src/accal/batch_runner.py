@@ -209,7 +209,8 @@ def run_batch(
 
     Returns
     -------
-    The job's summary (:meth:`BatchJob.summarise`).
+    summary : object
+        The job's summary (:meth:`BatchJob.summarise`).
 
     Raises
     ------
