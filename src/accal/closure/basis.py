@@ -44,6 +44,12 @@ __all__ = ["Basis", "BlockBase", "FitResult"]
 
 _RANK_TOL = 1e-9
 
+#: Attributes of :class:`Basis` set by its ``_build_blocks``.
+_BLOCK_ATTRS = frozenset(
+    ("seg_start", "seg_stop", "seg_block", "sample_seg", "q", "rinv", "ident", "rank")
+    + ("_q_lev", "_pad", "_qp", "_qpt", "_tiled")
+)
+
 
 @dataclass(frozen=True)
 class BlockBase:
@@ -341,12 +347,25 @@ class Basis:
         self.n = n
         self.p = p
         self.n_blocks = int(self.block.max()) + 1 if n_blocks is None else int(n_blocks)
-        self._build_blocks()
+        # the per-block SVDs are made when a block attribute is first needed
+        # (:meth:`__getattr__`): some bases of a run are built for a check that the
+        # run may not reach (e.g. the bias-only and the extended-signal bases)
+        self._blocks_pending = True
         self.extra = np.zeros((n, 0)) if extra is None else np.asarray(extra, dtype=np.float64)
         self._build_extra()
 
+    def __getattr__(self, name: str) -> Any:
+        # only called when ``name`` is not set: the block attributes before the blocks
+        # are built
+        if name in _BLOCK_ATTRS and self.__dict__.get("_blocks_pending"):
+            self._build_blocks()
+            if name in self.__dict__:
+                return self.__dict__[name]
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
     # ----------------------------------------------------------------- construction
     def _build_blocks(self) -> None:
+        self._blocks_pending = False
         n, p = self.n, self.p
         starts = (
             np.flatnonzero(np.r_[True, self.block[1:] != self.block[:-1]])
@@ -365,10 +384,17 @@ class Basis:
         rank = np.zeros(ns, dtype=np.int64)
         lengths = stops - starts
         active = self.seg_block >= 0
+        # every segment active and of one length: the samples tile them, and the
+        # per-segment views are reshapes (no gather, no scatter)
+        tiled = bool(ns > 0 and active.all() and np.all(lengths == lengths[0]))
         for length in np.unique(lengths[active]):
             segs = np.flatnonzero(active & (lengths == length))
-            rows = self.seg_start[segs][:, None] + np.arange(length)[None, :]
-            x = self.columns[rows]  # (g, L, p)
+            if tiled:
+                rows = None
+                x = self.columns.reshape(ns, int(length), p)
+            else:
+                rows = self.seg_start[segs][:, None] + np.arange(length)[None, :]
+                x = self.columns[rows]  # (g, L, p)
             nrm = np.sqrt(np.sum(x**2, axis=1))  # (g, p)
             d = np.where(nrm > 0, nrm, 1.0)
             u, s, vt = np.linalg.svd(x / d[:, None, :], full_matrices=False)
@@ -380,12 +406,18 @@ class Basis:
             sinv = np.where(keep, 1.0 / np.where(keep, s, 1.0), 0.0)
             # beta = D^-1 V S^-1 U' y   -> rinv (p, r): columns follow U's columns
             ri = (np.transpose(vt, (0, 2, 1)) * sinv[:, None, :]) / d[:, :, None]
-            q[rows.ravel(), :r] = uk.reshape(-1, uk.shape[2])
+            if rows is None:
+                q.reshape(ns, int(length), p)[:, :, :r] = uk
+            else:
+                q[rows.ravel(), :r] = uk.reshape(-1, uk.shape[2])
             rinv[segs, :, :r] = ri
             vk = vt * keep[:, :, None]
             ident[segs] = (np.sum(vk**2, axis=1) > 1 - 1e-6) & (nrm > 0)
             rank[segs] = rk
         self.q = q
+        # the block columns' leverage on a grid (:meth:`_q_leverage`); shared by the
+        # bases :meth:`extend` makes, which keep these blocks
+        self._q_lev: dict[str, Any] = {}
         self.rinv = rinv
         self.ident = ident
         self.rank = rank
@@ -395,8 +427,11 @@ class Basis:
         if ns > 1 and ns * lmax <= 1.5 * n:
             pos = np.arange(n) - self.seg_start[self.sample_seg]
             self._pad = (pos, lmax)
-            qp = np.zeros((ns, lmax, p))
-            qp[self.sample_seg, pos] = q
+            if ns * lmax == n:  # tiled: a view of q
+                qp = q.reshape(ns, lmax, p)
+            else:
+                qp = np.zeros((ns, lmax, p))
+                qp[self.sample_seg, pos] = q
             self._qp = qp
             self._qpt = np.ascontiguousarray(np.transpose(qp, (0, 2, 1)))
             # segments of one length tiling the samples (every platform period fully
@@ -438,6 +473,8 @@ class Basis:
         z = np.asarray(z, dtype=np.float64)
         if z.ndim == 1:
             z = z[:, None]
+        if self._blocks_pending:  # built once, shared by both
+            self._build_blocks()
         new = Basis.__new__(Basis)
         new.__dict__.update(self.__dict__)
         new.extra = np.column_stack([self.extra, z])
@@ -503,9 +540,9 @@ class Basis:
         z2 = z[:, None] if one else z
         out = self.block_expand(self.block_coef(z2))
         if self.qe.shape[1]:
-            out = out + self.qe @ (self.qe.T @ z2)
+            out += self.qe @ (self.qe.T @ z2)
         if self.nuisance is not None:
-            out = out + self.nuisance.project(z2)
+            out += self.nuisance.project(z2)
         return out[:, 0] if one else out
 
     def captured(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -528,10 +565,12 @@ class Basis:
         z = np.asarray(z, dtype=np.float64)
         if z.ndim == 1:
             z = z[:, None]
-        norms0 = np.linalg.norm(z, axis=0)
+        # the column norms as np.linalg.norm computes them (same sums), without its copy
+        norms0 = np.sqrt(np.add.reduce(z * z, axis=0))
         if z.shape[1] == 0 or not np.any(norms0 > 0):
             return np.zeros((z.shape[0], 0))
-        zt = z - self.project(z)
+        zt = self.project(z)
+        np.subtract(z, zt, out=zt)  # z − P z, in the projection's array
         scale = max(float(norms0.max()), 1e-300)
         if z.shape[1] <= 8:
             qz, rz = np.linalg.qr(zt)  # tall-skinny: QR, then the SVD of the small R
@@ -602,7 +641,30 @@ class Basis:
             rows = np.concatenate([np.arange(self.seg_start[s], self.seg_stop[s]) for s in segs])
             arr = np.zeros((segs.size, grid.n_chan, vals.shape[1], int(m_len)))
             arr[gi, chan[rows], :, gpos[rows] - gpos[self.seg_start[segs]][gi]] = vals[rows]
-            yield segs, int(m_len), np.fft.rfft(arr, axis=-1)
+            f = np.fft.rfft(arr, axis=-1)
+            del arr  # not kept while the caller works on f
+            yield segs, int(m_len), f
+
+    def _q_leverage(self, grid: Grid) -> NDArray[np.float64]:
+        """The block columns' part of :meth:`leverage` (C, nf), computed once per grid.
+
+        One run asks for it several times with the same blocks and grid (the null
+        model, every extended model): it is computed on the first call and kept (the
+        bases :meth:`extend` makes share it, as they share the blocks).
+        """
+        cache = self._q_lev
+        if cache.get("grid") is not grid:
+            nn = grid.size
+            circ = np.zeros((grid.n_chan, nn))
+            for _, m_len, f in self._local_groups(grid, self.q):
+                acf = np.fft.irfft(np.sum(np.abs(f) ** 2, axis=(0, 2)), m_len, axis=-1)  # (C, M)
+                half = m_len // 2
+                lags = np.r_[np.arange(half), np.arange(half - m_len, 0)]
+                keep = np.abs(lags) < nn
+                np.add.at(circ, (slice(None), lags[keep] % nn), acf[:, keep])
+            cache.clear()
+            cache.update(grid=grid, lev=np.fft.rfft(circ, axis=-1).real)
+        return cache["lev"]
 
     def leverage(self, grid: Grid) -> NDArray[np.float64]:
         """``Σ_j |Q_j(f)|²`` per channel on the grid's frequencies: shape (C, nf).
@@ -610,17 +672,10 @@ class Basis:
         The share of white-noise power the fit removes at ``f`` is this over the
         channel's sample count.  Block columns: their summed linear autocorrelation
         (local FFTs), folded onto the record's circle of length ``N`` and transformed
-        (identical to ``|rfft(Q_j)|²`` summed, without N-point FFTs per column).
+        (identical to ``|rfft(Q_j)|²`` summed, without N-point FFTs per column;
+        computed once per grid, :meth:`_q_leverage`).
         """
-        nn = grid.size
-        circ = np.zeros((grid.n_chan, nn))
-        for _, m_len, f in self._local_groups(grid, self.q):
-            acf = np.fft.irfft(np.sum(np.abs(f) ** 2, axis=(0, 2)), m_len, axis=-1)  # (C, M)
-            half = m_len // 2
-            lags = np.r_[np.arange(half), np.arange(half - m_len, 0)]
-            keep = np.abs(lags) < nn
-            np.add.at(circ, (slice(None), lags[keep] % nn), acf[:, keep])
-        lev = np.fft.rfft(circ, axis=-1).real
+        lev = self._q_leverage(grid).copy()
         if self.qe.shape[1]:
             lev = lev + np.sum(np.abs(grid.fft(self.qe)) ** 2, axis=0)
         if self.nuisance is not None:
