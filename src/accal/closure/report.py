@@ -222,6 +222,9 @@ def to_markdown(
             elif e.name == "auxiliary":  # the coupling's lag and low-pass, with their σ
                 if e.details.get("lag_sigma"):
                     where += f" ± {_fmt(e.details['lag_sigma'])}"
+                if e.details.get("lag_ambiguous"):  # other lags fit as well
+                    lo, hi = e.details["lag_interval"]
+                    where += f" (lag not identified within {_fmt(lo)}-{_fmt(hi)} s)"
                 if e.tau:
                     where += f", τ {e.tau:.4g}"
                     if e.details.get("tau_sigma"):

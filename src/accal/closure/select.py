@@ -44,6 +44,7 @@ from accal.closure.inputs import (
     usable_proxies,
 )
 from accal.closure.kinds import EFFECT_NAMES, kind_of, unit_of
+from accal.closure.lagprofile import add_lag_uncertainties
 from accal.closure.nuisance import (
     OrbitTemplate,
     estimate_period,
@@ -595,6 +596,7 @@ def _finish(search: Search, setup: _Setup, st, knots, noise_psd, floored, consid
         # first sample: their amplitudes are referred to the record's (QA: 4.9e-10 m/s²
         # reported for a 3e-9 decay 5400 s earlier)
         effects = refer_exponentials(effects, setup.t_first)
+    add_lag_uncertainties(search, final, effects)
     unexplained = []
     if not floored:
         w, zt = unexplained_test(

@@ -1,0 +1,313 @@
+"""Uncertainty of a coupling's lag: the profile of the explained power over the lag.
+
+A coupling ``c·(h_τ * x)(t − L)`` is linear in ``c``, not in the lag ``L``.  A pure lag
+(``τ = 0``) has no usable Jacobian (the derivative of a kicked channel is spikes), and a
+low-passed one's linearised σ is too small on the lag/low-pass ridge of a smooth channel
+(closure-detection: lag z up to ~5).  So the lag's uncertainty comes from the profile
+of the fit over the lag instead (the likelihood-ratio interval of a nonlinear parameter:
+Wilks 1938, *Ann. Math. Stat.* 9, 60; Venzon & Moolgavkar 1988, *Appl. Stat.* 37, 87;
+Seber & Wild 1989, *Nonlinear Regression*, sec. 5.9.1).
+
+With the rest of the final model held, the coefficient's Wald statistic at lag ``L`` is
+``W(L) = (zᵀr)² / zᵀVz`` (``z`` the regressor with the model projected out, ``r`` the
+residual, ``V`` the noise covariance).  A shift of a stationary channel leaves ``zᵀVz``
+nearly unchanged, so ``W(L) ≈ W(L̂)·P(L)/P(L̂)`` with ``P`` the explained power
+``(zᵀr)²/zᵀz``, and the 68 % profile interval ``{L : W(L̂) − W(L) ≤ 1}`` is
+
+.. math:: P(L) \\ge P(\\hat L)\\,\\bigl(1 - 1/W(\\hat L)\\bigr).
+
+:func:`lag_uncertainty` finds that set: the interval around ``L̂`` (its two crossings,
+by bisection at a tenth of a sample step) and, over the whole searched range, other
+lags that fit as well.  A channel that repeats (a platform temperature kicked at every
+rotation, a heater cycle) can fit almost alike at lags a cycle apart: those within
+``ΔW ≤ 4`` are listed as ``lag_alternatives`` and, within ``ΔW ≤ 1``, widen the
+reported interval to the hull of all of them (the lag is then not identified better
+than that, and ``lag_ambiguous`` says so).  With a per-period base (demodulation) the
+lags a whole period apart that explain at least :data:`ALIAS_SHARE` of the power are
+aliases (:func:`_is_alias`) and widen the interval too: the lag is known modulo the
+period only.
+
+A second σ, the least-squares sandwich of the lag under the residual's coloured noise
+(:func:`lag_sandwich_sigma`), is computed beside the profile's; ``lag_sigma`` is the
+larger (below a sample step the profile is widened by the channel's linear
+interpolation between samples, which no σ from a smooth model sees).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import minimize_scalar
+
+from accal.closure.candidates import Context
+from accal.closure.couplings import ANGULAR_MAX_LAG, SQUARED, _column, _power_at, max_lag
+from accal.closure.kinds import unit_class
+from accal.closure.results import Effect
+from accal.closure.wald import sandwich_cov
+
+if TYPE_CHECKING:  # annotations only: the search imports the candidates
+    from accal.closure.search import Found, Search
+
+__all__ = ["ALT_DELTA_W", "add_lag_uncertainties", "lag_sandwich_sigma", "lag_uncertainty"]
+
+#: ``ΔW`` up to which another lag is listed as an alternative (2σ).
+ALT_DELTA_W = 4.0
+#: Lags on the profile over the whole searched range (local maxima refined).
+PROFILE_POINTS = 121
+#: Local maxima of that profile refined and checked at most.
+MAX_ALTERNATIVES = 6
+#: Share of the explained power at which a lag a whole period away is an alias
+#: (the coupling search's rule, :func:`accal.closure.couplings._shortest_lag`).
+ALIAS_SHARE = 0.98
+
+
+def _crossing(f, inside: float, outside: float, tol: float) -> float:
+    """The point between ``inside`` (``f ≥ 0``) and ``outside`` (``f < 0``) where ``f``
+    changes sign, by bisection to ``tol``."""
+    while abs(outside - inside) > tol:
+        mid = 0.5 * (inside + outside)
+        if f(mid) >= 0:
+            inside = mid
+        else:
+            outside = mid
+    return 0.5 * (inside + outside)
+
+
+def _side(f, lag: float, bound: float, step: float, tol: float) -> float:
+    """The end of ``{f ≥ 0}`` from ``lag`` towards ``bound``: doubling steps, then bisection."""
+    sign = 1.0 if bound >= lag else -1.0
+    inside, d = lag, step
+    while True:
+        trial = lag + sign * d
+        if sign * (trial - bound) >= 0:
+            return bound if f(bound) >= 0 else _crossing(f, inside, bound, tol)
+        if f(trial) < 0:
+            return _crossing(f, inside, trial, tol)
+        inside, d = trial, 2.0 * d
+
+
+def lag_uncertainty(
+    ctx: Context,
+    name: str,
+    x: NDArray[np.float64],
+    tau: float,
+    lag: float,
+    wald: float,
+    top: float,
+) -> dict[str, Any]:
+    """The lag's 68 % profile interval, its σ and the other lags that fit as well.
+
+    Parameters
+    ----------
+    ctx : Context
+        The final model without this coupling (its residual and basis).
+    name, x : str, ndarray
+        The channel and its values on all samples.
+    tau, lag : float
+        The coupling's low-pass time constant and lag [s] (held τ).
+    wald : float
+        ``W(L̂)``: the coefficient's squared z in the final fit (summed over data
+        channels).
+    top : float
+        Longest lag searched [s].
+
+    Returns
+    -------
+    dict
+        ``lag_sigma`` (half the width of the interval) [s], ``lag_interval`` [s, s],
+        ``lag_alternatives`` (``[{"lag", "delta_w"[, "alias"]}]``, ``ΔW ≤``
+        :data:`ALT_DELTA_W` or an alias), ``lag_ambiguous`` (another lag inside
+        ``ΔW ≤ 1``, or an alias), ``lag_sigma_method``.
+        Empty when the coupling explains nothing at ``lag``.
+    """
+    step = ctx.grid.step
+    tol = 0.1 * step
+    top = max(float(top), float(lag))
+
+    def power(lg: float) -> float:
+        return _power_at(ctx, name, x, tau, float(min(max(lg, 0.0), top)))
+
+    p_hat = power(lag)
+    if not (p_hat > 0 and np.isfinite(wald)):
+        return {}
+    if wald <= 1.0:  # nothing known about the lag
+        return {
+            "lag_sigma": 0.5 * top,
+            "lag_interval": [0.0, top],
+            "lag_alternatives": [],
+            "lag_ambiguous": True,
+            "lag_sigma_method": "profile",
+        }
+
+    def delta_w(p: float) -> float:
+        return wald * (1.0 - p / p_hat)
+
+    def inside(lg: float) -> float:
+        return 1.0 - delta_w(power(lg))  # ≥ 0 inside the 68 % set
+
+    lo = _side(inside, lag, 0.0, step, tol) if lag > 0 else 0.0
+    hi = _side(inside, lag, top, step, tol) if lag < top else top
+    period = float(ctx.options.get("lag_period") or 0.0)
+    alts = _alternatives(power, delta_w, (lag, p_hat, period), lo, hi, top, step)
+    alike = [a["lag"] for a in alts if a["delta_w"] <= 1.0 or a.get("alias")]
+    ambiguous = bool(alike)
+    lo_all, hi_all = min([lo, *alike]), max([hi, *alike])
+    return {
+        "lag_sigma": 0.5 * (hi_all - lo_all),
+        "lag_interval": [lo_all, hi_all],
+        "lag_alternatives": alts,
+        "lag_ambiguous": bool(ambiguous),
+        "lag_sigma_method": "profile",
+    }
+
+
+def _is_alias(d_lag: float, p: float, p_hat: float, period: float) -> bool:
+    """Whether a lag ``d_lag`` away explaining ``p`` is an alias a whole period apart.
+
+    With a per-period base (demodulation, ``options["lag_period"]``) a channel that
+    repeats with the period fits alike at lags a period apart; the coupling search
+    takes the shortest lag explaining at least :data:`ALIAS_SHARE` of the power
+    (:func:`accal.closure.couplings._shortest_lag`), and the same rule makes the
+    others equivalent here: the lag is known modulo the period only.  On the
+    closure-detection platform runs the aliases of a 3e-8 m/s²/K coupling differed
+    by 3e-4 of the explained power, ΔW ≈ 5 at W ≈ 1.5e4, while the coefficient was
+    2-3 % (3σ) low: the model error is larger than that difference.
+    """
+    if period <= 0 or p < ALIAS_SHARE * p_hat:
+        return False
+    k = round(d_lag / period)
+    return k >= 1 and abs(d_lag - k * period) <= 0.25 * period
+
+
+def _alternatives(power, delta_w, at, lo, hi, top, step) -> list[dict[str, Any]]:
+    """Other local maxima of the profile over ``[0, top]`` with ``ΔW ≤ ALT_DELTA_W``,
+    and aliases a period apart (:func:`_is_alias`); ``at`` is (lag, power, period)."""
+    lag, p_hat, period = at
+    if top <= 0:
+        return []
+    grid = np.linspace(0.0, top, PROFILE_POINTS)
+    spacing = float(grid[1] - grid[0])
+    far = (grid < lo - spacing) | (grid > hi + spacing)
+    if not far.any():
+        return []
+    prof = np.array([power(g) if f else -np.inf for g, f in zip(grid, far, strict=True)])
+    left = np.r_[-np.inf, prof[:-1]]
+    right = np.r_[prof[1:], -np.inf]
+    peaks = np.flatnonzero(far & (prof >= left) & (prof >= right) & np.isfinite(prof))
+    # the grid can sit a fraction of a spacing off a narrow peak: refine the highest
+    peaks = peaks[np.argsort(-prof[peaks])][:MAX_ALTERNATIVES]
+    out = []
+    for k in peaks:
+        a, b = max(0.0, grid[k] - spacing), min(top, grid[k] + spacing)
+        res = minimize_scalar(
+            lambda lg: -power(lg),
+            bounds=(a, b),
+            method="bounded",
+            options={"xatol": 0.25 * step, "maxiter": 30},
+        )
+        lg, p = (float(res.x), -float(res.fun)) if -res.fun > prof[k] else (grid[k], prof[k])
+        dw = float(delta_w(p))
+        if lo <= lg <= hi:
+            continue
+        if _is_alias(abs(lg - lag), p, p_hat, period):
+            out.append({"lag": float(lg), "delta_w": max(dw, 0.0), "alias": True})
+        elif dw <= ALT_DELTA_W:
+            out.append({"lag": float(lg), "delta_w": max(dw, 0.0)})
+    return sorted(out, key=lambda a: a["delta_w"])
+
+
+def lag_sandwich_sigma(
+    ctx: Context, name: str, x: NDArray[np.float64], tau: float, lag: float, half: float
+) -> float:
+    """σ of the lag from the least-squares sandwich under the residual's coloured noise.
+
+    The lag maximising the explained power ``P(L)`` is an M-estimator; linearised at
+    ``L̂`` its variance is ``J/H²`` (Huber 1967; White 1982, *Econometrica* 50, 1) with
+    ``H = c²‖ż⊥‖²`` and ``J = c²·ż⊥ᵀVż⊥``: ``σ_L = √(q̂ᵀVq̂) / (|c|·‖ż⊥‖)``, ``ż⊥`` the
+    regressor's derivative in the lag with the model and the regressor itself
+    projected out, ``q̂`` its direction, ``V`` the noise covariance from the residual's
+    PSD (:func:`accal.closure.wald.sandwich_cov`).  The derivative is a secant over
+    ``±half`` (a pure lag of a kicked channel has spikes for a derivative: the secant
+    over the profile's own width is the slope the data resolve).  With several data
+    channels each has its coefficient; their informations add.  NaN when undefined.
+    """
+    use = ctx.use
+    z0 = _column(ctx, name, x, tau, lag)[use]
+    lo, hi = max(lag - half, 0.0), lag + half
+    zd = (_column(ctx, name, x, tau, hi)[use] - _column(ctx, name, x, tau, lo)[use]) / (hi - lo)
+    r = ctx.residual
+    info = 0.0
+    for m in ctx.channel_masks():
+        mz = z0 * m - ctx.basis.project(z0 * m)
+        md = zd * m - ctx.basis.project(zd * m)
+        nz = float(mz @ mz)
+        if not nz > 0:
+            continue
+        c = float(mz @ r) / nz
+        d = md - mz * (float(mz @ md) / nz)
+        nd = float(np.sqrt(d @ d))
+        if not (nd > 0 and c != 0):
+            continue
+        q = d / nd
+        r_full = r - mz * c  # the coupling's own part out of the PSD estimate
+        var_q = float(sandwich_cov(ctx.grid, r_full, q[None, :], ctx.leverage)[0, 0])
+        if var_q > 0:
+            info += (c * nd) ** 2 / var_q
+    return float(1.0 / np.sqrt(info)) if info > 0 else float("nan")
+
+
+def _wald(e: Effect) -> float:
+    """``W`` of an effect's coefficient: its squared z, summed over data channels."""
+    per = e.details.get("axes")
+    if per:
+        return float(
+            sum((v["coefficient"] / v["sigma"]) ** 2 for v in per.values() if v["sigma"] > 0)
+        )
+    return float((e.coefficient / e.sigma) ** 2) if e.sigma > 0 else float("nan")
+
+
+def add_lag_uncertainties(search: Search, final: Sequence[Found], effects: list[Effect]) -> None:
+    """Put each coupling's lag interval in its effect's details (in place).
+
+    ``final`` and ``effects`` are aligned (one effect per entry of the final model).
+    The profile is taken with the rest of the final model held
+    (:meth:`~accal.closure.search.Search.state` of the others, already computed for
+    their p-values).  A low-pass coupling's linearised σ (its Jacobian) is kept as
+    ``lag_sigma_linearised`` and the larger of the two is ``lag_sigma``.  The square
+    of a channel shares its channel's lag and gets none of its own.
+    """
+    for i, (f, e) in enumerate(zip(final, effects, strict=True)):
+        lag = f.prop.params.get("lag")
+        name = str(f.prop.channel)
+        x = search.aux.get(name)
+        if f.prop.name != "auxiliary" or lag is None or name.endswith(SQUARED) or x is None:
+            continue
+        others = [g for j, g in enumerate(final) if j != i]
+        basis, fit, lev = search.state(others)
+        ctx = search.context(others, basis, fit, lev)
+        top = max_lag(search.options, search.span)
+        if unit_class(dict(search.options.get("channel_units", {})).get(name, "")) == "angular":
+            top = min(top, ANGULAR_MAX_LAG)
+        tau = float(f.prop.params.get("tau") or 0.0)
+        info = lag_uncertainty(ctx, name, np.asarray(x, float), tau, float(lag), _wald(e), top)
+        if not info:
+            continue
+        sand = lag_sandwich_sigma(
+            ctx, name, np.asarray(x, float), tau, float(lag), max(info["lag_sigma"], ctx.grid.step)
+        )
+        info["lag_sigma_profile"] = info["lag_sigma"]
+        if np.isfinite(sand):
+            info["lag_sigma_sandwich"] = sand
+            if sand > info["lag_sigma"] and not info["lag_ambiguous"]:
+                info["lag_sigma"] = sand
+                info["lag_sigma_method"] = "sandwich"
+        lin = e.details.get("lag_sigma")
+        if lin:
+            info["lag_sigma_linearised"] = float(lin)
+            if lin > info["lag_sigma"]:
+                info["lag_sigma"] = float(lin)
+                info["lag_sigma_method"] = "linearised"
+        e.details.update(info)
