@@ -128,16 +128,22 @@ def test_time_constant_uncertainty_reaches_the_bias_sigma(sim):
     assert abs(_err(res, d)["bias"]["after"]) < 3 * bias.sigma_after
 
 
-@pytest.mark.parametrize(("amp", "tau"), [(5e-9, 7200.0), (3e-9, 50000.0)])
-def test_exponential_drift_noise_free_is_exact(amp, tau):
-    """Also beyond span/4 (50,000 s over a day: the polynomial swap's range)."""
+@pytest.mark.parametrize(("amp", "tau", "rel"), [(5e-9, 7200.0, 1e-9), (3e-9, 50000.0, 1e-8)])
+def test_exponential_drift_noise_free_is_exact(amp, tau, rel):
+    """Also beyond span/4 (50,000 s over a day: the polynomial swap's range).
+
+    Exact to the conditioning, not to one rounding: a 50,000 s decay over one day is
+    a line plus a little curvature, nearly collinear with the bias and drift of the
+    base, so T and A carry the rounding errors amplified (2.5e-9 and 3.2e-9 relative on
+    the 2026-11-27 machine with numpy 2.4.6/OpenBLAS; within 1e-9 on an earlier one).
+    """
     t = np.arange(0.0, 86400.0, 2.0)
     y = 1e-7 + 1e-12 * t + amp * np.exp(-t / tau)
     res = close_loop(t, y, resolution=np.finfo(float).eps * 1e-7)
     assert _names(res) == ["exponential_drift"] and res.unexplained == ()
     e = res.effects[0]
-    assert e.coefficient == pytest.approx(amp, rel=1e-9)
-    assert e.tau == pytest.approx(tau, rel=1e-9)
+    assert e.coefficient == pytest.approx(amp, rel=rel)
+    assert e.tau == pytest.approx(tau, rel=rel)
     assert res.base_coefficient("bias").after == pytest.approx(1e-7, rel=1e-12)
 
 
