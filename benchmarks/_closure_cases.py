@@ -214,7 +214,19 @@ def effect_record(e: Any, t0: float) -> dict[str, Any]:
         out[k] = None if v is None else float(v)
     if out["epoch"] is not None:
         out["epoch"] -= t0
-    out["reason"] = (get("details") or {}).get("reason")
+    det = get("details") or {}
+    out["reason"] = det.get("reason")
+    for k in (
+        "lag_sigma",
+        "lag_interval",
+        "lag_ambiguous",
+        "lag_sigma_linearised",
+        "lag_sigma_profile",
+        "lag_sigma_sandwich",
+        "lag_alternatives",
+    ):
+        if det.get(k) is not None:
+            out[k] = det[k]
     return out
 
 
@@ -253,6 +265,9 @@ def score(rec: dict[str, Any], kind: str, p: dict[str, Any], span: float) -> Non
     rec["z"] = None
     if hit is not None and kind in TRUE_PARAMETER and hit["sigma"]:
         rec["z"] = (hit["coefficient"] - p[TRUE_PARAMETER[kind]]) / hit["sigma"]
+    rec["lag_z"] = None  # a coupling's lag against its σ (accal.closure.lagprofile)
+    if hit is not None and p.get("lag") is not None and hit.get("lag_sigma"):
+        rec["lag_z"] = (hit["lag"] - p["lag"]) / hit["lag_sigma"]
     rec["wrong_removed"] = [
         e["name"] for e in rec["effects"] if e["instrument"] and (hit is None or e is not hit)
     ]
