@@ -109,3 +109,28 @@ def test_blocks_are_built_on_first_use_and_equal_an_eager_build():
     with pytest.raises(AttributeError, match="no attribute 'nothing'"):
         _ = Basis(block, cols).nothing
     assert Basis(block, cols).rank_total == eager.rank_total
+
+
+def test_block_cov_from_kept_spectra_equals_a_fresh_computation():
+    block, cols, t, chan, rng = _tiled(7)
+    grid = make_grid(t, chan)
+    b = Basis(block, cols)
+    b.leverage(grid)  # keeps the local spectra of Q
+    psd = 1.0 + rng.random(grid.size // 2 + 1)
+    kept = b.block_cov(grid, psd)
+    fresh = b.block_cov(grid, psd, vals=b.q.copy())  # the same weights, computed afresh
+    np.testing.assert_array_equal(kept, fresh)
+    other = b.extend(rng.standard_normal((block.size, 1)))
+    np.testing.assert_array_equal(
+        other.block_cov(grid, 2 * psd), b.block_cov(grid, 2 * psd, vals=b.q)
+    )
+
+
+def test_step_norms_equal_the_dense_projection_of_each_step():
+    block, cols, _, _, rng = _tiled(8, n_blocks=4, length=10)
+    b = Basis(block, cols).extend(rng.standard_normal((block.size, 1)))
+    mask = (rng.random(block.size) > 0.3).astype(float)
+    q = b.dense_q()
+    n = block.size
+    steps = (np.arange(n)[:, None] >= np.arange(n)[None, :]) * mask[:, None]  # column i: v_i
+    np.testing.assert_allclose(b.step_norms(mask), np.sum((q.T @ steps) ** 2, axis=0), rtol=1e-10)

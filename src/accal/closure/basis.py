@@ -415,7 +415,7 @@ class Basis:
             ident[segs] = (np.sum(vk**2, axis=1) > 1 - 1e-6) & (nrm > 0)
             rank[segs] = rk
         self.q = q
-        # the block columns' leverage on a grid (:meth:`_q_leverage`); shared by the
+        # the block columns' spectra on a grid (:meth:`_q_spectra`); shared by the
         # bases :meth:`extend` makes, which keep these blocks
         self._q_lev: dict[str, Any] = {}
         self.rinv = rinv
@@ -602,14 +602,14 @@ class Basis:
         m = np.ones(self.n) if mask is None else np.asarray(mask, dtype=np.float64)
         qm = self.q * m[:, None]
         rc = np.zeros((self.n + 1, self.p))
-        rc[:-1] = np.cumsum(qm[::-1], axis=0)[::-1]
+        np.cumsum(qm[::-1], axis=0, out=rc[-2::-1])  # rc[k] = Σ_{j ≥ k} qm[j]
         ssum = rc[self.seg_start] - rc[self.seg_stop]  # (n_seg, p)
         tot = np.sum(ssum**2, axis=1)
         tail = np.zeros(tot.size + 1)
         tail[:-1] = np.cumsum(tot[::-1])[::-1]
         seg = self.sample_seg
         partial = rc[:-1] - rc[self.seg_stop[seg]]
-        out = np.sum(partial**2, axis=1) + tail[seg + 1]
+        out = np.sum(np.square(partial, out=partial), axis=1) + tail[seg + 1]
         if self.qe.shape[1]:
             em = self.qe * m[:, None]
             s_e = np.cumsum(em[::-1], axis=0)[::-1]
@@ -645,26 +645,30 @@ class Basis:
             del arr  # not kept while the caller works on f
             yield segs, int(m_len), f
 
-    def _q_leverage(self, grid: Grid) -> NDArray[np.float64]:
-        """The block columns' part of :meth:`leverage` (C, nf), computed once per grid.
+    def _q_spectra(self, grid: Grid) -> dict[str, Any]:
+        """The block columns' local spectra and their part of :meth:`leverage`, once per grid.
 
-        One run asks for it several times with the same blocks and grid (the null
-        model, every extended model): it is computed on the first call and kept (the
-        bases :meth:`extend` makes share it, as they share the blocks).
+        One run asks for them several times with the same blocks and grid (the null
+        model's leverage, every extended model's leverage, both covariances of the
+        final fit): they are computed on the first call and kept (the bases
+        :meth:`extend` makes share them, as they share the blocks).  Returns
+        ``{"grid", "lev": (C, nf), "groups": [(segments, M, F)]}`` as
+        :meth:`_local_groups` yields them for ``Q``.
         """
         cache = self._q_lev
         if cache.get("grid") is not grid:
             nn = grid.size
             circ = np.zeros((grid.n_chan, nn))
-            for _, m_len, f in self._local_groups(grid, self.q):
+            groups = list(self._local_groups(grid, self.q))
+            for _, m_len, f in groups:
                 acf = np.fft.irfft(np.sum(np.abs(f) ** 2, axis=(0, 2)), m_len, axis=-1)  # (C, M)
                 half = m_len // 2
                 lags = np.r_[np.arange(half), np.arange(half - m_len, 0)]
                 keep = np.abs(lags) < nn
                 np.add.at(circ, (slice(None), lags[keep] % nn), acf[:, keep])
             cache.clear()
-            cache.update(grid=grid, lev=np.fft.rfft(circ, axis=-1).real)
-        return cache["lev"]
+            cache.update(grid=grid, lev=np.fft.rfft(circ, axis=-1).real, groups=groups)
+        return cache
 
     def leverage(self, grid: Grid) -> NDArray[np.float64]:
         """``Σ_j |Q_j(f)|²`` per channel on the grid's frequencies: shape (C, nf).
@@ -673,9 +677,9 @@ class Basis:
         channel's sample count.  Block columns: their summed linear autocorrelation
         (local FFTs), folded onto the record's circle of length ``N`` and transformed
         (identical to ``|rfft(Q_j)|²`` summed, without N-point FFTs per column;
-        computed once per grid, :meth:`_q_leverage`).
+        computed once per grid, :meth:`_q_spectra`).
         """
-        lev = self._q_leverage(grid).copy()
+        lev = self._q_spectra(grid)["lev"].copy()
         if self.qe.shape[1]:
             lev = lev + np.sum(np.abs(grid.fft(self.qe)) ** 2, axis=0)
         if self.nuisance is not None:
@@ -688,14 +692,16 @@ class Basis:
         """``V_bᵀ C V_b`` for every block: shape (n_seg, m, m).
 
         ``vals`` (n, m) are per-sample block-local weights (default the orthonormal
-        columns ``Q_b``); ``C`` is the circulant noise covariance of the
-        one-sided PSD level ``psd`` (nf,) on the grid (channels independent).
+        columns ``Q_b``, whose local spectra :meth:`_q_spectra` keeps); ``C`` is the
+        circulant noise covariance of the one-sided PSD level ``psd`` (nf,) on the
+        grid (channels independent).
         """
         v = self.q if vals is None else vals
         nn = grid.size
         acov = np.fft.irfft(psd, nn)  # circulant autocovariance on the grid
         out = np.zeros((self.seg_start.size, v.shape[1], v.shape[1]))
-        for segs, m_len, f in self._local_groups(grid, v):
+        groups = self._q_spectra(grid)["groups"] if vals is None else self._local_groups(grid, v)
+        for segs, m_len, f in groups:
             half = m_len // 2
             lags = np.abs(np.r_[np.arange(half), np.arange(half - m_len, 0)])
             kern = np.where(lags < nn, acov[np.minimum(lags, nn - 1)], 0.0)

@@ -186,22 +186,42 @@ def _as_two_axes(m) -> tuple[_F64, _F64]:
 
 
 def _rest_runs(theta: _F64, rest: NDArray[np.bool_], fs: float):
-    """Time since rest began, direction of the last rotation, rest angle (time samples)."""
+    """Time since rest began, direction of the last rotation, rest angle (time samples).
+
+    Per rest run: its angle is the median of θ over the run rounded to 1e-3 rad, the
+    time since rest ``k / fs`` at its ``k``-th sample (unknown, NaN, for a run at the
+    record's start), the direction the sign of the change from the previous run's
+    angle (0 for the first run and where the angle is unchanged).  All runs at once:
+    the medians from one sort of θ by run (the middle value, or the mean of the two
+    middle values, as :func:`numpy.median` takes them; NaN for a run holding a NaN).
+    """
     n = theta.size
     since = np.full(n, np.nan)
     direction = np.zeros(n)
     angle = np.full(n, np.nan)
     starts = np.flatnonzero(rest & ~np.r_[False, rest[:-1]])
     stops = np.flatnonzero(rest & ~np.r_[rest[1:], False]) + 1
-    prev = None
-    for a, b in zip(starts, stops, strict=True):
-        ang = float(np.round(np.median(theta[a:b]), 3))
-        angle[a:b] = ang
-        if a > 0:  # the first run's history is unknown
-            since[a:b] = np.arange(b - a) / fs
-        if prev is not None and ang != prev:
-            direction[a:b] = np.sign(ang - prev)
-        prev = ang
+    if starts.size == 0:
+        return since, direction, angle
+    lens = stops - starts
+    run = np.repeat(np.arange(starts.size), lens)
+    vals = theta[rest]  # the runs' samples, run after run
+    srt = vals[np.lexsort((vals, run))]  # sorted within each run (NaN last)
+    first = np.r_[0, np.cumsum(lens)[:-1]]
+    hi = srt[first + lens // 2]
+    lo = srt[first + (lens - 1) // 2]
+    med = np.where(lens % 2 == 1, hi, (lo + hi) / 2.0)
+    med[np.add.reduceat(np.isnan(vals), first) > 0] = np.nan
+    ang = np.round(med, 3)
+    angle[rest] = ang[run]
+    pos = (np.arange(run.size) - first[run]) / fs
+    if starts[0] == 0:  # the first run's history is unknown
+        pos[: lens[0]] = np.nan
+    since[rest] = pos
+    dirs = np.zeros(starts.size)
+    chg = ang[1:] != ang[:-1]
+    dirs[1:][chg] = np.sign(ang[1:] - ang[:-1])[chg]
+    direction[rest] = dirs[run]
     return since, direction, angle
 
 

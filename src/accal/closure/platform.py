@@ -193,11 +193,15 @@ def intra_period_shape(ctx: Context) -> list[Proposal]:
     phi = info.since_rest
     rest = np.isfinite(phi)
     shapes, keys = [], []
+    ph0 = np.where(rest, phi, 0.0)
+    decay: dict[float, NDArray[np.float64]] = {}  # exp(−φ/τ_s), shared by both kinds
     for kind, sign in (("common", np.ones_like(phi)), ("direction", info.direction)):
         if ctx.has_label(f"shape:{kind}"):
             continue
         for ts in taus:
-            shapes.append(np.where(rest, np.exp(-np.where(rest, phi, 0.0) / ts), 0.0) * sign)
+            if ts not in decay:
+                decay[ts] = np.where(rest, np.exp(-ph0 / ts), 0.0)
+            shapes.append(decay[ts] * sign)
             keys.append((kind, ts))
     if not shapes:
         return []
