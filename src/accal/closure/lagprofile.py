@@ -154,7 +154,9 @@ def lag_uncertainty(
     alts = _alternatives(power, delta_w, (lag, p_hat, period), lo, hi, top, step)
     alike = [a["lag"] for a in alts if a["delta_w"] <= 1.0 or a.get("alias")]
     ambiguous = bool(alike)
-    lo_all, hi_all = min([lo, *alike]), max([hi, *alike])
+    half = 0.5 * (hi - lo)  # each other lag is as uncertain as the chosen one
+    lo_all = max(min([lo] + [v - half for v in alike]), 0.0)
+    hi_all = min(max([hi] + [v + half for v in alike]), top)
     return {
         "lag_sigma": 0.5 * (hi_all - lo_all),
         "lag_interval": [lo_all, hi_all],
