@@ -8,6 +8,7 @@ and the lock must be byte-identical however the runs are spread over processes.
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -180,3 +181,88 @@ def test_dask_scheduler_writes_what_one_worker_writes(runs, tmp_path):
     assert "3 ok, 0 skipped (current), 0 failed" in err
     assert outputs(a) == outputs(b)
     assert "inputs run on dask scheduler " in (b / "accal.log").read_text()
+
+
+def _terminal_signals() -> None:
+    """In the child before exec: SIGINT and SIGTERM as a terminal gives them (a mask
+    and an ignored disposition are inherited across exec; see tests/test_batch.py)."""
+    import signal
+
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT, signal.SIGTERM})
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+def _pool_processes(pid: int) -> tuple[bool, list[float]]:
+    """Whether ``pid`` has started a fork server, and the CPU time [s] of each worker
+    that server forked (from ``/proc``; the workers start with their modules loaded,
+    so their CPU time is the work done)."""
+    import os
+
+    procs: dict[int, tuple[int, float]] = {}
+    for d in Path("/proc").iterdir():
+        try:
+            stat = (d / "stat").read_text() if d.name.isdigit() else ""
+        except OSError:
+            continue
+        if stat:
+            fields = stat[stat.rindex(")") + 2 :].split()
+            ticks = int(fields[11]) + int(fields[12])  # utime + stime
+            procs[int(d.name)] = (int(fields[1]), ticks / os.sysconf("SC_CLK_TCK"))
+    servers = []
+    for c, (parent, _) in procs.items():
+        try:
+            cmdline = Path(f"/proc/{c}/cmdline").read_bytes()
+        except OSError:
+            continue
+        if parent == pid and b"forkserver" in cmdline:
+            servers.append(c)
+    workers = [cpu for c, (parent, cpu) in procs.items() if parent in servers]
+    return bool(servers), workers
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="POSIX signals, /proc")
+@pytest.mark.parametrize("when", ["workers starting", "workers running"])
+def test_ctrl_c_on_two_workers_prints_one_line(tmp_path, when):
+    """Issue 21: SIGINT to a ``-j 2`` batch whose workers come from a fork server
+    printed, after ``accal: interrupted``, the resource tracker's "There appear to
+    be 5 leaked semaphore objects" (the pool's queues were still held when the run
+    left by ``os._exit``) or, while the workers started, a worker's
+    ``FileNotFoundError`` traceback (a worker the pool did not know yet read its
+    set-up after the pool was freed).  Only the one line now, status 130."""
+    import os
+    import signal
+    import subprocess
+    import time
+
+    from tests.indep import platform_run, write_platform_run
+
+    src = [
+        write_platform_run(platform_run(seed, days=2.0), tmp_path / f"run{seed}.parquet")
+        for seed in (1, 2)
+    ]
+    out = tmp_path / "o"
+    cmd = [sys.executable, "-m", "accal", "demod", *map(str, src), "--tau", "600", "--mask",
+           "200", "--close-loop", "--out", str(out), "-q", "-j", "2"]  # fmt: skip
+    proc = subprocess.Popen(
+        cmd,
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "ACCAL_START_METHOD": "forkserver"},
+        start_new_session=True,
+        preexec_fn=_terminal_signals,
+    )
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and proc.poll() is None:
+        server, workers = _pool_processes(proc.pid)
+        if when == "workers starting" and server and not workers:
+            break  # the fork server is importing its preload: no worker yet
+        if when == "workers running" and len(workers) == 2 and min(workers) > 1.0:
+            break  # both workers are demodulating
+        time.sleep(0.01)
+    assert proc.poll() is None, "the batch finished before it could be interrupted"
+    os.kill(proc.pid, signal.SIGINT)
+    _, err = proc.communicate(timeout=60)  # to its end: the workers and tracker share stderr
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines()[-1] == "accal: interrupted", err
+    assert "leaked" not in err and "Traceback" not in err, err

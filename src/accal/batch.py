@@ -63,6 +63,7 @@ from accal.batch_workers import (
     PRELOAD,
     default_workers,
     forced_start_method,
+    interrupts_held,
     other_threads,
     start_method,
     worker_init,
@@ -215,21 +216,23 @@ def _pool_round(
     with ProcessPoolExecutor(
         max_workers=min(n_workers, len(todo)), mp_context=ctx, initializer=worker_init
     ) as pool:
-        with warnings.catch_warnings():
-            # Python >= 3.12 warns on any fork with another thread; start_method chose
-            # fork knowing the only one (FORK_SAFE_THREADS)
-            warnings.filterwarnings(
-                "ignore", "This process .* is multi-threaded", DeprecationWarning
-            )
-            futures = {pool.submit(task, paths[i]): i for i in todo}
-        procs = list((getattr(pool, "_processes", None) or {}).values())
-        # The pool hands inputs out in order: while the workers compute, the inputs
-        # the next free workers will take are read ahead into the page cache (one
-        # per worker, topped up as each input completes).
-        ahead = iter([paths[i] for i in todo[n_workers:]])
-        for _ in range(n_workers):
-            prefetch(next(ahead, None))
         try:
+            # the workers start as the inputs are submitted: a Ctrl-C then takes effect
+            # once they are all known, so that stop_pool stops every one
+            with interrupts_held(), warnings.catch_warnings():
+                # Python >= 3.12 warns on any fork with another thread; start_method chose
+                # fork knowing the only one (FORK_SAFE_THREADS)
+                warnings.filterwarnings(
+                    "ignore", "This process .* is multi-threaded", DeprecationWarning
+                )
+                futures = {pool.submit(task, paths[i]): i for i in todo}
+            procs = list((getattr(pool, "_processes", None) or {}).values())
+            # The pool hands inputs out in order: while the workers compute, the inputs
+            # the next free workers will take are read ahead into the page cache (one
+            # per worker, topped up as each input completes).
+            ahead = iter([paths[i] for i in todo[n_workers:]])
+            for _ in range(n_workers):
+                prefetch(next(ahead, None))
             for fut in as_completed(futures):
                 prefetch(next(ahead, None))
                 i = futures[fut]
@@ -246,17 +249,37 @@ def _pool_round(
                 except Exception as exc:  # pickling errors, bugs
                     yield i, on_error(paths[i], exc)
         except (KeyboardInterrupt, GeneratorExit):
-            # Ctrl-C (or the caller stopped): drop the queued inputs and stop the
-            # workers now; otherwise the pool's exit waits for every queued input
-            procs = list((getattr(pool, "_processes", None) or {}).values())
-            pool.shutdown(wait=False, cancel_futures=True)
-            for proc in procs:
-                proc.terminate()
-            for proc in procs:
-                proc.join(timeout=10)
+            # Ctrl-C (or the caller stopped), also while the workers start
+            stop_pool(pool)
             raise
     order = {i: k for k, i in enumerate(todo)}
     broken.sort(key=order.__getitem__)
+
+
+def stop_pool(pool: Any) -> None:
+    """Stop a process pool now (Ctrl-C): drop its queued inputs, end its workers, free it.
+
+    The workers are terminated and joined first: the pool's own shutdown would
+    wait for every queued input.  The pool is then shut down *with* waiting, which
+    joins its manager thread (quick now: its workers are gone) and so frees the
+    pool's queues.  With a fork server or spawn their locks are named semaphores
+    registered with Python's resource tracker, unlinked when the queues are freed.
+    A shutdown without waiting left them to the manager thread, still running when
+    an interrupted run leaves by ``os._exit`` (:mod:`accal.__main__`, which skips
+    multiprocessing's exit handlers): the resource tracker then printed
+    "There appear to be 5 leaked semaphore objects" after ``accal: interrupted``.
+
+    Parameters
+    ----------
+    pool : concurrent.futures.ProcessPoolExecutor
+        The pool.
+    """
+    procs = list((getattr(pool, "_processes", None) or {}).values())
+    for proc in procs:
+        proc.terminate()
+    for proc in procs:
+        proc.join(timeout=10)
+    pool.shutdown(wait=True, cancel_futures=True)
 
 
 def prefetch(path: Path | None) -> None:

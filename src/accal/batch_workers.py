@@ -8,11 +8,12 @@ thread, a tuned allocator, a watch that ends it with the batch process);
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import os
 import signal
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 
 from accal._runtime import tune_allocator
 from accal.errors import AccalError
@@ -104,6 +105,55 @@ def start_method(preload: Sequence[str] = PRELOAD) -> str:
     if others is None or any(n not in FORK_SAFE_THREADS for n in others):
         return "forkserver"
     return "fork"
+
+
+@contextlib.contextmanager
+def interrupts_held() -> Iterator[None]:
+    """Hold a Ctrl-C (SIGINT) or SIGTERM while the block runs; it takes effect after it.
+
+    For the start of a pool's workers (:func:`accal.batch.execute`).  A worker is
+    started in two steps: the fork server forks it and reports its pid, then the
+    child reads its set-up (the pool's queues, their named semaphores among them)
+    from a pipe.  A Ctrl-C while this process waited for the pid (the fork server
+    may still be importing its preload, ~0.4 s and more) left a child the pool
+    never knew of: it was not stopped with the others, and it read its set-up after
+    the pool's semaphores were freed, printing a ``FileNotFoundError`` traceback
+    after ``accal: interrupted``.  Held, the signal is handled (by the handler in
+    place, e.g. :mod:`accal.__main__`'s) once the workers started are all known.  A
+    second one while held is handled at once (a fork server that hangs can still be
+    left with Ctrl-C).  Signals ignored or left to the default action are not
+    touched; outside the main thread this does nothing.
+    """
+    import threading  # ~15 ms (python -X importtime); imported where workers start
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held: list[int] = []
+    handlers: dict[int, object] = {}
+
+    def hold(signum: int, frame: object) -> None:
+        if held:  # a second one: at once
+            _run_handler(handlers.get(signum), signum, frame)
+        held.append(signum)
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        if callable(signal.getsignal(sig)):
+            handlers[sig] = signal.signal(sig, hold)
+    try:
+        yield
+    finally:
+        for sig, handler in handlers.items():
+            if signal.getsignal(sig) is hold:  # not if a handler run meanwhile changed it
+                signal.signal(sig, handler)  # type: ignore[arg-type]
+        if held:
+            _run_handler(handlers.get(held[0]), held[0], None)
+
+
+def _run_handler(handler: object, signum: int, frame: object) -> None:
+    """Call a Python signal handler as the interpreter would."""
+    if callable(handler):
+        handler(signum, frame)
 
 
 def worker_init() -> None:
