@@ -16,6 +16,7 @@ from accal._cliutil import (
     option_stack,
     plots_option,
 )
+from accal.cli.batch_options import batch_options
 
 DEMOD_PSD_HELP = (
     "Noise PSD behind sigma, Rd[k] and GLS: 'auto' estimates it from the run's own residual "
@@ -107,28 +108,7 @@ _OPTIONS: list[Callable[[Any], Any]] = [
         metavar="ROWS",
         help="Rows read at a time (bounds the memory; results do not depend on it).",
     ),
-    click.option(
-        "--workers",
-        "-j",
-        type=click.IntRange(min=1),
-        default=None,
-        help="Worker processes on this machine, one run each [default: all cores].",
-    ),
-    click.option(
-        "--scheduler",
-        default=None,
-        metavar="ADDRESS",
-        help="Run on a dask.distributed cluster (e.g. tcp://host:8786); workers must see "
-        "the same file system.",
-    ),
-    click.option(
-        "--force", is_flag=True, help="Redo runs whose outputs are current (OUT/manifest.json)."
-    ),
-    click.option(
-        "--checksum",
-        is_flag=True,
-        help="Decide 'current' by SHA-256 of the runs instead of size and mtime.",
-    ),
+    batch_options("runs"),  # -j, --scheduler, --force, --checksum
     click.option(
         "--close-loop",
         is_flag=True,

@@ -19,6 +19,7 @@ from accal._cliutil import (
     plots_option,
     quiet_option,
 )
+from accal.cli.batch_options import batch_options
 
 
 def parse_margins(text: str) -> tuple[float, float] | None:
@@ -193,26 +194,7 @@ _OPTIONS: list[Callable[[Any], Any]] = [
         metavar="PATTERN",
         help="Names taken from directories (repeatable; default: *ACC1B_* and *ACT1B_*).",
     ),
-    click.option(
-        "--workers",
-        "-j",
-        type=click.IntRange(min=1),
-        default=None,
-        help="Worker processes on this machine [default: all cores].",
-    ),
-    click.option(
-        "--scheduler",
-        default=None,
-        metavar="ADDRESS",
-        help="Run on a dask.distributed cluster (e.g. tcp://host:8786); workers must see "
-        "the same file system.",
-    ),
-    click.option("--force", is_flag=True, help="Redo inputs whose outputs are current."),
-    click.option(
-        "--checksum",
-        is_flag=True,
-        help="Decide 'current' by SHA-256 of the inputs instead of size and mtime.",
-    ),
+    batch_options("inputs"),  # -j, --scheduler, --force, --checksum
     click.option(
         "--close-loop",
         is_flag=True,
