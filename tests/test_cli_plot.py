@@ -11,7 +11,13 @@ from click.testing import CliRunner
 
 from accal.cli import main
 from accal.errors import AccalError
-from accal.products.archive_plot import BIAS_SCALE, DRIFT_SCALE, bias_drift_figure
+from accal.products.archive_plot import (
+    BIAS_SCALE,
+    DRIFT_SCALE,
+    _accel_scale,
+    bias_drift_figure,
+    periods_figure,
+)
 
 SAMPLES = Path(__file__).resolve().parents[1] / "data" / "samples"
 INPUTS = [
@@ -75,3 +81,54 @@ def test_plot_errors_are_one_line(archive, tmp_path):
              "axis": "x", "bias": 0.0, "bias_sigma": 1.0, "drift": 0.0, "drift_sigma": 1.0}
         )  # fmt: skip
         bias_drift_figure(many, source="t")
+
+
+def test_one_day_is_plotted_over_a_week_not_years(archive):
+    table = pd.read_parquet(archive / "bias_drift.parquet")
+    one = table[table["date"] == table["date"].iloc[0]]
+    fig = bias_drift_figure(one, source="t")
+    lo, hi = fig.axes[0].get_xlim()
+    assert 5.9 < hi - lo < 6.1  # days (matplotlib date units)
+
+
+@pytest.fixture(scope="module")
+def demod_dir(tmp_path_factory):
+    base = tmp_path_factory.mktemp("plotdemod")
+    runs = []
+    for seed in (1, 2):
+        run = base / f"run{seed}.parquet"
+        code, msg = _run("simulate", "gap", "--days", "0.1", "--seed", seed, "--out", run)
+        assert code == 0, msg
+        runs.append(run)
+    out = base / "out"
+    code, msg = _run("demod", *runs, "--tau", 600, "--mask", 200, "--out", out, "-j", 1, "-q")
+    assert code == 0, msg
+    return out
+
+
+def test_plot_of_a_demod_directory_shows_its_periods(demod_dir, tmp_path):
+    """accal plot on an accal demod directory plots a_Y, a_Z per period (QA: it said
+    'no bias_drift.parquet here' although accal table shows the periods)."""
+    code, msg = _run("plot", demod_dir)
+    assert code == 0, msg
+    png = demod_dir / "periods.png"
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    table = pd.read_parquet(demod_dir / "periods.parquet")
+    assert f"wrote {png} ({len(table)} periods)" in msg
+    code, msg = _run("plot", demod_dir, "--satellite", "A", "--out", tmp_path / "x.png")
+    assert code == 2 and "periods table of accal demod" in msg
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_the_periods_figure_shows_the_table_values(demod_dir):
+    table = pd.read_parquet(demod_dir / "periods.parquet")
+    table["t_mid_utc"] = pd.to_datetime(table["t_mid_utc"], utc=True)
+    fig = periods_figure(table, source="t")
+    factor, unit = _accel_scale(table[["a_Y", "a_Z"]].to_numpy())
+    assert 1.0 <= np.nanmax(np.abs(table[["a_Y", "a_Z"]].to_numpy())) * factor < 1000.0
+    for ax, comp in zip(fig.axes[:2], ("Y", "Z"), strict=True):
+        assert ax.get_ylabel() == f"a_{comp} [{unit}]"
+        shown = sorted(float(y) for c in ax.containers for y in c.lines[0].get_ydata())
+        np.testing.assert_allclose(shown, sorted(table[f"a_{comp}"] * factor), rtol=1e-12)
+    assert _accel_scale(np.array([3e-13, np.nan])) == (1e12, "pm/s²")
+    assert _accel_scale(np.array([2.0])) == (1.0, "m/s²")

@@ -68,6 +68,14 @@ def selected_rows(path: Path, df: Any, **selection: Any) -> Any:
     return table_view.select_rows(df, **selection)
 
 
+def periods_filter_message(path: Path) -> str:
+    """The usage error of a row option given for an ``accal demod`` periods table."""
+    return (
+        f"{path} is the periods table of accal demod: --satellite, --start, --end, "
+        "--method, --axis and --status select rows of a bias_drift table"
+    )
+
+
 @click.command("table", short_help="Print or export the bias/drift table of an output directory.")
 @click.argument("directory", type=click.Path(file_okay=False, exists=True, path_type=Path))
 @ROW_OPTIONS
@@ -108,10 +116,7 @@ def table_cmd(
         units = df.attrs.get("units")
         filters = satellites or start or end or methods or axes or statuses
         if table_view.is_periods(path) and filters:
-            usage_fail(
-                f"{path} is the periods table of accal demod: --satellite, --start, --end, "
-                "--method, --axis and --status select rows of a bias_drift table"
-            )
+            usage_fail(periods_filter_message(path))
         df = selected_rows(
             path, df, satellites=satellites, start=start, end=end, methods=methods, axes=axes,
             statuses=statuses,

@@ -1,11 +1,13 @@
-"""Bias and drift of an archive over time, one figure (``accal plot DIRECTORY``).
+"""An output directory's table over time, one figure (``accal plot DIRECTORY``).
 
 A scientist looking at a mission archive wants the day-by-day bias and drift of each
 axis with their error bars, one series per satellite and method, against UTC dates,
 in units read at a glance (µm/s² for the bias, nm/s² per day for the drift) and with
 a title that names the table.  The values come from the ``bias_drift`` table of an
 ``accal grace-bias`` output directory as written (SI: m/s², m/s³); only the plot
-scales them.
+scales them.  In an ``accal demod`` directory the ``periods`` table is plotted
+instead: the unbiased accelerations a_Y, a_Z of every period with their σ, one series
+per run, against the period's mid-time (UTC), in the SI prefix that suits them.
 """
 
 from __future__ import annotations
@@ -46,9 +48,19 @@ def plot_bias_drift(table: pd.DataFrame, path: str | Path, *, source: str) -> Pa
     Path
         ``path``.
     """
+    return _save(bias_drift_figure(table, source=source), path)
+
+
+def plot_periods(table: pd.DataFrame, path: str | Path, *, source: str) -> Path:
+    """Write :func:`periods_figure` of ``table`` to a PNG, atomically (as
+    :func:`plot_bias_drift`)."""
+    return _save(periods_figure(table, source=source), path)
+
+
+def _save(fig: Figure, path: str | Path) -> Path:
+    """``fig`` as a PNG at ``path`` (a complete file or none), then closed."""
     import matplotlib.pyplot as plt
 
-    fig = bias_drift_figure(table, source=source)
     path = Path(path)
     try:
         with atomic_path(path) as tmp:
@@ -56,6 +68,86 @@ def plot_bias_drift(table: pd.DataFrame, path: str | Path, *, source: str) -> Pa
     finally:
         plt.close(fig)
     return path
+
+
+#: SI prefixes for the periods plot: (factor, unit), the first whose scaled values
+#: reach 1 is used.
+ACCEL_SCALES = ((1.0, "m/s²"), (1e3, "mm/s²"), (1e6, "µm/s²"), (1e9, "nm/s²"), (1e12, "pm/s²"))
+
+
+def _accel_scale(values: np.ndarray) -> tuple[float, str]:
+    """The :data:`ACCEL_SCALES` entry in which the largest finite ``|values|`` is ≥ 1."""
+    finite = np.abs(values[np.isfinite(values)])
+    top = float(finite.max()) if finite.size else 0.0
+    for factor, unit in ACCEL_SCALES:
+        if top * factor >= 1.0:
+            return factor, unit
+    return ACCEL_SCALES[-1]
+
+
+def periods_figure(table: pd.DataFrame, *, source: str) -> Figure:
+    """a_Y and a_Z of every demodulation period against its mid-time, with 1σ bars.
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        Rows of an ``accal demod`` ``periods`` table (columns ``source``,
+        ``t_mid_utc``, ``a_Y``, ``a_Z``, ``sigma_Y``, ``sigma_Z``; SI units).
+    source : str
+        What the rows are (the table's path), for the title.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Two panels (a_Y, a_Z) sharing the time axis; one series per run.
+
+    Raises
+    ------
+    accal.errors.AccalError
+        No period to plot, or more than :data:`MAX_SERIES` runs.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    rows = table.dropna(subset=["t_mid_utc"])
+    if rows.empty:
+        raise AccalError(f"{source}: no period to plot")
+    runs = sorted({str(s) for s in rows["source"]})
+    if len(runs) > MAX_SERIES:
+        raise AccalError(
+            f"{source}: {len(runs)} runs in one figure (at most {MAX_SERIES}); plot a "
+            "directory with fewer runs, or use accal table --export and your own plot"
+        )
+    values = rows[["a_Y", "a_Z"]].to_numpy(dtype=float)
+    factor, unit = _accel_scale(values)
+    fig, panels = plt.subplots(2, 1, figsize=(11, 6.0), sharex=True, squeeze=False)
+    for i, comp in enumerate(("Y", "Z")):
+        ax = panels[i][0]
+        for k, run in enumerate(runs):
+            sel = rows[rows["source"].astype(str) == run].sort_values("t_mid_utc")
+            when = pd.to_datetime(sel["t_mid_utc"]).dt.tz_localize(None).to_numpy()
+            value = sel[f"a_{comp}"].to_numpy(dtype=float) * factor
+            sigma = sel[f"sigma_{comp}"].to_numpy(dtype=float) * factor
+            ax.errorbar(
+                when, value, yerr=np.where(np.isfinite(sigma), sigma, 0.0),
+                fmt="o-", ms=2, lw=0.6, capsize=1.5, color=f"C{k % 10}", label=run,
+            )  # fmt: skip
+        ax.set_ylabel(f"a_{comp} [{unit}]")
+        ax.grid(alpha=0.3)
+        ax.ticklabel_format(axis="y", useOffset=False)
+    panels[-1][0].set_xlabel("period mid-time (UTC)")
+    panels[0][0].legend(fontsize=8, loc="best")
+    first, last = rows["t_mid_utc"].min(), rows["t_mid_utc"].max()
+    fig.suptitle(
+        f"unbiased accelerations per period, {first:%Y-%m-%d %H:%M} to {last:%Y-%m-%d %H:%M} "
+        f"UTC, ± 1σ\n{source}",
+        fontsize=10,
+    )
+    fig.autofmt_xdate()
+    fig.tight_layout()
+    return fig
 
 
 def bias_drift_figure(table: pd.DataFrame, *, source: str) -> Figure:
@@ -123,6 +215,10 @@ def bias_drift_figure(table: pd.DataFrame, *, source: str) -> Figure:
             ax.ticklabel_format(axis="y", useOffset=False)
     for ax in panels[-1]:
         ax.set_xlabel("date")
+    dates = pd.to_datetime(rows["date"])
+    if dates.nunique() == 1:  # one day: a week around it, not matplotlib's years
+        one = dates.iloc[0]
+        panels[-1][0].set_xlim(one - pd.Timedelta(days=3), one + pd.Timedelta(days=3))
     panels[0][1].legend(fontsize=8, loc="best")
     first, last = str(rows["date"].min()), str(rows["date"].max())
     fig.suptitle(f"bias and drift, {first} to {last}, ± 1σ\n{source}", fontsize=10)
