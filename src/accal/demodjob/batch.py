@@ -55,6 +55,7 @@ from accal.batch import (
     write_error_message,
 )
 from accal.batch_runner import BatchJob, run_batch, scheduler_name
+from accal.batch_summary import peak_rss_mb
 from accal.demodjob.closure import close_run
 from accal.demodjob.closure_outputs import apply_closure, write_demod_closure
 from accal.demodjob.options import DemodOptions, DemodResult, DemodRunSummary, RunOutcome
@@ -69,7 +70,6 @@ from accal.demodjob.report import summary_markdown, summary_warnings
 from accal.demodjob.summary import summarise, summary_of_extended
 from accal.demodjob.table import add_utc_columns, period_rows
 from accal.errors import AccalError, ValidationError
-from accal.gracejob.outcome import peak_rss_mb
 from accal.io.merge import merge_table
 from accal.io.writers import atomic_path, run_guard
 

@@ -2,17 +2,27 @@
 
 :class:`FileOutcome` (one input: its table rows, outputs, warnings, peak memory),
 :class:`RunSummary` (a batch, with its one-line end-of-run summary), and the
-helpers that make an outcome of a failure or measure the memory of a worker.
+helpers that make an outcome of a failure or measure the memory of a worker
+(:func:`peak_rss_mb`, re-exported from :mod:`accal.batch_summary`, where the
+summary's shared part is).
 """
 
 from __future__ import annotations
 
-import sys
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 from accal.batch import Outcome, internal_error_message
+from accal.batch_summary import BatchSummary, peak_rss_mb
+
+__all__ = [
+    "KEPT_EARLIER",
+    "FileOutcome",
+    "RunSummary",
+    "internal_error",
+    "peak_rss_mb",
+]
 
 
 @dataclass(frozen=True)
@@ -57,70 +67,17 @@ class FileOutcome(Outcome):
 
 
 @dataclass(frozen=True)
-class RunSummary:
-    """Result of a batch run.
+class RunSummary(BatchSummary):
+    """Result of a ``grace-bias`` batch: :class:`accal.batch_summary.BatchSummary`
+    (counts, throughput, end-of-run line) of :class:`FileOutcome`, its line naming
+    ``accal grace-bias``.
 
     ``outcomes`` are in input order; inputs not run (``--fail-fast``) are absent.
     """
 
     outcomes: list[FileOutcome]
-    table_path: Path | None
-    seconds: float
-    n_inputs: int = 0
-    log_path: Path | None = None
-    workers: int = 1
 
-    @property
-    def n_ok(self) -> int:
-        """Inputs processed now."""
-        return sum(o.ok and not o.skipped for o in self.outcomes)
-
-    @property
-    def n_skipped(self) -> int:
-        """Inputs whose outputs were current."""
-        return sum(o.skipped for o in self.outcomes)
-
-    @property
-    def n_failed(self) -> int:
-        """Inputs that failed."""
-        return sum(not o.ok for o in self.outcomes)
-
-    @property
-    def n_not_run(self) -> int:
-        """Inputs never started (after a failure with ``fail_fast``)."""
-        return self.n_inputs - len(self.outcomes)
-
-    @property
-    def n_samples(self) -> int:
-        """Samples read."""
-        return sum(o.n_samples for o in self.outcomes)
-
-    @property
-    def n_bytes(self) -> int:
-        """Bytes read (inputs processed now)."""
-        return sum(o.n_bytes for o in self.outcomes if not o.skipped)
-
-    @property
-    def peak_rss(self) -> float:
-        """Largest peak resident memory of a process that ran inputs [MB]."""
-        return max((o.peak_rss for o in self.outcomes), default=0.0)
-
-    def line(self, command: str = "accal grace-bias") -> str:
-        """The one-line end-of-run summary."""
-        done = self.n_ok + self.n_failed
-        rate = (
-            f"{self.n_bytes / 1e6 / self.seconds:.1f} MB/s, {done / self.seconds:.2f} files/s"
-            if self.seconds > 0
-            else "-"
-        )
-        rss = f", peak RSS {self.peak_rss:.0f} MB per worker" if self.peak_rss > 0 else ""
-        return (
-            f"{command}: {self.n_ok} ok, {self.n_skipped} skipped (current), {self.n_failed} "
-            f"failed, {self.n_not_run} not run; {self.n_samples:,} samples, "
-            f"{self.n_bytes / 1e6:.1f} MB in {self.seconds:.2f} s ({rate}, {self.workers} "
-            f"worker{'s' if self.workers != 1 else ''}{rss}); table: "
-            f"{self.table_path or '(none written)'}"
-        )
+    command: ClassVar[str] = "accal grace-bias"
 
 
 #: What a failed input's earlier outputs are (said in the log and on stderr).
@@ -130,15 +87,6 @@ KEPT_EARLIER = (
 )
 
 
-def peak_rss_mb() -> float:
-    """Peak resident memory of this process [MB] (0 where ``resource`` is missing)."""
-    try:
-        import resource
-    except ImportError:  # pragma: no cover - not POSIX
-        return 0.0
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    return peak / (1 << 20) if sys.platform == "darwin" else peak / 1024.0
-
-
 def internal_error(path: Path, exc: BaseException) -> FileOutcome:
+    """The failed outcome of an exception that escaped the task (a bug, a dead worker)."""
     return FileOutcome(Path(path), False, internal_error_message(path, exc))
