@@ -1,22 +1,19 @@
 """``grace-bias --reference REF --bias-basis ... | --scale fit ... --close-loop``: one day.
 
-Issue 22: the closure runs on the residual of the reference fit.  The fit's model,
-in the raw data's units (eq. 1 of :mod:`accal.estimators.reference` solved for the
-raw acceleration)::
+Issue 22: the closure runs on the calibrated residual of the reference fit, in
+the raw data's units, with the fit's scales held at their estimates (eq. 1 of
+:mod:`accal.estimators.reference` solved for the raw acceleration)::
 
-    a_raw = S⁻¹ a_ref + b(t) + n                                              (1)
+    a_raw = S⁻¹ a_ref + b(t) + n,   y_i = a_raw,i − (S⁻¹ a_ref)_i = Σ_k b_ik φ_k(t) + ...
 
-is, per axis ``i``, linear in the bias basis ``φ_k(t)`` and in the reference
-columns whose scale entries the fit estimated: ``y_i = a_raw,i − a_ref,i =
-Σ_k b_ik φ_k + ((S⁻¹)_ii − 1) a_ref,i (+ Σ_j≠i (S⁻¹)_ij a_ref,j)``, or, for an
-axis whose scale is fixed, ``y_i = a_raw,i − (S⁻¹ a_ref)_i = Σ_k b_ik φ_k``.
-That design is the declared base of :func:`accal.closure.close_loop` (its
-``base`` accepts a :class:`~accal.closure.basis.BlockBase`), so every candidate
+so the declared base of :func:`accal.closure.close_loop` is the bias basis
+``φ_k(t)`` alone (a :class:`~accal.closure.basis.BlockBase`), and every candidate
 (steps, couplings to the data's channels, polynomial and exponential drifts,
-and the scale where the fit did not estimate it) is tested, validated and
-estimated against the reference fit's null model, with the closure's own
-machinery deciding what is an instrument effect.  The effects it accepts are
-subtracted from the raw data and the reference fit is made again
+and the scale where the fit held it fixed) is tested, validated and estimated
+against it, with the closure's own machinery deciding what is an instrument
+effect.  The reference is not a free regressor of the closure (a noisy one would
+be attenuated: :func:`null_design`).  The effects it accepts are subtracted from
+the raw data and the reference fit is made again
 (:func:`accal.pipeline_reference.fit_day`); the covariance of the refit gets
 what estimating the effects adds (as :func:`accal.pipeline_closure.with_effect_uncertainty`
 does for the wavelet/lsq fits).
@@ -68,8 +65,23 @@ class ReferenceClosure:
 
 def null_design(
     fit: Any, axis: int, time: np.ndarray, raw: np.ndarray, reference: np.ndarray
-) -> tuple[np.ndarray, Any, np.ndarray | None]:
+) -> tuple[np.ndarray, Any, np.ndarray]:
     """The data and base of the closure of one axis of a reference fit (eq. 1).
+
+    The closure runs on the calibrated residual in raw units, with the reference
+    fit's scales held at their estimates::
+
+        y_i = a_raw,i − (S⁻¹ a_ref)_i = Σ_k b_ik φ_k(t) + n_i − (S⁻¹ e)_i       (3)
+
+    so its null model is the bias basis alone, and the reference enters only through
+    the fitted model subtracted from the data.  Not as free regressors: a reference
+    noisy at high frequency (a POD-derived one: 5.6e-8 m/s² RMS at 1 Hz for ~2e-8 of
+    cross-track signal) regressed on by least squares is attenuated towards −1 (its
+    noise is in the regressor and, with the opposite sign, in ``y``: errors in
+    variables, Fuller, *Measurement Error Models*, 1987, §1.1), which left ~90 % of
+    the signal in the closure's residual (issue 22, QA).  The fit's own scales are
+    estimated with the reference as the observation and are not attenuated
+    (:mod:`accal.estimators.reference`).
 
     Parameters
     ----------
@@ -85,24 +97,20 @@ def null_design(
     Returns
     -------
     y : ndarray, shape (n,)
-        ``a_raw,i − a_ref,i`` (scale fitted on this axis) or ``a_raw,i − (S⁻¹ a_ref)_i``
-        (scale fixed) [m/s²].
+        ``a_raw,i − (S⁻¹ a_ref)_i`` (eq. 3) [m/s²].
     base : BlockBase
         The bias basis columns (``bias[k]``, labelled with the powers of ``t`` they
         span: a Legendre ``polyN`` spans ``t^0..t^N``, a clamped cubic B-spline every
-        cubic, de Boor 2001, ch. IX) and the reference columns of the fitted scale
-        entries (``Sinv_<i><j>``: coefficient ``(S⁻¹)_ij − δ_ij`` [1], each column
-        normalised to unit RMS with the factor in ``BlockBase.scale``); the diagonal
-        one labelled ``scale`` (the closure's ``scale`` candidate is then not proposed).
-        The reference columns are the base's ``signal`` part: a candidate they could
-        mimic is not identifiable (:func:`accal.closure.validation.identifiability`).
-    scale_reference : ndarray or None
-        The reference column of the ``scale`` candidate (``(S⁻¹ a_ref)_i``) where the
-        fit held the scale fixed; also the closure's ``reference`` otherwise.
+        cubic, de Boor 2001, ch. IX); no signal part.
+    signal : ndarray, shape (n,)
+        ``a_raw,i − b_i(t)``: the signal in raw units with the accelerometer's noise,
+        not the reference's (the closure's ``reference``: regressor of the ``scale``
+        candidate, offered on axes whose scale the fit held fixed, and screen of the
+        coupling channels).  Its coefficient is ``1 − s/s₀`` for a raw gain ``1/s``
+        and a fixed scale ``s₀`` (``s₀/s − 1`` to first order).
     """
     from accal.closure.basis import BlockBase
 
-    mode = fit.modes[axis]
     ref = np.nan_to_num(np.asarray(reference, dtype=np.float64))
     phi, first = fit.basis.design(time)
     keep = ~fit.unsupported[first : first + phi.shape[1]] if fit.unsupported.size else None
@@ -114,37 +122,18 @@ def null_design(
     else:  # the clamped cubic spline reproduces every cubic over the arc
         labels = [f"t^{j}" if j < 4 else f"bspline[{k}]" for j, k in enumerate(k_idx)]
     names = [f"bias[{k}]" for k in k_idx]
-    cols = [phi]
-    scale = [np.ones(phi.shape[1])]
-    s_inv = np.linalg.inv(fit.scale)
-    if mode == "fixed":
-        expected = ref @ s_inv.T  # (S⁻¹ a_ref) of every axis
-        y = raw[:, axis] - expected[:, axis]
-        scale_ref = expected[:, axis]
-    else:
-        y = raw[:, axis] - ref[:, axis]
-        scale_ref = ref[:, axis]
-        js = range(3) if mode == "fit-matrix" else (axis,)
-        for j in js:
-            r = ref[:, j]
-            rms = float(np.sqrt(np.mean(r**2))) or 1.0
-            cols.append((r / rms)[:, None])
-            scale.append(np.array([1.0 / rms]))
-            names.append(f"Sinv_{AXES[axis]}{AXES[j]}")
-            labels.append("scale" if j == axis else f"crosstalk_{AXES[axis]}{AXES[j]}")
-    x = np.column_stack(cols)
-    # the reference columns model the signal: a candidate is told from it by how much
-    # of it lies outside their span (accal.closure.validation.identifiability)
-    signal = tuple(range(phi.shape[1], x.shape[1]))
+    expected = ref @ np.linalg.inv(fit.scale).T  # S⁻¹ a_ref of every axis
+    y = raw[:, axis] - expected[:, axis]
+    bias, _ = fit.bias(time)
+    signal = raw[:, axis] - np.nan_to_num(bias[:, axis])
     base = BlockBase(
-        np.zeros(x.shape[0], dtype=np.int64),
-        x,
+        np.zeros(phi.shape[0], dtype=np.int64),
+        np.ascontiguousarray(phi),
         tuple(names),
         tuple(labels),
-        np.concatenate(scale),
-        signal=signal,
+        np.ones(phi.shape[1]),
     )
-    return y, base, scale_ref
+    return y, base, signal
 
 
 def _resolution(raw: np.ndarray, y: np.ndarray) -> float:
@@ -220,15 +209,11 @@ def with_effect_uncertainty(fit: Any, summaries: dict[str, dict[str, Any]]) -> A
     The refit subtracts the effects as if known; the closure gives, per base
     coefficient, what estimating them adds to its variance (``sigma_after² −
     sigma_plain²``, :class:`accal.closure.BaseCoefficient`).  That is added to the
-    diagonal of the refit's covariance: for ``bias[k]`` to ``bias_coef[i, k]`` (same
-    quantity); for ``Sinv_ij`` (the coefficient of ``a_ref,j`` in eq. 1, ``(S⁻¹)_ij``)
-    to ``S_ij`` with the first-order Jacobian of the inverse, ``dS = −S d(S⁻¹) S``
-    (Petersen & Pedersen, *The Matrix Cookbook*, 2012, eq. 59), i.e. a variance
-    factor ``(S_ii S_jj)²`` for a near-diagonal ``S``.
+    diagonal of the refit's covariance for ``bias[k]`` to ``bias_coef[i, k]`` (same
+    quantity; the closure's base is the bias basis alone, eq. 3).
     """
     k = fit.basis.size
     bias_cov = np.array(fit.bias_cov, dtype=np.float64, copy=True)
-    scale_cov = np.array(fit.scale_cov, dtype=np.float64, copy=True)
     cov = np.array(fit.cov, dtype=np.float64, copy=True)
     for ax, entry in summaries.items():
         if not entry.get("removed_from_calibrated"):
@@ -236,23 +221,16 @@ def with_effect_uncertainty(fit: Any, summaries: dict[str, dict[str, Any]]) -> A
         i = AXES.index(ax)
         for b in entry.get("base") or []:
             after, plain = b.get("sigma_after"), b.get("sigma_plain")
+            name = str(b.get("name", ""))
             if after is None or plain is None or not np.isfinite(after * plain):
                 continue
-            dv = max(0.0, after**2 - plain**2)
-            name = str(b.get("name", ""))
             if name.startswith("bias["):
                 idx = i * k + int(name[5:-1])
+                dv = max(0.0, after**2 - plain**2)
                 bias_cov[idx, idx] += dv
                 if cov.size:
                     cov[9 + idx, 9 + idx] += dv
-            elif name.startswith("Sinv_"):
-                j = AXES.index(name[-1])
-                idx = 3 * i + j
-                ds = dv * (fit.scale[i, i] * fit.scale[j, j]) ** 2
-                scale_cov[idx, idx] += ds
-                if cov.size:
-                    cov[idx, idx] += ds
-    return dataclasses.replace(fit, bias_cov=bias_cov, scale_cov=scale_cov, cov=cov)
+    return dataclasses.replace(fit, bias_cov=bias_cov, cov=cov)
 
 
 def _close_axes(
@@ -273,11 +251,17 @@ def _close_axes(
         covered &= np.isfinite(v)
     use_cl = day.use & covered
     candidates, note = closure_candidates(opts)
+    # the scale is a candidate only where the user fixed it: with --scale fit|fit-matrix
+    # eq. 3 holds the fit's estimate, and an axis the fit had to fix (not identifiable,
+    # e.g. with a step in the residual) gets its scale from the refit without the effects
+    refit_scale = opts.scale in ("fit", "fit-matrix")
     base_name = day.fit.basis.name()
     out: dict[str, Any] = {}
     plots: list[Path] = []
     for i, ax in enumerate(AXES):
-        y, base, scale_ref = null_design(day.fit, i, series.time, series.acc, day.reference)
+        y, base, signal = null_design(day.fit, i, series.time, series.acc, day.reference)
+        mode = day.fit.modes[i]
+        cands = tuple(c for c in candidates if c != "scale" or not refit_scale)
         res = close_loop(
             series.time,
             y,
@@ -286,9 +270,10 @@ def _close_axes(
             aux=aux or None,
             alpha=opts.alpha,
             orbit_period=opts.orbit_period,
-            candidates=candidates,
+            candidates=cands,
             resolution=_resolution(series.acc[:, i], y),
-            reference=scale_ref,
+            reference=signal,
+            signal_model="none",
             channel_units=units,
             screened=left_out,
             options={"orbit_period_fixed": True},
@@ -302,9 +287,9 @@ def _close_axes(
         summary = res.to_dict()
         summary.update(
             model="+".join(labels),
-            candidates=list(candidates),
-            null_model=f"reference fit: bias {base_name}, scale {day.fit.modes[i]} "
-            f"({', '.join(base.names)})",
+            candidates=list(cands),
+            null_model=f"reference fit's calibrated residual a_raw − S⁻¹a_ref (scale {mode} "
+            f"held at {day.fit.scale[i, i]:.6g}): bias {base_name} ({', '.join(base.names)})",
             removed_from_calibrated=labels[1:],
             markdown=to_markdown(res, title=f"{path.name} axis {ax} (reference fit)"),
         )
