@@ -38,7 +38,7 @@ from numpy.typing import NDArray
 from scipy import linalg, stats
 
 from accal.errors import ValidationError, check_option
-from accal.estimators.arnoise import ArModel, fit_ar, segment_positions
+from accal.estimators.arnoise import ArModel, levinson, segment_positions
 from accal.estimators.refbasis import BiasBasis
 from accal.estimators.trend import linear_estimator_covariance
 
@@ -512,6 +512,43 @@ def fit_reference(
     )
 
 
+#: White-noise loading of the residual's autocovariance before its AR model is fitted,
+#: relative to its variance: bounds the whitening's dynamic range (:func:`_fit_noise`).
+NOISE_FLOOR = 1e-3
+
+
+def _fit_noise(r: NDArray, t: NDArray, max_order: int) -> ArModel:
+    """AR model of the residual ``r`` with a white floor of :data:`NOISE_FLOOR` of its variance.
+
+    As :func:`accal.estimators.arnoise.fit_ar` (biased autocovariances on the gap-filled
+    grid, Durbin–Levinson, order by BIC) with ``γ(0)`` multiplied by ``1 + NOISE_FLOOR``:
+    the diagonal loading of a covariance estimate (Carlson, IEEE Trans. AES 24, 1988),
+    i.e. white noise of that variance added to the model, whose PSD then never drops
+    below ~1e-3 of the residual's mean level.  Without it, a noise-free reference left a
+    residual that is the raw data's CRN-filtered noise alone, whose PSD falls by many
+    decades above 35 mHz; Yule–Walker AR models of such spectra are ill-conditioned
+    (Percival & Walden, *Spectral Analysis for Physical Applications*, 1993, §9.4) and
+    their whitening multiplies what the raw data hold there (rounding, the signal's
+    own mismatch) by up to ~1e10: the GLS iterations then wandered (x: 0.96 → 0.969 →
+    2.08 → 0.19) and returned y 0.856 for 0.98, x and z "not identifiable" (issue 22,
+    QA).  A reference noisier than 1e-3 of the residual's variance at every frequency
+    (any real one) is not affected: the default simulated POD noise and 1e-10 of it
+    gave the same scales to 4 digits with and without the floor.
+    """
+    step = float(np.median(np.diff(t))) if t.size > 1 else 1.0
+    grid = np.rint((t - t[0]) / step).astype(np.int64)
+    full = np.zeros(int(grid[-1]) + 1 if t.size else 0)
+    full[grid] = r - r.mean()
+    n = r.size
+    max_order = min(max_order, max(0, (n - 10) // 3))
+    gamma = np.array([full[: full.size - k] @ full[k:] for k in range(max_order + 1)]) / n
+    gamma[0] *= 1.0 + NOISE_FLOOR
+    phi, v = levinson(gamma)
+    bic = n * np.log(v) + np.arange(max_order + 1) * np.log(n)
+    p = int(np.argmin(bic))
+    return ArModel(tuple(phi[: p + 1]), v[: p + 1].copy())
+
+
 def _fit_mode(ax: _Axis, i, mode, unsupported, apriori, pos, noise_var, t, iterations, max_order):
     """Iterated AR-weighted least squares of axis ``i`` with the scale model ``mode``.
 
@@ -535,7 +572,7 @@ def _fit_mode(ax: _Axis, i, mode, unsupported, apriori, pos, noise_var, t, itera
         mat = ax.normal(ar)
         theta, inv = _solve(mat, free, fixed, _eiv_power(ar, pos, var_n, i))
         r = ax.residual(theta)
-        ar = fit_ar(r, t, max_order)
+        ar = _fit_noise(r, t, max_order)
         if free[i]:  # bounded by what the residual holds: −S_ii n_i is in it
             var_n = min(noise_var[i], _raw_noise(r[:, None], pos)[0] / theta[i] ** 2)
     mat = ax.normal(ar, keep=True)
