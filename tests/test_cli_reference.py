@@ -218,6 +218,31 @@ def test_a_reference_that_does_not_cover_the_day_fails_that_input_only(tmp_path)
     assert code == 1
     assert "reference covers" in msg and "day.csv" in msg
     assert not (out / "day.calibrated.parquet").exists()
+    # one line naming the input and the reference, UTC times, what to do (QA: raw GPS
+    # seconds "[116769600.0, 116771599.0] s" and no hint)
+    (line,) = [ln for ln in msg.splitlines() if ln.startswith("accal: ")]
+    assert line.startswith(f"accal: {day}: {ref}: the reference covers 2003-09-13 23:59:47 to ")
+    assert (
+        "2003-09-14 00:33:06 UTC, the data 2003-09-13 23:59:47 to 2003-09-14 01:06:26 UTC" in line
+    )
+    assert line.endswith("the reference must cover the data (give a reference for the whole day)")
+
+
+@pytest.mark.parametrize("arc", [None, "3d"])
+def test_a_truncated_reference_parquet_names_the_day_too(tmp_path, arc):
+    """``accal: DAY: REF: corrupt Parquet file (...)``, as the reference's other errors
+    (before: ``accal: REF: ...``, the day being processed not named)."""
+    t, _, day, ref = _day(tmp_path, 2000, 6)
+    pq = tmp_path / "ref.parquet"
+    pd.read_csv(ref).to_parquet(pq)
+    pq.write_bytes(pq.read_bytes()[: pq.stat().st_size // 2])
+    extra = ("--arc", arc) if arc else ()
+    code, msg = _run(
+        day, "--reference", pq, "--scale", "fit", *extra, "--out", tmp_path / "o", "-q"
+    )
+    assert code == 1
+    (line,) = [ln for ln in msg.splitlines() if ln.startswith("accal: ")]
+    assert line.startswith(f"accal: {day}: {pq}: corrupt Parquet file ("), line
 
 
 def test_no_sca1b_beside_a_table_input_is_a_clear_error(tmp_path):

@@ -26,7 +26,7 @@ from accal.gracejob.outputs import (
     output_stem,
     write_json,
 )
-from accal.gracejob.reading import read_with_reference, with_warnings
+from accal.gracejob.reading import read_input, read_with_reference, with_warnings
 from accal.io.writers import run_guard, write_table
 from accal.series import AccSeries
 
@@ -39,7 +39,7 @@ def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutco
     AccalError
         On bad input; nothing is written for this input then.
     """
-    series, fit_series, ref_series = read_with_reference(path, opts)
+    series, fit_series, ref_series = read_with_reference(path, opts, read_reference_named(opts))
     stem = output_stem(path)
     if opts.reference_fit:
         # imported here: the reference fit's modules import scipy (~0.3 s of start-up)
@@ -104,6 +104,24 @@ def process_file(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutco
         closure={ax: c["summary"] for ax, c in closure.items()},
         warnings=tuple(report["read_report"]["warnings"]),
     )
+
+
+def read_reference_named(opts: GraceBiasOptions) -> AccSeries | None:
+    """``--reference`` as read (None without one); its reader's errors without a path.
+
+    A reader's error carries the reference's path, and
+    :func:`accal.batch.failure_message` then prints it alone; re-raised as a
+    :class:`ValidationError` whose text starts with that path, the line names the
+    input too, as the reference's other errors do (``accal: DAY: REF: ...``).
+    """
+    if opts.reference is None:
+        return None
+    try:
+        return read_input(Path(opts.reference), GraceBiasOptions(columns=opts.columns))
+    except AccalError as exc:
+        if getattr(exc, "path", None) is None:
+            raise
+        raise ValidationError(str(exc).replace("\n", " ")) from exc
 
 
 def _save_spectra(

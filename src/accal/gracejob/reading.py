@@ -21,7 +21,7 @@ from accal.gracejob.options import GraceBiasOptions
 from accal.io import FORMATS, detect_format, read
 from accal.plausibility import flag_wild_samples
 from accal.series import ACC_UNIT_FACTORS, AccSeries, acceleration_factor
-from accal.timescale import gps_to_date
+from accal.timescale import gps_to_date, gps_to_utc
 
 
 def read_input(path: Path, opts: GraceBiasOptions) -> AccSeries:
@@ -47,6 +47,24 @@ def read_input(path: Path, opts: GraceBiasOptions) -> AccSeries:
 REFERENCE_MAX_BRIDGE = 2.5
 
 
+def _utc_span(t: np.ndarray) -> str:
+    """``2005-01-15 00:00:00 to 11:59:59 UTC`` for GPS seconds ``t`` (first and last)."""
+    try:
+        a, b = (str(x).replace("T", " ") for x in gps_to_utc(t[[0, -1]]).astype("datetime64[s]"))
+    except ValueError:  # non-finite or before 1972: the seconds as they are
+        return f"GPS seconds {t[0]:.1f} to {t[-1]:.1f}"
+    return f"{a} to {b[11:] if b[:10] == a[:10] else b} UTC"
+
+
+def _not_covered(ref_path: Path, tr: np.ndarray, t: np.ndarray) -> str:
+    """One line: the reference ``ref_path`` (times ``tr``) does not cover the data's ``t``."""
+    have = f"covers {_utc_span(tr)}" if tr.size >= 2 else f"has {tr.size} sample(s)"
+    return (
+        f"{ref_path}: the reference {have}, the data {_utc_span(t)}: the reference must "
+        "cover the data (give a reference for the whole day)"
+    )
+
+
 def subtract_reference(series: AccSeries, reference: AccSeries, ref_path: Path) -> AccSeries:
     """Return ``series`` minus ``reference`` interpolated onto its epochs.
 
@@ -66,10 +84,7 @@ def subtract_reference(series: AccSeries, reference: AccSeries, ref_path: Path) 
     t = series.time
     tr = reference.time
     if tr.size < 2 or tr[0] > t[0] or tr[-1] < t[-1]:
-        raise ValidationError(
-            f"{ref_path}: reference covers [{tr[0] if tr.size else 'nan'}, "
-            f"{tr[-1] if tr.size else 'nan'}] s, the data [{t[0]}, {t[-1]}] s"
-        )
+        raise ValidationError(_not_covered(ref_path, tr, t))
     unit = reference.units.get("acc")
     factor = acceleration_factor(unit)
     if factor is None:
