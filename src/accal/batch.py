@@ -34,7 +34,6 @@ import os
 import stat
 import warnings
 from collections.abc import Callable, Iterator, Sequence
-from pathlib import Path
 from typing import Any
 
 from accal.batch_discovery import (
@@ -113,12 +112,12 @@ __all__ = [
 
 
 def execute(
-    task: Callable[[Path], Any],
-    paths: Sequence[Path],
+    task: Callable[[Any], Any],
+    paths: Sequence[Any],
     *,
     workers: int = 1,
     scheduler: str | Any | None = None,
-    on_error: Callable[[Path, BaseException], Any],
+    on_error: Callable[[Any, BaseException], Any],
     on_note: Callable[[str], Any] | None = None,
 ) -> Iterator[tuple[int, Any]]:
     """Run ``task`` on every path; yield ``(index, outcome)`` as each completes.
@@ -129,7 +128,8 @@ def execute(
         A picklable module-level function of one path (the work of one input).
         It should catch input errors itself and return an outcome.
     paths : sequence of Path
-        Inputs.
+        Inputs (or other picklable arguments of ``task``: ``grace-bias --arc`` runs
+        one task per arc of inputs; only paths are read ahead).
     workers : int
         Local worker processes (1: in this process, in order).
     scheduler : str or distributed.Client, optional
@@ -198,12 +198,12 @@ def execute(
 
 
 def _pool_round(
-    task: Callable[[Path], Any],
-    paths: Sequence[Path],
+    task: Callable[[Any], Any],
+    paths: Sequence[Any],
     todo: Sequence[int],
     ctx: Any,
     n_workers: int,
-    on_error: Callable[[Path, BaseException], Any],
+    on_error: Callable[[Any, BaseException], Any],
     broken: list[int],
     *,
     died: bool = False,
@@ -282,15 +282,16 @@ def stop_pool(pool: Any) -> None:
     pool.shutdown(wait=True, cancel_futures=True)
 
 
-def prefetch(path: Path | None) -> None:
+def prefetch(path: Any) -> None:
     """Ask the kernel to read ``path`` into the page cache in the background.
 
     ``posix_fadvise(POSIX_FADV_WILLNEED)`` starts the reads and returns; the
     worker that later reads the file finds it in memory instead of waiting for
     the disk (on a cold archive, ~9 MB per day file).  A no-op where not
-    available or for anything but a readable regular file; never raises.
+    available or for anything but a readable regular file (a task's argument
+    that is not a path: an arc of inputs); never raises.
     """
-    if path is None or not hasattr(os, "posix_fadvise"):
+    if not isinstance(path, str | os.PathLike) or not hasattr(os, "posix_fadvise"):
         return
     try:
         fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
@@ -326,10 +327,10 @@ def _death(codes: Sequence[int]) -> str:
 
 
 def _execute_dask(
-    task: Callable[[Path], Any],
-    paths: Sequence[Path],
+    task: Callable[[Any], Any],
+    paths: Sequence[Any],
     scheduler: str | Any,
-    on_error: Callable[[Path, BaseException], Any],
+    on_error: Callable[[Any, BaseException], Any],
 ) -> Iterator[tuple[int, Any]]:
     try:
         from distributed import Client, as_completed

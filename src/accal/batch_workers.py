@@ -13,6 +13,7 @@ import importlib
 import os
 import signal
 import sys
+import time
 from collections.abc import Iterator, Sequence
 
 from accal._runtime import tune_allocator
@@ -101,10 +102,20 @@ def start_method(preload: Sequence[str] = PRELOAD) -> str:
         return "forkserver"
     for name in preload:
         importlib.import_module(name)
-    others = other_threads()
+    for _ in range(JOINED_THREAD_POLLS):
+        others = other_threads()
+        if others is None or all(n in FORK_SAFE_THREADS for n in others):
+            break
+        # a thread just joined (the manager thread of a pool that has just ended, e.g.
+        # grace-bias --arc's scan before its arcs) is still listed for a moment
+        time.sleep(0.01)
     if others is None or any(n not in FORK_SAFE_THREADS for n in others):
         return "forkserver"
     return "fork"
+
+
+#: How often :func:`start_method` looks again, 10 ms apart, when another thread is listed.
+JOINED_THREAD_POLLS = 5
 
 
 @contextlib.contextmanager

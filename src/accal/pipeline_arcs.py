@@ -2,10 +2,12 @@
 
 Sequencing only (issue 22): :func:`reference_outputs` writes what one input's
 reference fit produced (table rows, calibrated series, parameter table, covariance,
-report); :func:`arc_outcomes` reads a batch's inputs, groups them into arcs
-(:func:`accal.pipeline_reference.group_arcs`), fits each arc once
-(:func:`accal.pipeline_reference.fit_arc`) and yields one outcome per input for
-:func:`accal.pipeline.run` to commit.
+report); :func:`arc_outcomes` runs an ``--arc`` batch on the batch's workers
+(:func:`accal.batch.execute`): the inputs are read (:func:`scan_input`, a task per
+input), grouped into arcs here (:func:`accal.pipeline_reference.group_arcs`), and
+each arc is fitted once (:func:`accal.pipeline_reference.fit_arc`) and written by
+one task (:func:`fit_arc_task`); it yields one outcome per input for the batch
+runner to commit.
 """
 
 from __future__ import annotations

@@ -2,8 +2,8 @@
 
 :func:`run` is the shared runner (:func:`accal.batch_runner.run_batch`) with the
 steps of :class:`GraceBiasJob`: it decides which inputs are due (the manifest and
-the table say which are current), runs them (local workers, a dask scheduler, or
-the arcs of the reference fit), and commits their rows and manifest records as
+the table say which are current), runs them (local workers or a dask scheduler; with
+``--arc`` an arc of inputs per task), and commits their rows and manifest records as
 they finish (:func:`_commit`); :func:`options_key` is what the manifest compares.
 """
 
@@ -212,7 +212,12 @@ class GraceBiasJob(BatchJob):
         rlog: RunLog,
         run_token: str | None,
     ) -> Iterator[tuple[int, FileOutcome]]:
-        """The inputs' outcomes; with ``--arc``, the arcs' (fitted whole, here)."""
+        """The inputs' outcomes; with ``--arc``, the arcs' (each arc one task, fitted whole).
+
+        The arcs run on the same workers as the inputs of a day-by-day batch
+        (:func:`accal.pipeline_arcs.arc_outcomes`: the inputs are read in parallel,
+        grouped here, then fitted an arc per task).
+        """
         if self.opts.arc == "day":
             return super().outcomes(
                 paths, workers=workers, scheduler=scheduler, rlog=rlog, run_token=run_token
@@ -220,7 +225,15 @@ class GraceBiasJob(BatchJob):
         # imported here: the reference fit's modules import scipy (~0.3 s of start-up)
         from accal.pipeline_arcs import arc_outcomes
 
-        return arc_outcomes(paths, self.out_dir, self.opts)
+        return arc_outcomes(
+            paths,
+            self.out_dir,
+            self.opts,
+            workers=workers,
+            scheduler=scheduler,
+            on_note=rlog,
+            run_token=run_token,
+        )
 
     def write(self, outcome: FileOutcome) -> FileOutcome:
         """A failed input whose calibrated file is there keeps its earlier outputs."""
@@ -265,14 +278,14 @@ class GraceBiasJob(BatchJob):
         log_path: Path | None,
         workers: int,
     ) -> RunSummary:
-        """The :class:`RunSummary` (the arcs run in this process: one worker)."""
+        """The :class:`RunSummary` of the outcomes."""
         return RunSummary(
             outcomes,
             self.table_path,
             seconds,
             n_inputs=n_inputs,
             log_path=log_path,
-            workers=1 if self.opts.arc != "day" else workers,
+            workers=workers,
         )
 
 
