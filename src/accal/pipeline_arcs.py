@@ -300,8 +300,9 @@ def _fit_arc_inputs(arc: Arc, out_dir: Path, opts: GraceBiasOptions) -> list[Fil
     outcomes: dict[int, FileOutcome] = {}
     try:
         reference = read_reference(opts)
-    except AccalError as exc:
-        return [FileOutcome(p, False, failure_message(p, exc)) for p in paths]
+    except AccalError as exc:  # as in scan_input: the input's name first
+        named = ValidationError(str(exc)) if getattr(exc, "path", None) else exc
+        return [FileOutcome(p, False, failure_message(p, named)) for p in paths]
     loaded: dict[int, tuple[AccSeries, AccSeries]] = {}
     for k, p in enumerate(paths):
         try:
