@@ -134,3 +134,21 @@ def test_step_norms_equal_the_dense_projection_of_each_step():
     n = block.size
     steps = (np.arange(n)[:, None] >= np.arange(n)[None, :]) * mask[:, None]  # column i: v_i
     np.testing.assert_allclose(b.step_norms(mask), np.sum((q.T @ steps) ** 2, axis=0), rtol=1e-10)
+
+
+def test_a_failed_block_build_raises_again_on_the_next_use(monkeypatch):
+    block, cols, _, _, _ = _tiled(9)
+    b = Basis(block, cols)
+    calls = []
+
+    def broken_svd(*args, **kwargs):
+        calls.append(1)
+        raise np.linalg.LinAlgError("SVD did not converge")
+
+    monkeypatch.setattr(np.linalg, "svd", broken_svd)
+    for _ in range(2):
+        with pytest.raises(np.linalg.LinAlgError, match="did not converge"):
+            _ = b.q
+    assert len(calls) == 2
+    monkeypatch.undo()
+    np.testing.assert_array_equal(b.q, Basis(block, cols).q)

@@ -358,10 +358,19 @@ class Basis:
         # only called when ``name`` is not set: the block attributes before the blocks
         # are built
         if name in _BLOCK_ATTRS and self.__dict__.get("_blocks_pending"):
-            self._build_blocks()
+            self._ensure_blocks()
             if name in self.__dict__:
                 return self.__dict__[name]
         raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
+    def _ensure_blocks(self) -> None:
+        """Build the blocks if not yet built (a failed build is tried again next time)."""
+        if self.__dict__.get("_blocks_pending"):
+            try:
+                self._build_blocks()
+            except BaseException:
+                self._blocks_pending = True
+                raise
 
     # ----------------------------------------------------------------- construction
     def _build_blocks(self) -> None:
@@ -473,8 +482,7 @@ class Basis:
         z = np.asarray(z, dtype=np.float64)
         if z.ndim == 1:
             z = z[:, None]
-        if self._blocks_pending:  # built once, shared by both
-            self._build_blocks()
+        self._ensure_blocks()  # built once, shared by both
         new = Basis.__new__(Basis)
         new.__dict__.update(self.__dict__)
         new.extra = np.column_stack([self.extra, z])
