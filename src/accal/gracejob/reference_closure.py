@@ -288,8 +288,9 @@ def _close_axes(
         summary.update(
             model="+".join(labels),
             candidates=list(cands),
-            null_model=f"reference fit's calibrated residual a_raw − S⁻¹a_ref (scale {mode} "
-            f"held at {day.fit.scale[i, i]:.6g}): bias {base_name} ({', '.join(base.names)})",
+            null_model=f"reference fit's calibrated residual a_raw − S⁻¹a_ref (scale {mode}"
+            f"{', held' if mode != 'fixed' else ''} at {day.fit.scale[i, i]:.6g}): bias "
+            f"{base_name} ({', '.join(base.names)})",
             removed_from_calibrated=labels[1:],
             markdown=to_markdown(res, title=f"{path.name} axis {ax} (reference fit)"),
         )
