@@ -314,3 +314,20 @@ def test_truth_and_a_coupling_to_a_table_channel(tmp_path):
     assert abs(est["bias"]["true_error_after"]) < 3 * est["bias"]["sigma_after"]
     assert abs(est["bias"]["true_error_before"]) > 20 * abs(est["bias"]["true_error_after"])
     assert "true error after" in (out / "closure.md").read_text()
+
+
+def test_fixed_scales_the_scale_candidate_is_not_attenuated_by_a_noisy_reference(tmp_path):
+    """``--scale 1,1,1`` against a POD-like noisy reference: the ``scale`` candidate's
+    regressor is the raw data less the bias, not the reference, so its coefficient is
+    ``1 − s`` for a raw gain ``1/s`` (truth 0.04, 0.02, 0.05), not pulled towards −1."""
+    t, _, raw, ref = _draw(N_DAY, 1, noisy=True)
+    day, ref = _write(tmp_path / "d.csv", t, raw), _write(tmp_path / "r.csv", t, ref)
+    out = tmp_path / "out"
+    args = ("--scale", "1,1,1", "--bias-basis", "poly1", "-q", "-j", "1", "--close-loop")
+    code, msg = _run(day, "--reference", ref, *args, "--out", out)
+    assert code == 0, msg
+    entry = json.loads((out / "closure.json").read_text())["sources"]["d.csv"]
+    for i, ax in enumerate("xyz"):
+        assert entry[ax]["removed_from_calibrated"] == ["scale"], entry[ax]["effects"]
+        (e,) = [e for e in entry[ax]["effects"] if e["name"] == "scale"]
+        assert abs(e["coefficient"] - (1 - SCALE[i])) < 3 * e["sigma"] < 0.03, e
