@@ -67,6 +67,10 @@ def test_removed_effects_say_which_member(sim):
         {"name": "bias_step", "channel": None, "p_accept": 1e-5, "epoch": 1.5e8},
         {"name": "periodic", "channel": "line", "p_accept": 2e-3, "frequency": 1e-3},
     ]
+    md = to_markdown(dataclasses.replace(res, removed=(gone, line)))
+    # the Markdown names the step by its epoch, not "bias_step (None)" (QA)
+    assert "eliminated (stood in for another effect): bias_step@2004-10-02T14:40:00GPS, " in md
+    assert "periodic(0.001 Hz)" in md and "(None)" not in md
 
 
 def test_exponential_time_constant_reported_with_its_sigma():

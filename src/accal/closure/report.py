@@ -34,6 +34,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from accal.closure.kinds import effect_label
+
 if TYPE_CHECKING:
     from numpy.typing import NDArray
 
@@ -250,7 +252,7 @@ def to_markdown(
         ch = f" ({n['channel']})" if n.get("channel") is not None else ""
         lines.append(f"- {n['name']}{ch}: {n['note']}")
     if result.removed:
-        names = ", ".join(f"{e.name} ({e.channel})" for e in result.removed)
+        names = ", ".join(effect_label(e) for e in result.removed)  # a step: its epoch
         lines.append(f"- added and later eliminated (stood in for another effect): {names}")
     for e in result.rejected:
         ch = f" ({e.channel})" if e.channel is not None else ""
