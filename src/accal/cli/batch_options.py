@@ -8,14 +8,19 @@ what a command processes differs (``inputs``, ``runs``).
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import Any
+import dataclasses
+import os
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any, TypeVar
 
 import click
 
 from accal._cliutil import option_stack
 
-__all__ = ["batch_options"]
+__all__ = ["batch_options", "for_scheduler"]
+
+T = TypeVar("T")
 
 
 def batch_options(noun: str = "inputs") -> Callable[[Any], Any]:
@@ -62,3 +67,25 @@ def batch_options(noun: str = "inputs") -> Callable[[Any], Any]:
             ),
         ]
     )
+
+
+def for_scheduler(
+    scheduler: str | None, paths: Sequence[Path], out: Path, opts: T
+) -> tuple[list[Path], Path, T]:
+    """The inputs, the output directory and the options' files as absolute paths
+    when the batch runs on a Dask cluster (``scheduler`` given), else unchanged.
+
+    A Dask worker resolves a relative path against its own working directory, not
+    the one the command was typed in (QA: every input "no such file", and a relative
+    ``--out`` created beside the worker's directory, outside the intended one).
+    ``opts`` is a frozen dataclass; its :class:`~pathlib.Path` fields are made absolute.
+    """
+    if scheduler is None:
+        return list(paths), out, opts
+    paths = [Path(os.path.abspath(p)) for p in paths]
+    changes = {
+        f.name: Path(os.path.abspath(getattr(opts, f.name)))
+        for f in dataclasses.fields(opts)  # type: ignore[arg-type]
+        if isinstance(getattr(opts, f.name), Path)
+    }
+    return paths, Path(os.path.abspath(out)), dataclasses.replace(opts, **changes)  # type: ignore[type-var]

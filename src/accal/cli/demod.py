@@ -14,6 +14,7 @@ from typing import Any
 import click
 
 from accal._cliutil import CONTEXT_SETTINGS, err, fail, fmt_number, progress, usage_fail
+from accal.cli.batch_options import for_scheduler
 from accal.cli.demod_options import demod_options
 
 
@@ -98,6 +99,8 @@ def demod(
         noise = load_psd(psd)
     except AccalError as exc:
         usage_fail(str(exc))
+    runs_l, out, opts = for_scheduler(scheduler, runs, out, opts)
+    runs = tuple(runs_l)
     coarse = too_coarse_for_tau(runs, opts)
     if coarse:
         path, step = coarse[0]

@@ -13,6 +13,7 @@ from pathlib import Path
 import click
 
 from accal._cliutil import check_files, err, progress
+from accal.cli.batch_options import for_scheduler
 from accal.cli.grace_bias_options import grace_bias_options, parse_column_map, parse_margins
 
 
@@ -97,6 +98,7 @@ def grace_bias(
         raise click.UsageError(str(exc)) from None
     check_files(reference=reference, aux=aux, truth=truth, attitude=attitude, thrusters=thrusters)
     files, problems = discover(inputs, recursive=recursive, include=include or DEFAULT_INCLUDE)
+    files, out, opts = for_scheduler(scheduler, files, out, opts)
     try:
         summary = run(
             files,
