@@ -212,7 +212,12 @@ def to_markdown(
                 ),
                 "",
             )
-            if e.tau is not None and e.details.get("tau_sigma") and where.startswith("τ"):
+            if e.name == "bias_step" and e.details.get("epoch_sigma"):
+                where += f" ± {_fmt(e.details['epoch_sigma'])} s"
+                if e.details.get("epoch_ambiguous"):
+                    lo, hi = e.details["epoch_interval"]
+                    where += f" (other epochs fit as well: {lo:.10g}-{hi:.10g} s)"
+            elif e.tau is not None and e.details.get("tau_sigma") and where.startswith("τ"):
                 where += f" ± {_fmt(e.details['tau_sigma'])}"
             elif e.name == "periodic" and e.details.get("amplitude_rate") is not None:
                 # amplitude at mid-record, changing linearly (see _Search._modulated)

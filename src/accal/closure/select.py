@@ -34,6 +34,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from accal.closure.basis import Basis, BlockBase
 from accal.closure.candidates import step_placebo_sigma
+from accal.closure.epochprofile import add_epoch_uncertainties
 from accal.closure.final import covariances, describe, refer_exponentials
 from accal.closure.inputs import (
     MIN_SAMPLES,
@@ -597,6 +598,7 @@ def _finish(search: Search, setup: _Setup, st, knots, noise_psd, floored, consid
         # reported for a 3e-9 decay 5400 s earlier)
         effects = refer_exponentials(effects, setup.t_first)
     add_lag_uncertainties(search, final, effects)
+    add_epoch_uncertainties(search, final, effects)
     unexplained = []
     if not floored:
         w, zt = unexplained_test(
