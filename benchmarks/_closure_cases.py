@@ -222,11 +222,16 @@ def effect_record(e: Any, t0: float) -> dict[str, Any]:
         "lag_ambiguous",
         "lag_sigma_linearised",
         "lag_sigma_profile",
+        "epoch_sigma",
+        "epoch_interval",
+        "epoch_ambiguous",
         "lag_sigma_sandwich",
         "lag_alternatives",
     ):
         if det.get(k) is not None:
             out[k] = det[k]
+    if out.get("epoch_interval") is not None:  # relative to the record's start, as the epoch
+        out["epoch_interval"] = [float(v) - t0 for v in out["epoch_interval"]]
     return out
 
 

@@ -469,6 +469,38 @@ def lag_table(results: list[dict]) -> list[str]:
     return lines
 
 
+def epoch_table(results: list[dict]) -> list[str]:
+    """Found steps: the epoch against its interval (``accal.closure.epochprofile``)."""
+    lines = [
+        "| data | kind | size | found with an epoch interval | true epoch inside "
+        "| median width [s] | ambiguous |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    runs = [r for r in results if r["kind"] in ("step", "pf_step", "swarm_step") and r["axes"]]
+    key = lambda r: (r["source"] + "/" + r["path"], r["kind"], r["size"])  # noqa: E731
+    for (src, kind, size), rs in _group(runs, key).items():
+        hits = [
+            (a["hit"], a["params"]["epoch"])
+            for r in rs
+            for a in r["axes"]
+            if a.get("injected", True) and a.get("hit") and a["hit"].get("epoch_interval")
+        ]
+        if not hits:
+            continue
+        inside = 0  # epochs and intervals relative to the record's start (effect_record)
+        widths = []
+        for h, e0 in hits:
+            lo, hi = h["epoch_interval"]
+            inside += lo - 1e-6 <= e0 <= hi + 1e-6
+            widths.append(hi - lo)
+        lines.append(
+            f"| {src} | {kind} | {size:.3g} | {len(hits)} | {_frac(inside, len(hits))} "
+            f"| {_g(float(np.median(widths)), '.3g')} "
+            f"| {_frac(sum(bool(h.get('epoch_ambiguous')) for h, _ in hits), len(hits))} |"
+        )
+    return lines
+
+
 def _status(a: dict, channel: str) -> str:
     for c in a.get("considered") or []:
         if c.get("channel") == channel:
@@ -673,6 +705,7 @@ def report(results: list[dict], meta: dict) -> str:
          inject_table(results)),
         ("Injected effects on the platform", platform_inject_table(results)),
         ("Lags of the couplings found", lag_table(results)),
+        ("Epochs of the steps found", epoch_table(results)),
         ("The real Swarm-A day (CLI, table input)", swarm_table(results)),
         ("Same days through the CLI and the library path", cli_api_table(results)),
         ("Time per closure", timing_table(results)),
