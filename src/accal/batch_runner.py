@@ -265,7 +265,9 @@ def run_batch(
             rlog(summary.line())
             if interrupted:
                 remove_stale_temporaries(out_dir)  # of the workers stopped mid-write
-                rlog("interrupted (SIGINT or SIGTERM): finished inputs kept; a re-run does the rest")
+                rlog(
+                    "interrupted (SIGINT or SIGTERM): finished inputs kept; a re-run does the rest"
+                )
                 raise Interrupted(summary)
             return summary
         finally:
