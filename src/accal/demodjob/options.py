@@ -8,13 +8,13 @@ made), :class:`RunOutcome` (one run file), :class:`DemodRunSummary` (a batch) an
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
 from accal.batch import Outcome
+from accal.batch_summary import BatchSummary
 from accal.errors import ValidationError, check_option
-from accal.gracejob.outcome import RunSummary
 
 #: Standard integration time for σ(T) in the summary: 3 h, as in the paper (Fig. 5) [s].
 STANDARD_INTEGRATION = 3 * 3600.0
@@ -204,16 +204,17 @@ class DemodResult:
 
 
 @dataclass(frozen=True)
-class DemodRunSummary(RunSummary):
+class DemodRunSummary(BatchSummary):
     """Result of :func:`accal.demodjob.batch.run_demod` over a batch.
 
-    :class:`accal.gracejob.outcome.RunSummary` (the same counts and end-of-run
-    line) of :class:`RunOutcome`; ``table_path`` is the periods table.
+    :class:`accal.batch_summary.BatchSummary` (the counts and end-of-run line every
+    batch command shares) of :class:`RunOutcome`, its line naming ``accal demod``;
+    ``table_path`` is the periods table.
     """
 
-    def line(self, command: str = "accal demod") -> str:
-        """The one-line end-of-run summary (as ``grace-bias``'s)."""
-        return super().line(command)
+    outcomes: list[RunOutcome]
+
+    command: ClassVar[str] = "accal demod"
 
 
 @dataclass
