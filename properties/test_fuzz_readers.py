@@ -54,7 +54,7 @@ from hypothesis import strategies as st
 
 from accal.errors import AccalError
 from accal.io import read
-from accal.io._common import GPS_TIME_RANGE
+from accal.io.common import GPS_TIME_RANGE
 from accal.io.grace_l1b import TIME_RANGE, read_grace_acc1b
 from accal.io.housekeeping import Housekeeping, read_housekeeping
 from accal.io.rawlog import open_rawlog, read_psd, read_rawlog

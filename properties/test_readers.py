@@ -17,7 +17,7 @@ from hypothesis.extra import numpy as hnp
 
 from accal.errors import FormatError
 from accal.io import read
-from accal.io._common import MAX_ABS_ACCELERATION
+from accal.io.common import MAX_ABS_ACCELERATION
 from accal.io.grace_l1b import (
     AUX_COLUMNS,
     DEFAULT_INVALID_BITS,

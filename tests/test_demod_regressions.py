@@ -51,7 +51,7 @@ def test_short_csv_error_exits_1_never_aborts(run_csv, tmp_path):
 
     pyarrow's threaded read_csv could finish its clean-up on a worker thread while
     the interpreter was shutting down (std::terminate, exit 134) in 5 of 7 runs of
-    this test; accal.io._common.csv_read_options parses on the calling thread.
+    this test; accal.io.common.csv_read_options parses on the calling thread.
     """
     short = tmp_path / "short.csv"
     write_table(_rows(run_csv).iloc[:150], short, units={"theta": "rad"})

@@ -1,6 +1,6 @@
 """Samples too far from their day to be accelerometer data (issue 23, finding 7).
 
-The readers refuse a value beyond 1000 m/s² (:data:`accal.io._common.MAX_ABS_ACCELERATION`),
+The readers refuse a value beyond 1000 m/s² (:data:`accal.io.common.MAX_ABS_ACCELERATION`),
 but a single damaged value below that limit passed: one ``lin_accl_z`` of 999 m/s² in a
 GRACE day moved the z bias to 0.416 m/s², with exit status 0.  Here a sample is
 *wild* when it is farther from its axis' median than both :data:`WILD_SIGMAS` robust

@@ -1,4 +1,4 @@
-"""Tests of the shared reader helpers (accal.io._common)."""
+"""Tests of the shared reader helpers (accal.io.common)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import pyarrow as pa
 import pytest
 
 from accal.errors import FormatError
-from accal.io._common import arrow_to_numpy, bits_from_strings
+from accal.io.common import arrow_to_numpy, bits_from_strings
 
 
 @pytest.mark.parametrize("width", [1, 3, 8, 12, 32])
@@ -36,7 +36,7 @@ def test_bits_from_strings_names_the_bad_line(bad, why):
 
 
 def test_tidy_says_when_dropped_duplicates_had_other_values():
-    from accal.io._common import tidy
+    from accal.io.common import tidy
 
     t = np.array([0.0, 1, 1, 2, 3, 3, 3])
     acc = np.arange(14.0).reshape(7, 2)

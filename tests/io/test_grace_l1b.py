@@ -532,7 +532,7 @@ def test_gzip_members_padding_and_garbage(samples, tmp_path):
 
 
 def test_gzip_bomb_and_huge_file_refused(samples, tmp_path, monkeypatch):
-    from accal.io import _common
+    from accal.io import common as _common
 
     monkeypatch.setattr(_common, "MAX_INPUT_BYTES", 10_000)
     with pytest.raises(FormatError, match="file larger than 10,000 bytes"):

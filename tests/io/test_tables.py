@@ -178,13 +178,13 @@ def test_registry_errors(samples, tmp_path):
 
 
 def test_permission_error_becomes_format_error(samples, monkeypatch):
-    import accal.io._common
+    import accal.io.common
 
     def deny(*args, **kwargs):
         raise PermissionError(13, "Permission denied")
 
     # read_bytes opens the file itself (unbuffered, to skip a BOM without a copy)
-    monkeypatch.setattr(accal.io._common, "open", deny, raising=False)
+    monkeypatch.setattr(accal.io.common, "open", deny, raising=False)
     with pytest.raises(FormatError, match="permission denied"):
         read_grace_acc1b(samples["grace_a"])
     with pytest.raises(FormatError, match="permission denied"):

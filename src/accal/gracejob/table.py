@@ -17,7 +17,7 @@ import numpy as np
 
 from accal import __version__
 from accal.errors import FormatError, ValidationError
-from accal.io._common import arrow_to_numpy, csv_read_options, one_line
+from accal.io.common import arrow_to_numpy, csv_read_options, one_line
 from accal.io.writers import arrow_column, write_table
 from accal.products.utc import utc_arrow, utc_unit
 

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from accal.errors import FormatError, check_option
-from accal.io._common import GZIP_MAGIC, missing, peek, read_bytes
+from accal.io.common import GZIP_MAGIC, missing, peek, read_bytes
 from accal.io.grace_l1b import read_grace_acc1b, sniff_grace_acc1b, write_grace_acc1b
 from accal.io.tables import read_table_series, sniff_table, write_series
 from accal.series import AccSeries
@@ -68,7 +68,7 @@ def _check_content(path: Path) -> None:
     """Raise the real problem of a file no sniffer accepts, if it has one (error path only).
 
     An empty (or blank) file and a gzip stream that cannot be decompressed are
-    reported as the readers report them (:func:`accal.io._common.read_bytes`:
+    reported as the readers report them (:func:`accal.io.common.read_bytes`:
     ``empty file``, ``corrupt gzip stream (...)``), not as an unknown format.
     """
     head = peek(path, 4096)

@@ -13,8 +13,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from accal.errors import FormatError
-from accal.io._common import check_binary
 from accal.io.ahk_spec import N_FIXED, TIME_RANGE, Field
+from accal.io.common import check_binary
 from accal.io.hk_data import _NOT_PRESENT
 
 _WHITESPACE = np.zeros(256, dtype=bool)

@@ -87,11 +87,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from accal.errors import FormatError, UnsupportedFormatError, ValidationError
-from accal.io._common import (
-    _short,
+from accal.io.common import (
     bits_from_strings,
     check_binary,
     check_gps_time,
+    shorten,
     tidy,
 )
 from accal.io.grace_l1b import (
@@ -535,7 +535,7 @@ def _interpret_gracefo(header: bytes, path: Path) -> dict[str, Any]:
     names = tuple(next(iter(v)) for v in variables)
     if names != COLUMNS:
         raise UnsupportedFormatError(
-            f"columns {_short(' '.join(names[:9]), 100)} are not the SCA1B columns "
+            f"columns {shorten(' '.join(names[:9]), 100)} are not the SCA1B columns "
             f"({' '.join(COLUMNS)})",
             path,
             _yaml_line(header, "variables"),
@@ -550,7 +550,7 @@ def _interpret_gracefo(header: bytes, path: Path) -> dict[str, Any]:
     letter = platform.split()[-1] if isinstance(platform, str) and platform.split() else ""
     if letter not in ("C", "D"):
         raise FormatError(
-            f"YAML header: platform is {_short(str(platform), 40)}, "
+            f"YAML header: platform is {shorten(str(platform), 40)}, "
             "expected 'GRACE C' or 'GRACE D'",
             path,
             _yaml_line(header, "platform"),
@@ -585,7 +585,7 @@ def _numbers(col: tuple[str, ...], name: str, dtype: type, path: Path, lines: li
         except ValueError:
             ok = False
         if not ok:
-            raise FormatError(f"{name}: not {kind}: {_short(tok, 30)}", path, lines[i])
+            raise FormatError(f"{name}: not {kind}: {shorten(tok, 30)}", path, lines[i])
     raise FormatError(f"{name}: cannot parse", path)  # pragma: no cover
 
 
@@ -624,7 +624,7 @@ def _parse_records(data: bytes, first_line: int, path: Path) -> dict[str, Any]:
     if bad.size:
         i = int(bad[0])
         raise FormatError(
-            f"satellite id {_short(ids[i], 10)} is not one of A, B, C, D", path, lines[i]
+            f"satellite id {shorten(ids[i], 10)} is not one of A, B, C, D", path, lines[i]
         )
     sca_id = _numbers(cols[2], "sca_id", np.int64, path, lines)
     quat = np.column_stack(

@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from accal.errors import AccalError, FormatError
-from accal.io._common import PARQUET_MAGIC, check_gps_time
+from accal.io.common import PARQUET_MAGIC, check_gps_time
 from accal.io.hk_data import Housekeeping, _listing, _sort_merge
 from accal.io.table_columns import numeric_column, utc_column_to_gps
 from accal.io.table_parse import read_csv_table, read_parquet_table

@@ -32,7 +32,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from accal.io._common import PARQUET_MAGIC
 from accal.io.ahk import (  # noqa: F401 (names kept importable from here)
     _BIT_MEANING_RE,
     _bit_meanings,
@@ -63,6 +62,7 @@ from accal.io.ahk_spec import (  # noqa: F401 (names kept importable from here)
     TIME_RANGE,
     Field,
 )
+from accal.io.common import PARQUET_MAGIC
 from accal.io.grace.header import _GRACE_END_RE, _GRACE_KEY_RE, read_l1b_bytes
 from accal.io.hk_data import (  # noqa: F401 (names kept importable from here)
     _NOT_PRESENT,

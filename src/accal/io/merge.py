@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from accal.errors import ValidationError
-from accal.io._common import arrow_to_numpy
+from accal.io.common import arrow_to_numpy
 from accal.io.writers import arrow_column, write_table
 
 __all__ = ["as_arrow_table", "merge_table", "sort_rows"]

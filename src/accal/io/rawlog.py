@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from accal.errors import FormatError
-from accal.io._common import implausible, implausible_message
+from accal.io.common import implausible, implausible_message
 from accal.io.tables import (
     STREAM_ROWS,
     TableStream,

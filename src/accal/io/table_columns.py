@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from accal.errors import FormatError
-from accal.io._common import arrow_to_numpy, one_line
+from accal.io.common import arrow_to_numpy, one_line
 from accal.io.table_parse import _exc_text
 from accal.timescale import utc_to_gps
 
@@ -89,7 +89,7 @@ def numeric_column(
 
 
 #: UTC instants accepted in a ``time_utc`` column: the GPS epoch to 2100 (as
-#: :data:`accal.io._common.GPS_TIME_RANGE`).
+#: :data:`accal.io.common.GPS_TIME_RANGE`).
 UTC_RANGE = (np.datetime64("1980-01-06T00:00:00", "s"), np.datetime64("2100-01-01T00:00:00", "s"))
 #: :data:`UTC_RANGE` as ISO-8601 text, compared with the smallest and largest string.
 _UTC_TEXT_RANGE = ("1980-01-06", "2100-01-01T00:00:00")

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from accal.errors import FormatError
-from accal.io._common import one_line
+from accal.io.common import one_line
 
 #: Key of the series description in the file metadata written by :func:`write_series`.
 META_KEY = "accal_series"

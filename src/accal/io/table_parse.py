@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from accal.errors import FormatError
-from accal.io._common import PARQUET_MAGIC, check_binary, csv_read_options, one_line, read_bytes
+from accal.io.common import PARQUET_MAGIC, check_binary, csv_read_options, one_line, read_bytes
 from accal.io.table_meta import _comment, _json_object, _plain_name, _units_object
 from accal.io.writers import read_csv_metadata
 

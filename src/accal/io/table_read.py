@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from accal.errors import FormatError, check_option
-from accal.io._common import (
+from accal.io.common import (
     PARQUET_MAGIC,
     bits_from_strings,
     check_gps_time,

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from accal.errors import FormatError, ValidationError
-from accal.io._common import (
+from accal.io.common import (
     PARQUET_MAGIC,
     UTF8_BOM,
     check_binary,

@@ -5,7 +5,7 @@ counts, per-record on-times, accumulated durations and the derived
 :class:`FiringEvents`); :func:`firing_mask` marks the accelerometer epochs that lie
 near a firing; :func:`find_thruster_file` finds the THR1B file that belongs to an
 ACC1B / ACT1B file.  Supported inputs (both may be gzip-compressed, detected by
-magic bytes, see :func:`accal.io._common.read_bytes`):
+magic bytes, see :func:`accal.io.common.read_bytes`):
 
 * GRACE THR1B ASCII (RL00-RL03): fixed-width header ending with ``END OF HEADER``
   (``FILE TYPE ipTHR1XF``), header in ``meta["grace"]``;
@@ -88,7 +88,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from accal.errors import FormatError, UnsupportedFormatError, ValidationError
-from accal.io._common import check_gps_time, one_line
+from accal.io.common import check_gps_time, one_line
 from accal.io.grace_l1b import (
     SATELLITES,
     _grace_int,

@@ -240,7 +240,7 @@ def _float_values(values: Any) -> NDArray[np.float64]:
     import pyarrow as pa
 
     if isinstance(values, pa.ChunkedArray | pa.Array):
-        from accal.io._common import arrow_to_numpy
+        from accal.io.common import arrow_to_numpy
 
         return np.asarray(arrow_to_numpy(values.cast(pa.float64())), dtype=np.float64)
     return np.asarray(values, dtype=np.float64)

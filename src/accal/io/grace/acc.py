@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from accal.errors import ValidationError
-from accal.io._common import tidy
+from accal.io.common import tidy
 from accal.io.grace.ascii import _parse_ascii
 from accal.io.grace.binary import _parse_binary
 from accal.io.grace.checks import _check_header_span, _check_ids, _name_letter

@@ -15,9 +15,8 @@ from typing import Any
 import numpy as np
 
 from accal.errors import FormatError
-from accal.io._common import (
+from accal.io.common import (
     MAX_ABS_ACCELERATION,
-    _short,
     arrow_to_numpy,
     bits_from_strings,
     check_gps_time,
@@ -25,6 +24,7 @@ from accal.io._common import (
     implausible_message,
     one_line,
     row_to_line,
+    shorten,
 )
 from accal.io.grace.binary import _binary_records
 from accal.io.grace.spec import COLUMNS, DTYPES, _unit
@@ -100,11 +100,11 @@ def _locate_bad_line(
             try:
                 v = float(tok)
             except ValueError:
-                return FormatError(f"{name}: not a number: {_short(tok)}", path, lineno)
+                return FormatError(f"{name}: not a number: {shorten(tok)}", path, lineno)
             if not np.isfinite(v):
-                return FormatError(f"{name}: non-finite value {_short(tok)}", path, lineno)
+                return FormatError(f"{name}: non-finite value {shorten(tok)}", path, lineno)
             if not _NUMBER_RE.fullmatch(tok):
-                return FormatError(f"{name}: not a number: {_short(tok)}", path, lineno)
+                return FormatError(f"{name}: not a number: {shorten(tok)}", path, lineno)
             if name != "gps_time" and abs(v) > MAX_ABS_ACCELERATION:
                 return FormatError(implausible_message(name, v, _unit(name)), path, lineno)
     why = f" ({one_line(reason, 120)})" if reason else ""

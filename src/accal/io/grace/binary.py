@@ -9,7 +9,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from accal.errors import FormatError
-from accal.io._common import GPS_TIME_RANGE, check_gps_time, implausible, implausible_message
+from accal.io.common import GPS_TIME_RANGE, check_gps_time, implausible, implausible_message
 from accal.io.grace.checks import _ID_LOOKUP
 from accal.io.grace.spec import BINARY_DTYPE, COLUMNS, _unit
 

@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from accal.errors import FormatError
-from accal.io._common import _short, string_at
+from accal.io.common import shorten, string_at
 from accal.io.grace.spec import SATELLITES
 from accal.timescale import gps_to_date
 
@@ -58,7 +58,7 @@ def _check_ids(
         i = int(np.flatnonzero(~ok)[0])
         where = f"record {i + 1}: " if line_of is None else ""
         raise FormatError(
-            f"{where}satellite id {_short(string_at(ids, i), 10)} is not one of A, B, C, D",
+            f"{where}satellite id {shorten(string_at(ids, i), 10)} is not one of A, B, C, D",
             path,
             None if line_of is None else line_of(i),
         )

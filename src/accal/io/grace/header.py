@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from accal.errors import FormatError, UnsupportedFormatError
-from accal.io._common import GPS_TIME_RANGE, _short, check_binary, peek, read_bytes, read_head
+from accal.io.common import GPS_TIME_RANGE, check_binary, peek, read_bytes, read_head, shorten
 from accal.io.grace.spec import COLUMNS, GRACEFO_COLUMNS, HEADER_END, SATELLITES, YAML_MAX_DEPTH
 
 _GRACE_END_RE = re.compile(rb"^(?:# )?END OF HEADER[ \t]*\r?$", re.M)
@@ -119,13 +119,13 @@ def read_l1b_bytes(path: str | Path) -> bytes:
     (and than :data:`L1B_SIZE_FLOOR`) is refused after reading its first MiB, before
     gigabytes of a wrong or padded file are read and parsed (issue 23, finding 9: a
     2 GB file reached 4.3 GB of memory and 30 s before failing).  Without a record
-    count in the first MiB, :func:`accal.io._common.read_bytes` and its global
+    count in the first MiB, :func:`accal.io.common.read_bytes` and its global
     limit decide.
 
     Raises
     ------
     FormatError
-        As :func:`accal.io._common.read_bytes`, or the file is larger than its
+        As :func:`accal.io.common.read_bytes`, or the file is larger than its
         header's record count allows.
     """
     head = read_head(path, _HEADER_SEARCH)
@@ -167,7 +167,7 @@ def _parse_grace_header(header: bytes, path: Path) -> tuple[dict[str, Any], dict
             continue
         key, sep, value = line.partition(":")
         if not sep:
-            raise FormatError(f"header line is not 'KEY : value': {_short(line, 40)}", path, i)
+            raise FormatError(f"header line is not 'KEY : value': {shorten(line, 40)}", path, i)
         key, value = key.strip(), value.strip()
         if key in meta:
             prev = meta[key]
@@ -186,7 +186,7 @@ def _grace_int(meta: dict, lines: dict, key: str, path: Path) -> int | None:
         return int(str(value).split()[0])
     except (ValueError, IndexError):
         raise FormatError(
-            f"header {key!r} is not an integer: {_short(str(value), 40)}", path, lines.get(key)
+            f"header {key!r} is not an integer: {shorten(str(value), 40)}", path, lines.get(key)
         ) from None
 
 
@@ -244,7 +244,7 @@ def _header_time(value: Any, key: str, path: Path, line: int | None) -> float | 
     lo, hi = GPS_TIME_RANGE
     if not (np.isfinite(t) and lo <= t <= hi):
         raise FormatError(
-            f"header {key!r} is not a GPS time in seconds: {_short(str(value), 40)}", path, line
+            f"header {key!r} is not a GPS time in seconds: {shorten(str(value), 40)}", path, line
         )
     return t
 
@@ -299,7 +299,7 @@ def _interpret_gracefo(header: bytes, path: Path) -> dict[str, Any]:
     names = tuple(next(iter(v)) for v in variables)
     if names and names != GRACEFO_COLUMNS:
         raise UnsupportedFormatError(
-            f"columns {_short(' '.join(names[:6]), 80)} ... are not ACC1B/ACT1B columns "
+            f"columns {shorten(' '.join(names[:6]), 80)} ... are not ACC1B/ACT1B columns "
             "(only accelerometer data are supported)",
             path,
         )
@@ -312,7 +312,7 @@ def _interpret_gracefo(header: bytes, path: Path) -> dict[str, Any]:
         letter = ""  # no platform: the records' GRACEFO_id, else the file name (issue 23)
     elif letter not in ("C", "D"):
         raise FormatError(
-            f"YAML header: platform is {_short(platform, 40)}, expected 'GRACE C' or 'GRACE D'",
+            f"YAML header: platform is {shorten(platform, 40)}, expected 'GRACE C' or 'GRACE D'",
             path,
         )
     nsa = hdr.get("non-standard_attributes") or {}
@@ -350,7 +350,7 @@ def header_satellite(meta: dict[str, Any], lines: dict[str, int], path: Path) ->
     letter = sat.split()[-1] if sat.split() else ""
     if letter not in SATELLITES:
         raise FormatError(
-            f"header 'SATELLITE NAME' is {_short(sat, 40)}, expected 'GRACE A' ... 'GRACE D'",
+            f"header 'SATELLITE NAME' is {shorten(sat, 40)}, expected 'GRACE A' ... 'GRACE D'",
             path,
             lines.get("SATELLITE NAME"),
         )

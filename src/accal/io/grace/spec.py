@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from accal.io._common import GPS_TIME_RANGE
+from accal.io.common import GPS_TIME_RANGE
 from accal.series import UNITS
 
 #: Data columns of ACC1B / ACT1B, in file order (GRACE-FO names the id ``GRACEFO_id``).

@@ -288,7 +288,7 @@ def csv_read_options(**kwargs: Any) -> Any:
     return pacsv.ReadOptions(use_threads=False, **kwargs)
 
 
-def _short(value: Any, n: int = 40) -> str:
+def shorten(value: Any, n: int = 40) -> str:
     """``repr`` of a value cut to ``n`` characters, for error messages."""
     return repr(value[:n] if isinstance(value, str | bytes) else value)
 
@@ -442,7 +442,7 @@ def bits_from_strings(
     if bad.size:
         i = int(bad[0])
         raise FormatError(
-            f"{name}: quality flag {_short(string_at(arr, i))} is not {width} characters of 0/1",
+            f"{name}: quality flag {shorten(string_at(arr, i))} is not {width} characters of 0/1",
             path,
             where(i),
         )
@@ -453,7 +453,7 @@ def bits_from_strings(
     if not np.all(ones | (chars == ord("0"))):
         i = int(np.flatnonzero(~(ones | (chars == ord("0"))).all(axis=1))[0])
         raise FormatError(
-            f"{name}: quality flag {_short(string_at(arr, i))} is not {width} characters of 0/1",
+            f"{name}: quality flag {shorten(string_at(arr, i))} is not {width} characters of 0/1",
             path,
             where(i),
         )
