@@ -166,6 +166,9 @@ def test_close_loop_with_a_reference_finds_the_cli_step(tmp_path: Path) -> None:
     assert abs(step["epoch"] - (day.time[0] + 5000)) < 600  # the injected step
     assert step["epoch_utc"].tzname() == "UTC"
     assert abs(abs(step["coefficient"]) - 5e-9) < 5 * step["sigma"]
+    # the epoch's σ (accal.closure.epochprofile), as closure.json's details have it
+    assert step["epoch_sigma"] == entry["effects"][0]["details"]["epoch_sigma"] >= 1.0
+    assert df.attrs["units"]["epoch_sigma"] == "s" and "lag_sigma" in df.columns
 
 
 def test_demodulate_equals_the_cli(tmp_path: Path) -> None:

@@ -65,7 +65,9 @@ class Closure:
 
         Columns: ``axis``, ``kind``, ``name``, ``channel``, ``coefficient`` (in
         ``unit``, SI), ``sigma``, ``significance`` (p-value), ``epoch`` (GPS
-        seconds, steps), ``epoch_utc``, ``frequency`` [Hz], ``lag``, ``tau`` [s],
+        seconds, steps), ``epoch_utc``, ``epoch_sigma`` [s] (half the epoch's
+        interval, :mod:`accal.closure.epochprofile`), ``frequency`` [Hz], ``lag``,
+        ``lag_sigma`` [s] (:mod:`accal.closure.lagprofile`), ``tau`` [s],
         ``instrument`` (removed from the calibrated series), ``model``.
 
         Examples
@@ -77,19 +79,22 @@ class Closure:
         """
         import pandas as pd
 
-        cols = ["coefficient", "unit", "sigma", "significance", "epoch", "frequency"]
-        cols += ["lag", "tau", "instrument"]
+        cols = ["coefficient", "unit", "sigma", "significance", "epoch", "epoch_sigma"]
+        cols += ["frequency", "lag", "lag_sigma", "tau", "instrument"]
+        from_details = ("epoch_sigma", "lag_sigma")
         rows = []
         for key, entry in self.entries.items():
             for kind, items in (("effect", "effects"), ("unexplained", "unexplained")):
                 for e in entry.get(items, []):
                     row = {"axis": e.get("axis") or key, "kind": kind, "name": e.get("name")}
                     row["channel"] = e.get("channel")
-                    row.update({c: e.get(c) for c in cols})
+                    row.update({c: e.get(c) for c in cols if c not in from_details})
+                    row.update({c: (e.get("details") or {}).get(c) for c in from_details})
                     row["model"] = entry.get("model", "")
                     rows.append(row)
         df = pd.DataFrame(rows, columns=["axis", "kind", "name", "channel", *cols, "model"])
-        for c in ("coefficient", "sigma", "significance", "epoch", "frequency", "lag", "tau"):
+        numeric = ("coefficient", "sigma", "significance", "epoch", "frequency", "lag", "tau")
+        for c in (*numeric, *from_details):
             df[c] = pd.to_numeric(df[c], errors="coerce").astype(float)
         epochs = df["epoch"].to_numpy()
         utc = np.full(epochs.size, np.datetime64("NaT"), dtype="datetime64[ns]")
@@ -108,7 +113,9 @@ class Closure:
             "epoch": "s (GPS seconds since 2000-01-01 12:00:00; steps)",
             "epoch_utc": "UTC",
             "frequency": "Hz",
+            "epoch_sigma": "s",
             "lag": "s",
+            "lag_sigma": "s",
             "tau": "s",
         }
         df.attrs["orbit_period"] = self.orbit_period
