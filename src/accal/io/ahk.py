@@ -26,12 +26,12 @@ from accal.io.ahk_spec import (
     RECORD_COLUMNS,
 )
 from accal.io.grace.header import (
-    _grace_int,
-    _parse_grace_header,
-    _split_header,
+    grace_int,
     header_satellite,
     load_yaml_header,
+    parse_grace_header,
     refuse_binary,
+    split_header,
 )
 from accal.io.grace.spec import SATELLITES
 from accal.io.hk_data import Housekeeping, _sort_merge
@@ -41,7 +41,7 @@ _BIT_MEANING_RE = re.compile(r"^bits?\s+(\d+)(?:\s*-\s*(\d+))?\s*=\s*(.*?)\s*$")
 
 
 def _interpret_grace(header: bytes, path: Path) -> dict[str, Any]:
-    meta, lines = _parse_grace_header(header, path)
+    meta, lines = parse_grace_header(header, path)
     file_type = next((k for k in meta if k.startswith("FILE TYPE")), None)
     if file_type is not None:
         m = re.search(r"ip(\w{3}1[ABX])F", file_type)
@@ -62,7 +62,7 @@ def _interpret_grace(header: bytes, path: Path) -> dict[str, Any]:
     return {
         "meta": {"grace": meta},
         "letter": letter,
-        "n_header": _grace_int(meta, lines, "NUMBER OF DATA RECORDS", path),
+        "n_header": grace_int(meta, lines, "NUMBER OF DATA RECORDS", path),
         "fields": GRACE_FIELDS,
         "format": "grace-ahk1b",
     }
@@ -154,7 +154,7 @@ def _check_time_ref(time_ref: NDArray[np.bytes_], path: Path) -> list[str]:
 
 
 def _read_ahk1b(raw: bytes, path: Path) -> Housekeeping:
-    flavour, header, data_start, first_line = _split_header(raw, path)
+    flavour, header, data_start, first_line = split_header(raw, path)
     info = (_interpret_gracefo if flavour == "gracefo" else _interpret_grace)(header, path)
     cols, present, positional = _parse_records(raw[data_start:], first_line, info["fields"], path)
     warn = _check_ids(cols["id"], info["letter"], path)

@@ -98,15 +98,15 @@ from accal.io.grace_l1b import (
     SATELLITES,
     _check_header_span,
     _header_time,
-    _parse_grace_header,
     _record_count,
     _span,
-    _split_header,
     _yaml_line,
     header_satellite,
     load_yaml_header,
+    parse_grace_header,
     read_l1b_bytes,
     refuse_binary,
+    split_header,
 )
 from accal.series import UNITS
 
@@ -503,7 +503,7 @@ def find_attitude_file(acc_path: str | Path) -> Path | None:
 
 
 def _interpret_grace(header: bytes, path: Path) -> dict[str, Any]:
-    meta, lines = _parse_grace_header(header, path)
+    meta, lines = parse_grace_header(header, path)
     file_type = next((k for k in meta if k.startswith("FILE TYPE")), None)
     if file_type is not None:
         m = re.search(r"ip(\w{3}1[AB])F", file_type)
@@ -702,7 +702,7 @@ def read_attitude(path: str | Path) -> Attitude:
     """
     path = Path(path)
     raw = read_l1b_bytes(path)
-    flavour, header, data_start, first_line = _split_header(raw, path)
+    flavour, header, data_start, first_line = split_header(raw, path)
     info = (_interpret_gracefo if flavour == "gracefo" else _interpret_grace)(header, path)
     cols = _parse_records(raw[data_start:], first_line, path)
     warn: list[str] = []

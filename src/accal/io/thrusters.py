@@ -91,13 +91,13 @@ from accal.errors import FormatError, UnsupportedFormatError, ValidationError
 from accal.io.common import check_gps_time, one_line
 from accal.io.grace_l1b import (
     SATELLITES,
-    _grace_int,
-    _parse_grace_header,
-    _split_header,
+    grace_int,
     header_satellite,
     load_yaml_header,
+    parse_grace_header,
     read_l1b_bytes,
     refuse_binary,
+    split_header,
 )
 
 #: The 14 thrusters in record order: attitude control branch 1 and 2, thrusters 1-6
@@ -298,7 +298,7 @@ class ThrusterFirings:
 
 
 def _interpret_grace(header: bytes, path: Path) -> dict[str, Any]:
-    meta, lines = _parse_grace_header(header, path)
+    meta, lines = parse_grace_header(header, path)
     file_type = next((k for k in meta if k.startswith("FILE TYPE")), None)
     if file_type is not None:
         m = re.search(r"ip(\w{3}1[ABX])F", file_type)
@@ -308,7 +308,7 @@ def _interpret_grace(header: bytes, path: Path) -> dict[str, Any]:
             )
     refuse_binary(meta, lines, path, "THR1B")
     letter = header_satellite(meta, lines, path)
-    n = _grace_int(meta, lines, "NUMBER OF DATA RECORDS", path)
+    n = grace_int(meta, lines, "NUMBER OF DATA RECORDS", path)
     return {
         "meta": {"grace": meta},
         "letter": letter,
@@ -534,7 +534,7 @@ def read_thrusters(path: str | Path) -> ThrusterFirings:
     """
     path = Path(path)
     raw = read_l1b_bytes(path)
-    flavour, header, data_start, first_line = _split_header(raw, path)
+    flavour, header, data_start, first_line = split_header(raw, path)
     info = (_interpret_gracefo if flavour == "gracefo" else _interpret_grace)(header, path)
     rec = _parse_records(raw[data_start:], first_line, path)
     lines = rec["line"]

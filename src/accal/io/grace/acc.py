@@ -19,8 +19,8 @@ from accal.io.grace.checks import _check_header_span, _check_ids, _name_letter
 from accal.io.grace.header import (
     _interpret_grace,
     _interpret_gracefo,
-    _split_header,
     read_l1b_bytes,
+    split_header,
 )
 from accal.io.grace.spec import AUX_COLUMNS, COLUMN_UNITS, DEFAULT_INVALID_BITS, SATELLITES
 from accal.series import UNITS, AccSeries, ReadReport
@@ -73,7 +73,7 @@ def read_grace_acc1b(path: str | Path, *, invalid_bits: int = DEFAULT_INVALID_BI
         )
     path = Path(path)
     raw = read_l1b_bytes(path)
-    flavour, header, data_start, first_line = _split_header(raw, path)
+    flavour, header, data_start, first_line = split_header(raw, path)
     info = (_interpret_gracefo if flavour == "gracefo" else _interpret_grace)(header, path)
     cols = (
         _parse_binary(raw[data_start:], path)

@@ -139,7 +139,7 @@ def read_l1b_bytes(path: str | Path) -> bytes:
     )
 
 
-def _split_header(raw: bytes, path: Path) -> tuple[str, bytes, int, int]:
+def split_header(raw: bytes, path: Path) -> tuple[str, bytes, int, int]:
     """Return (flavour, header bytes, offset of data, 1-based line of first data row)."""
     head = raw[:_HEADER_SEARCH]
     flavour = "gracefo" if head.startswith(b"header:") else "grace"
@@ -156,7 +156,7 @@ def _split_header(raw: bytes, path: Path) -> tuple[str, bytes, int, int]:
     return flavour, header, data_start, first_data_line
 
 
-def _parse_grace_header(header: bytes, path: Path) -> tuple[dict[str, Any], dict[str, int]]:
+def parse_grace_header(header: bytes, path: Path) -> tuple[dict[str, Any], dict[str, int]]:
     meta: dict[str, Any] = {}
     lines: dict[str, int] = {}
     for i, raw_line in enumerate(header.decode("utf-8").split("\n"), start=1):
@@ -178,7 +178,7 @@ def _parse_grace_header(header: bytes, path: Path) -> tuple[dict[str, Any], dict
     return meta, lines
 
 
-def _grace_int(meta: dict, lines: dict, key: str, path: Path) -> int | None:
+def grace_int(meta: dict, lines: dict, key: str, path: Path) -> int | None:
     if key not in meta:
         return None
     value = meta[key]
@@ -193,14 +193,14 @@ def _grace_int(meta: dict, lines: dict, key: str, path: Path) -> int | None:
 def _record_count(meta: dict, lines: dict, path: Path) -> int | None:
     """The header's NUMBER OF DATA RECORDS (None if absent); negative is an error."""
     key = "NUMBER OF DATA RECORDS"
-    n = _grace_int(meta, lines, key, path)
+    n = grace_int(meta, lines, key, path)
     if n is not None and n < 0:
         raise FormatError(f"header {key!r} is negative: {n}", path, lines.get(key))
     return n
 
 
 def _interpret_grace(header: bytes, path: Path) -> dict[str, Any]:
-    meta, lines = _parse_grace_header(header, path)
+    meta, lines = parse_grace_header(header, path)
     file_type = next((k for k in meta if k.startswith("FILE TYPE")), None)
     if file_type is not None:
         m = re.search(r"ip(\w{3}1[AB])F", file_type)
@@ -212,7 +212,7 @@ def _interpret_grace(header: bytes, path: Path) -> dict[str, Any]:
                 lines[file_type],
             )
     letter = header_satellite(meta, lines, path)
-    fmt = _grace_int(meta, lines, "FILE FORMAT 0=BINARY 1=ASCII", path)
+    fmt = grace_int(meta, lines, "FILE FORMAT 0=BINARY 1=ASCII", path)
     if fmt not in (None, 0, 1):
         raise FormatError(f"header 'FILE FORMAT' is {fmt}, expected 0 or 1", path)
     first, last = (
@@ -359,7 +359,7 @@ def header_satellite(meta: dict[str, Any], lines: dict[str, int], path: Path) ->
 
 def refuse_binary(meta: dict[str, Any], lines: dict[str, int], path: Path, product: str) -> None:
     """UnsupportedFormatError for a binary (``FILE FORMAT 0``) file of an ASCII-only reader."""
-    if _grace_int(meta, lines, "FILE FORMAT 0=BINARY 1=ASCII", path) == 0:
+    if grace_int(meta, lines, "FILE FORMAT 0=BINARY 1=ASCII", path) == 0:
         raise UnsupportedFormatError(
             f"binary {product} files are not supported (use the ASCII product)",
             path,
