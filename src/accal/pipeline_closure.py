@@ -420,6 +420,18 @@ def _plot_closure(res: Any, prefix: Path, ax: str) -> list[Path]:
     return names
 
 
+def change_entry(before: float, sigma_before: float, after: float, sigma_after: float) -> dict:
+    """One quantity before and after closing the loop, with ``change_sigmas``:
+    ``|after − before| / σ_after`` (infinite for σ_after = 0)."""
+    return {
+        "before": before,
+        "sigma_before": sigma_before,
+        "after": after,
+        "sigma_after": sigma_after,
+        "change_sigmas": abs(after - before) / sigma_after if sigma_after > 0 else float("inf"),
+    }
+
+
 def before_after(
     before: dict[tuple[str, str], Any],
     after: dict[tuple[str, str], Any],
@@ -440,13 +452,7 @@ def before_after(
         for k, name in enumerate(("bias", "drift")):
             b, s_b = float(fb.coef[k]), float(fb.sigma[k])
             v, s_v = float(fa.coef[k]), float(fa.sigma[k])
-            e = {
-                "before": b,
-                "sigma_before": s_b,
-                "after": v,
-                "sigma_after": s_v,
-                "change_sigmas": abs(v - b) / s_v if s_v > 0 else float("inf"),
-            }
+            e = change_entry(b, s_b, v, s_v)
             if truth is not None:
                 tb = truth["bias"] + truth["drift"] * (fb.t0 - truth["t0"])
                 tv = tb if name == "bias" else truth["drift"]

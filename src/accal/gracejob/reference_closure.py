@@ -175,6 +175,8 @@ def before_after(
     when the truth has the reference's ``S`` (``accal simulate grace --reference-out``),
     of the scale; a truth without it leaves the scale out (every row of the report's
     table then has its true errors)."""
+    from accal.pipeline_closure import change_entry  # imported lazily, as the others here
+
     b = _row_estimates(before, axis, time, opts.scale)
     a = _row_estimates(after, axis, time, opts.scale)
     true_s = _truth_scale(opts.truth) if truth is not None and opts.truth else None
@@ -183,13 +185,7 @@ def before_after(
         if q == "scale" and truth is not None and true_s is None:
             continue
         (vb, sb), (va, sa) = b[q], a[q]
-        e = {
-            "before": vb,
-            "sigma_before": sb,
-            "after": va,
-            "sigma_after": sa,
-            "change_sigmas": abs(va - vb) / sa if sa > 0 else float("inf"),
-        }
+        e = change_entry(vb, sb, va, sa)
         if truth is not None and q == "scale":
             i = AXES.index(axis)
             e["true_error_before"] = vb - float(true_s[i, i])
