@@ -152,3 +152,39 @@ def test_a_failed_block_build_raises_again_on_the_next_use(monkeypatch):
     assert len(calls) == 2
     monkeypatch.undo()
     np.testing.assert_array_equal(b.q, Basis(block, cols).q)
+
+
+def test_appended_columns_equal_a_full_qr_and_a_dependent_one_falls_back():
+    """``extend`` updates the QR of the extra columns (CholeskyQR2 of the new block);
+    a basis built with all of them at once (Householder QR) spans the same space."""
+    block, cols, _, _, rng = _tiled(10)
+    n = block.size
+    z1, z2 = rng.standard_normal((n, 3)), rng.standard_normal((n, 2))
+    inc = Basis(block, cols).extend(z1).extend(z2)
+    full = Basis(block, cols, extra=np.column_stack([z1, z2]))
+    y = rng.standard_normal(n)
+    fi, ff = inc.fit(y), full.fit(y)
+    np.testing.assert_allclose(fi.resid, ff.resid, rtol=0, atol=1e-12 * np.abs(y).max())
+    np.testing.assert_allclose(fi.gamma, ff.gamma, rtol=1e-9)
+    np.testing.assert_allclose(inc.qe.T @ inc.qe, np.eye(5), atol=1e-12)
+    # a column in the span of the others: the pivoted QR drops it (coefficient NaN)
+    dep = inc.extend(z1[:, :1] + 2.0 * z2[:, 1:])
+    assert dep.keep.size == 5 and np.isnan(dep.fit(y).gamma).sum() == 1
+    np.testing.assert_allclose(dep.fit(y).resid, fi.resid, atol=1e-12 * np.abs(y).max())
+
+
+def test_orthonormal_columns_are_taken_as_their_own_qr():
+    block, cols, _, _, rng = _tiled(11)
+    n = block.size
+    b = Basis(block, cols)
+    z = rng.standard_normal((n, 4))
+    z = np.linalg.qr(z - b.project(z))[0]  # orthonormal, orthogonal to the blocks
+    fast = b.extend(z, orthonormal=True)
+    assert fast.qe is z and np.array_equal(fast.re, np.eye(4))
+    y = rng.standard_normal(n)
+    np.testing.assert_allclose(
+        fast.fit(y).resid, b.extend(z).fit(y).resid, atol=1e-12 * np.abs(y).max()
+    )
+    # not orthogonal to the blocks: the flag is checked and the QR made
+    bad = b.extend(z + cols[:, :1] * 0.1, orthonormal=True)
+    assert bad.qe is not z

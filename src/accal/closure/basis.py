@@ -477,8 +477,13 @@ class Basis:
         self.qe = qe
         self.re = re
 
-    def extend(self, z: NDArray[np.float64]) -> Basis:
-        """A new basis with the raw columns ``z`` (n, q) appended to the extra ones."""
+    def extend(self, z: NDArray[np.float64], orthonormal: bool = False) -> Basis:
+        """A new basis with the raw columns ``z`` (n, q) appended to the extra ones.
+
+        ``orthonormal``: ``z`` is known to be orthonormal and orthogonal to this basis
+        (a template's smooth curve beside the bias); checked on the blocks, then taken
+        as its own QR factor.
+        """
         z = np.asarray(z, dtype=np.float64)
         if z.ndim == 1:
             z = z[:, None]
@@ -486,8 +491,54 @@ class Basis:
         new = Basis.__new__(Basis)
         new.__dict__.update(self.__dict__)
         new.extra = np.column_stack([self.extra, z])
-        new._build_extra()
+        if orthonormal and self.n_extra == 0 and self.nuisance is None:
+            inside = np.abs(self.block_project(z)).max(initial=0.0)
+            if inside < 1e-9 * max(float(np.abs(z).max(initial=0.0)), 1e-300):
+                new.qe, new.re, new.keep = z, np.eye(z.shape[1]), np.arange(z.shape[1])
+                return new
+        if not (self.keep.size == self.n_extra and new._append_extra(z)):
+            new._build_extra()
         return new
+
+    def _append_extra(self, z: NDArray[np.float64]) -> bool:
+        """Update the QR of the extra columns for the appended ``z`` (False: not possible).
+
+        With the current columns all kept, ``[E z] = [Q_e q] [[R_e, c], [0, r]]`` with
+        ``c = Q_eᵀ z̃`` and ``q r`` the QR of ``z̃ − Q_e c`` (``z̃`` the columns with the
+        blocks and the nuisance projected out; Gram-Schmidt twice, Giraud et al. 2005,
+        *Numer. Math.* 101, 87): ``O(n k q)`` instead of the ``O(n (k+q)²)`` of a new
+        QR, which a smooth curve of a few hundred columns made the main cost.  The QR
+        of the new block is CholeskyQR2 (Fukaya et al. 2014, *ScalA*, 31), matrix
+        products only.  A column dependent on the others returns False (the caller's
+        pivoted QR decides).
+        """
+        ez = z if self.nuisance is None else self.nuisance.residualize(z)
+        et = ez - self.block_project(ez)
+        c = self.qe.T @ et
+        et = et - self.qe @ c
+        c2 = self.qe.T @ et
+        et = et - self.qe @ c2
+        try:
+            r1 = np.linalg.cholesky(et.T @ et).T
+            q = et @ np.linalg.inv(r1)
+            r2 = np.linalg.cholesky(q.T @ q).T
+            q = q @ np.linalg.inv(r2)
+        except np.linalg.LinAlgError:
+            return False
+        r = r2 @ r1
+        norms = np.linalg.norm(z, axis=0)
+        d = np.abs(np.diag(r))
+        if not (np.all(np.isfinite(q)) and np.all(d > 1e-6 * np.maximum(norms, 1e-300))):
+            return False
+        k, m = self.re.shape[0], r.shape[0]
+        re = np.zeros((k + m, k + m))
+        re[:k, :k] = self.re
+        re[:k, k:] = c + c2
+        re[k:, k:] = r
+        self.qe = np.column_stack([self.qe, q])
+        self.re = re
+        self.keep = np.arange(k + m)
+        return True
 
     # ----------------------------------------------------------------- projections
     @property

@@ -355,16 +355,17 @@ def projection_bias(
         lev = nc - (nc - basis_leverage) * beta
         noise = estimate_psd(grid, residual, lev)
         spsd = np.maximum(noise.psd, 0.0)
-        num = np.zeros((grid.n_chan, nf))
-        for _ in range(n_sim):
+        es = []
+        for _ in range(n_sim):  # the draws in the order of one series at a time
             z = rng.standard_normal((grid.n_chan, nf)) + 1j * rng.standard_normal((grid.n_chan, nf))
             z /= np.sqrt(2.0)
             z[:, 0] = z[:, 0].real * np.sqrt(2.0)
             if nn % 2 == 0:
                 z[:, -1] = z[:, -1].real * np.sqrt(2.0)
-            e = np.fft.irfft(z * np.sqrt(spsd * nn), nn, axis=-1)[grid.channel, grid.idx]
-            r = e - basis.project(e)
-            num += np.abs(grid.fft(r)[0]) ** 2 / nc
+            es.append(np.fft.irfft(z * np.sqrt(spsd * nn), nn, axis=-1)[grid.channel, grid.idx])
+        e = np.column_stack(es)  # (n, n_sim): one projection for all of them
+        r = e - basis.project(e)
+        num = np.sum(np.abs(grid.fft(r)) ** 2, axis=0) / nc
         nb = noise.level.size
         den = spsd * supp_w * n_sim
         wsum = np.bincount(noise.which[1:], weights=num[:, 1:].sum(axis=0), minlength=nb)
