@@ -119,30 +119,3 @@ def test_property_projection_of_a_projection(period, order, seed):
     pz = tm.project(z)
     np.testing.assert_allclose(tm.project(pz), pz, atol=1e-9 * max(1, np.abs(pz).max()))
     assert abs((z - pz) @ pz) < 1e-8 * (z @ z)
-
-
-def test_fine_smooth_curve_equals_the_dense_construction():
-    """The sparse first pass of the B-spline orthonormalisation spans what two dense
-    passes span, orthonormal and orthogonal to the bins; the cached step norms equal
-    fresh ones and the dense projection of each step."""
-    from accal.closure.nuisance import OrbitTemplate, bspline_columns
-
-    t = np.arange(6000.0)
-    tmpl = OrbitTemplate(t, 997.3, order=1, global_degree=1, knot_spacing=60.0, mod_harmonics=0)
-    q = tmpl.qs
-    np.testing.assert_allclose(q.T @ q, np.eye(q.shape[1]), atol=1e-12)
-    assert np.abs(tmpl.coef(q)).max() < 1e-12
-    ref = OrbitTemplate(t, 997.3, order=1, global_degree=1, knot_spacing=0.0, mod_harmonics=0)
-    dense = ref._orthonormal(bspline_columns(t, 60.0))
-    z = np.random.default_rng(0).standard_normal((t.size, 3))
-    np.testing.assert_allclose(q @ (q.T @ z), dense @ (dense.T @ z), atol=1e-10)
-    first = tmpl.step_norms()
-    again = tmpl.step_norms()
-    np.testing.assert_array_equal(first, again)
-    fresh = OrbitTemplate(t, 997.3, order=1, global_degree=1, knot_spacing=60.0, mod_harmonics=0)
-    np.testing.assert_allclose(fresh.step_norms(np.ones(t.size) * 1.0), first, rtol=1e-12)
-    for i in (0, 1234, 5999):
-        v = (t >= t[i]).astype(float)
-        np.testing.assert_allclose(
-            first[i], np.sum(tmpl.project(v) ** 2), rtol=1e-9, atol=1e-9 * t.size
-        )

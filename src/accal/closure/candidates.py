@@ -42,7 +42,6 @@ __all__ = [
     "quadratic_drift",
     "scan_multiplicity",
     "step_placebo_sigma",
-    "step_sizes",
 ]
 
 
@@ -517,21 +516,6 @@ def _scan(basis, r, masks, ok, extra=None) -> NDArray[np.float64]:
         ok &= good
         stat += np.where(good, s_r**2 / nrm, 0.0)
     return stat
-
-
-def step_sizes(ctx: Context, epoch: float):
-    """The least-squares size of the step at ``epoch`` [m/s²] and, with it fitted, the
-    size of a further step at every used sample of the first data channel: (size,
-    sizes [m/s²], squared norms of the projected indicators, used times)."""
-    raw = (ctx.t_all >= epoch).astype(np.float64)[ctx.use]
-    zp = raw - ctx.basis.project(raw)
-    zz = float(zp @ zp)
-    size = float(zp @ ctx.residual) / zz if zz > 0 else 0.0
-    zt = ctx.basis.complement(raw)
-    r = ctx.residual - zt @ (zt.T @ ctx.residual)
-    m = ctx.channel_masks()[0]
-    s_r, nrm, good = _step_sums(ctx.basis, r, m, zt)
-    return size, np.where(good, s_r / nrm, 0.0), np.where(good, nrm, 0.0), ctx.t
 
 
 #: Fewest placebo epochs (one per other block) for :func:`step_placebo_sigma`.

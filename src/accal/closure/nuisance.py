@@ -29,13 +29,11 @@ of a few samples): :func:`estimate_period` refines the nominal value on the data
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-
 import numpy as np
 from numpy.typing import NDArray
 from scipy.sparse import csr_matrix
 
-__all__ = ["OrbitTemplate", "choose_template", "estimate_period", "template_order"]
+__all__ = ["OrbitTemplate", "estimate_period", "template_order"]
 
 #: Harmonics whose summed power locates the orbit frequency (grid search).
 PERIOD_HARMONICS = 8
@@ -48,12 +46,6 @@ PERIOD_BAND = 0.03
 UNRESOLVED_SIGMAS = 3.0
 #: Largest fraction of the bins flagged as unresolved (the steepest).
 UNRESOLVED_MAX_FRACTION = 0.05
-
-
-#: Knots per orbit of the fine smooth curve of a drag-dominated axis (:func:`choose_template`).
-FINE_KNOTS_PER_ORBIT = 24
-#: Residual-std ratio (orbit knots / fine knots) from which an axis takes the fine curve.
-FINE_RATIO = 2.0
 
 
 def template_order(n_orbits: float) -> int:
@@ -139,9 +131,8 @@ def _gram_orthonormal(x: NDArray[np.float64], tol: float = 1e-12) -> NDArray[np.
     return x @ (v[:, keep] / np.sqrt(lam[keep]))
 
 
-def bspline_columns(t: NDArray[np.float64], spacing: float, sparse: bool = False):
-    """Cubic B-spline basis on ``t`` with uniform knots ``spacing`` apart (scipy);
-    a dense array, or the sparse CSR matrix with ``sparse=True``."""
+def bspline_columns(t: NDArray[np.float64], spacing: float) -> NDArray[np.float64]:
+    """Cubic B-spline basis on ``t`` with uniform knots ``spacing`` apart (scipy)."""
     from scipy.interpolate import BSpline
 
     t = np.asarray(t, dtype=np.float64)
@@ -149,121 +140,7 @@ def bspline_columns(t: NDArray[np.float64], spacing: float, sparse: bool = False
     inner = np.linspace(t[0], t[-1], n_int + 1)
     k = 3
     knots = np.r_[[inner[0]] * k, inner, [inner[-1]] * k]
-    design = BSpline.design_matrix(t, knots, k)
-    return design.tocsr() if sparse else design.toarray()
-
-
-def choose_template(
-    t: NDArray[np.float64],
-    r: NDArray[np.float64],
-    period: float,
-    order: int,
-    global_degree: int,
-    others: Sequence[NDArray[np.float64]] = (),
-    screening: bool = False,
-) -> tuple[OrbitTemplate, float]:
-    """The template with the knot spacing the axis needs (one orbit, or a 24th of one),
-    and that spacing [s].
-
-    On the drag axis the density's non-periodic variation (travelling disturbances,
-    a few % of the drag over tens of minutes) is signal the one-orbit curve cannot
-    follow: left in the residual it is red noise 10-100× the instrument's, so the
-    least-squares statistic of a sharp bias step, whose weight lies at the low
-    frequencies, never reached significance on x (`tests.indep` days: step z −1 to
-    2 for 1e-8 m/s²).  With knots ``period/24`` apart (~230 s) the same steps had z
-    10-15 (``period/16``: 3-8; ``period/32``: 14-21, at twice the cost of the
-    template): a step is told from the signal by its edge (the curve takes its slow
-    part).  The price is that slow effects (lines of periods over ~10 min, couplings to
-    slow channels) cannot be told from the signal on that axis, so the fine curve is
-    used only on the drag axis, recognised from the data:
-
-    * the fine curve lowers the residual's standard deviation by :data:`FINE_RATIO` or
-      more (``r`` with the base fitted, and the one-orbit template's fit, less its
-      :data:`DECISION_LINES` strongest spectral lines: a broadband slow variation, not
-      a few lines), and
-    * what it takes is larger than what it takes from each of the ``others`` (the
-      other axes, same samples): the along-track drag is the largest non-periodic
-      signal; an axis with a large slow instrument effect is not the drag axis.
-
-    Without ``others`` the axis keeps the one-orbit curve (the drag axis cannot be
-    recognised).  Measured on `tests.indep` days (2026-11-27, ratio without the
-    lines): x 4.7-14.5 on quiet, storm and random-walk-noise days of GRACE and
-    GRACE-FO, y and z 1.0-1.2, and 1.3-1.5 with a 3e-8 m/s²/K temperature coupling;
-    an `accal simulate` half day's radial axis 3.7 (its x larger).
-    ``screening``: the template is only for a first look at the residual (outliers):
-    the one-orbit template is returned whatever the spacing chosen (the fine one costs
-    a few seconds to build; the caller builds it for the samples it keeps).
-    """
-    default = OrbitTemplate(t, period, order, global_degree)
-    fine_spacing = float(period) / FINE_KNOTS_PER_ORBIT
-    if float(t[-1] - t[0]) <= 2.0 * default.knot_spacing or fine_spacing < 10.0 * default.dt:
-        return default, default.knot_spacing
-    # the decision: the fine curve fitted to the default residual (sparse least squares;
-    # the fine template itself is built only for an axis that takes it)
-    b = bspline_columns(t, fine_spacing, sparse=True)
-    gram = (b.T @ b).toarray()
-
-    def slow(x: NDArray[np.float64]) -> tuple[float, float, float]:
-        x_def = _without_lines(t, default.residualize(x), default.dt)
-        taken = b @ np.linalg.lstsq(gram, b.T @ x_def, rcond=None)[0]
-        return float(np.std(x_def)), float(np.std(taken)), float(np.std(x_def - taken))
-
-    s_default, s_taken, s_fine = slow(np.asarray(r, dtype=np.float64))
-    ratio = s_default / s_fine if s_fine > 0 else 1.0
-    taken_others = []
-    for o in others:
-        o = np.asarray(o, dtype=np.float64)
-        fit = np.polynomial.polynomial.polyfit(t - t[0], o, max(global_degree, 0))
-        o = o - np.polynomial.polynomial.polyval(t - t[0], fit)
-        taken_others.append(slow(o)[1])
-    largest = bool(taken_others) and all(s_taken > x for x in taken_others)
-    fine = ratio >= FINE_RATIO and largest
-    default.knot_rule = {
-        "residual_ratio": ratio,
-        "threshold": FINE_RATIO,
-        "slow_std": s_taken,
-        "slow_std_other_axes": taken_others,
-        "fine": fine,
-    }
-    if fine and not screening:
-        chosen = OrbitTemplate(t, period, order, global_degree, knot_spacing=fine_spacing)
-        chosen.knot_rule = default.knot_rule
-        return chosen, fine_spacing
-    return default, fine_spacing if fine else default.knot_spacing
-
-
-def _tail_norms(q: NDArray[np.float64], m: NDArray[np.float64], chunk: int = 32) -> NDArray:
-    """``‖Σ_{j≥i} m_j q_j‖²`` for every row ``i`` of ``q`` (n, k), in column chunks
-    (a few hundred columns of a fine smooth curve: no (n, k) temporaries)."""
-    out = np.zeros(q.shape[0])
-    for j in range(0, q.shape[1], chunk):
-        c = np.cumsum((q[::-1, j : j + chunk] * m[::-1, None]), axis=0)
-        out += np.einsum("ij,ij->i", c, c)[::-1]
-    return out
-
-
-#: Strongest periodogram ordinates (and their neighbours) left out of the knot decision.
-DECISION_LINES = 8
-
-
-def _without_lines(t: NDArray[np.float64], r: NDArray[np.float64], dt: float) -> NDArray:
-    """``r`` less its :data:`DECISION_LINES` strongest spectral ordinates (±2 each).
-
-    The knot decision asks whether the residual holds a broadband slow variation (the
-    drag's); a few lines (a 5e-9 m/s² term at 1000 s on the radial axis) would make the
-    fine curve look needed and then hide them (it follows a 1000 s sinusoid).  The
-    residual is placed on its sampling grid (gaps zero) for the FFT.
-    """
-    idx = np.rint((t - t[0]) / dt).astype(np.int64)
-    n = int(idx[-1]) + 1
-    placed = np.zeros(n)
-    placed[idx] = r
-    spec = np.fft.rfft(placed)
-    power = np.abs(spec) ** 2
-    power[0] = 0.0
-    for k in np.argsort(power)[::-1][:DECISION_LINES]:
-        spec[max(k - 2, 0) : k + 3] = 0.0
-    return np.fft.irfft(spec, n)[idx]
+    return BSpline.design_matrix(t, knots, k).toarray()
 
 
 class OrbitTemplate:
@@ -304,9 +181,6 @@ class OrbitTemplate:
     ) -> None:
         t = np.asarray(t, dtype=np.float64)
         self._t = t
-        self.knot_rule: dict | None = None  # set by choose_template
-        self._smooth_lev: dict[tuple[int, float], NDArray[np.float64]] = {}
-        self._step_norms_full: NDArray[np.float64] | None = None
         self.n = t.size
         self.period = float(period)
         self.order = int(order)
@@ -360,7 +234,7 @@ class OrbitTemplate:
         self.qs = np.zeros((self.n, 0))
         self.n_smooth = 0
         if self.knot_spacing > 0 and span > 2 * self.knot_spacing:
-            self.qs = self._orthonormal_spline(bspline_columns(t, self.knot_spacing, sparse=True))
+            self.qs = self._orthonormal(bspline_columns(t, self.knot_spacing))
             self.n_smooth = self.qs.shape[1]
         mod_spacing = 4.0 * self.period
         if self.mod_harmonics > 0 and span > 2 * mod_spacing:
@@ -402,34 +276,13 @@ class OrbitTemplate:
         flag |= np.roll(flag, 1) | np.roll(flag, -1)
         return flag[self.bin]
 
-    def _orthonormal_spline(self, xs) -> NDArray[np.float64]:
-        """:meth:`_orthonormal` of sparse B-spline columns ``xs`` (n, k), the template only.
-
-        The first pass never forms ``(I − P_T) X`` densely: its Gram matrix is
-        ``XᵀX − CᵀC`` with ``C = Q_Tᵀ X`` (both sparse), and the orthonormal columns are
-        ``X M − Q_T (C M)`` with ``M`` from that Gram's eigen-decomposition; the second
-        pass is the dense one.  A fine curve (a few hundred columns on a drag axis,
-        :func:`choose_template`) cost four dense ``n k²`` products, now two.
-        """
-        c = self._qs @ xs
-        gram = (xs.T @ xs).toarray() - (c.T @ c).toarray()
-        lam, v = np.linalg.eigh(0.5 * (gram + gram.T))
-        keep = lam > 1e-12 * max(float(lam.max()), 1e-300)
-        m = v[:, keep] / np.sqrt(lam[keep])
-        x = np.asarray(xs @ m) - np.asarray(self._qst @ np.asarray(c @ m))
-        # the Gram's rounding (XᵀX − CᵀC, absolute error ~ε·λ_max) leaves the columns
-        # orthonormal to ~ε·λ_max/λ_min: a well-conditioned curve needs no second pass
-        if float(lam.max()) < 1e4 * float(lam[keep].min()):
-            return x
-        return self._orthonormal(x, passes=1)
-
-    def _orthonormal(self, x: NDArray[np.float64], passes: int = 2) -> NDArray[np.float64]:
+    def _orthonormal(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
         """Orthonormal basis of ``x`` with the template and the dense parts so far removed.
 
         Twice (Gram-Schmidt's "twice is enough"): directions nearly inside the template
         otherwise keep its rounding error amplified by the inverse of their norm.
         """
-        for _ in range(passes):
+        for _ in range(2):
             x = x - np.asarray(self._qst @ self.coef(x))  # ⊥ the whole template, G too
             if self.qs.shape[1]:
                 x = x - self.qs @ (self.qs.T @ x)
@@ -490,9 +343,6 @@ class OrbitTemplate:
         per-sample changes (O(n K)).
         """
         m = np.ones(self.n) if mask is None else np.asarray(mask, dtype=np.float64)
-        full = bool(np.all(m == 1.0))
-        if full and self._step_norms_full is not None:  # the search asks again and again
-            return self._step_norms_full.copy()
         qs = (self.q * m[:, None])[self._order]  # sorted by bin, then time
         # reverse cumulative sums within each bin
         tot = np.cumsum(qs[::-1], axis=0)[::-1]
@@ -511,13 +361,12 @@ class OrbitTemplate:
         dd[self._order] = d  # back to time order
         out = np.cumsum(dd[::-1])[::-1]
         if self.qg.shape[1]:
-            out -= _tail_norms(self.qg, m)
+            gm = self.qg * m[:, None]
+            out -= np.sum(np.cumsum(gm[::-1], axis=0)[::-1] ** 2, axis=1)
         if self.qs.shape[1]:
-            out += _tail_norms(self.qs, m)
-        out = np.maximum(out, 0.0)
-        if full:
-            self._step_norms_full = out.copy()
-        return out
+            sm = self.qs * m[:, None]
+            out += np.sum(np.cumsum(sm[::-1], axis=0)[::-1] ** 2, axis=1)
+        return np.maximum(out, 0.0)
 
     def leverage(self, grid_size: int, step: float, counts: NDArray[np.float64]) -> NDArray:
         """Approximate leverage spectrum (C, nf) of the template on a record's DFT grid.
@@ -543,16 +392,10 @@ class OrbitTemplate:
                 kk = kk[(kk >= 0) & (kk < nf)]
                 np.maximum.at(share, kk, min(side, 1.0))
         lev[:] = share[None, :] * np.maximum(counts, 1.0)[:, None]
-        if self.qs.shape[1]:  # the smooth curve: its columns exactly (FFT), once per grid
-            key = (int(grid_size), float(step))
-            if key not in self._smooth_lev:
-                acc = np.zeros(nf)
-                for j in range(0, self.qs.shape[1], 32):  # no (k, grid) temporary
-                    place = np.zeros((min(32, self.qs.shape[1] - j), grid_size))
-                    place[:, self._grid_idx(grid_size, step)] = self.qs[:, j : j + 32].T
-                    acc += np.sum(np.abs(np.fft.rfft(place, axis=-1)) ** 2, axis=0)
-                self._smooth_lev[key] = acc
-            lev += self._smooth_lev[key][None, :]
+        if self.qs.shape[1]:  # the smooth curve: its few columns exactly (FFT)
+            place = np.zeros((self.qs.shape[1], grid_size))
+            place[:, self._grid_idx(grid_size, step)] = self.qs.T
+            lev += np.sum(np.abs(np.fft.rfft(place, axis=-1)) ** 2, axis=0)[None, :]
         return lev
 
     def _grid_idx(self, grid_size: int, step: float) -> NDArray[np.int64]:
@@ -569,6 +412,5 @@ class OrbitTemplate:
             "parameters": self.rank,
             "knot_spacing": self.knot_spacing,
             "modulated_harmonics": self.mod_harmonics,
-            **({"knot_rule": dict(self.knot_rule)} if self.knot_rule is not None else {}),
             "units": {"period": "s", "knot_spacing": "s"},
         }

@@ -273,13 +273,6 @@ def to_markdown(
             f"(knots {sm.get('knot_spacing', 0):.0f} s) and {sm.get('modulated_harmonics', 0)} "
             "orbit harmonics with slowly changing amplitude"
             + (
-                "; the drag axis (its slow residual the largest of the axes and "
-                f"{sm['knot_rule']['residual_ratio']:.1f}× what the fine curve leaves): "
-                "slow effects cannot be told from the drag on it, steps by their edge"
-                if (sm.get("knot_rule") or {}).get("fine")
-                else ""
-            )
-            + (
                 f"; instrument effects must stay significant given the other axes "
                 f"({', '.join(sm['signal_proxies'])})"
                 if sm.get("signal_proxies")

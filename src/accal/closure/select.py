@@ -48,7 +48,6 @@ from accal.closure.kinds import EFFECT_NAMES, kind_of, unit_of
 from accal.closure.lagprofile import add_lag_uncertainties
 from accal.closure.nuisance import (
     OrbitTemplate,
-    choose_template,
     estimate_period,
     template_order,
 )
@@ -297,12 +296,9 @@ def close_loop(
         orbit_period,
         opts.get("orbit_period_fixed", False),
     )
-    setup.others = proxies_all
     use, n_spikes = _spikes_out(t_all, y_all, chan_all, use)
-    st = setup.build(use, screening=True)
+    st = setup.build(use)
     st, use, notes = _leave_out_outliers(setup, st, use, aux_all, n_spikes)
-    if st["template"] is not None and st["template"].knot_spacing != setup.knot_rule[0]:
-        st = setup.build(use)  # no outliers: the screening build's knots were not the rule's
     fit0 = st["fit0"]
     proxies = usable_proxies(proxies_all, use, notes) if st["template"] else None
     opts.update(
@@ -467,13 +463,8 @@ class _Setup:
         self.signal_model, self.orbit_period = signal_model, orbit_period
         self.period_fixed = bool(fixed)
         self.t_first: float | None = None  # the first used sample of the first build
-        self.knot_rule: tuple[float, dict | None] | None = None  # the template's knots
-        self.others: dict[str, NDArray[np.float64]] = {}  # the other axes (knot decision)
 
-    def build(self, use: NDArray[np.bool_], screening: bool = False) -> dict[str, Any]:
-        """The null fit on the samples ``use``; ``screening``: a first build to find the
-        outliers with (the template's smooth curve is decided, but built with the
-        default knots: see :func:`accal.closure.nuisance.choose_template`)."""
+    def build(self, use: NDArray[np.bool_]) -> dict[str, Any]:
         t_u, y_u = self.t_all[use], self.y_all[use]
         chan_u = None if self.chan_all is None else self.chan_all[use]
         t0 = float(t_u[0])
@@ -503,21 +494,12 @@ class _Setup:
                 # the second build (outliers left out) keeps it
                 self.orbit_period, self.period_fixed = period, True
             degree = int(self.base[-1]) if isinstance(self.base, str) else -1
-            order = template_order(span / period)
-            if self.knot_rule is None:  # the first build decides the smooth curve's knots
-                others = [a[use] for a in self.others.values() if np.all(np.isfinite(a[use]))]
-                template, spacing = choose_template(
-                    t_u, plain.fit(y_u).resid, period, order, degree, others, screening
-                )
-                self.knot_rule = (spacing, template.knot_rule)
-            else:  # the second build (outliers left out) keeps them
-                template = OrbitTemplate(t_u, period, order, degree, knot_spacing=self.knot_rule[0])
-                template.knot_rule = self.knot_rule[1]
+            template = OrbitTemplate(t_u, period, template_order(span / period), degree)
             basis0 = Basis(bbase.block[use], bbase.columns[use], nuisance=template)
             # the smooth curve counts with the bias for identifiability: a sharp step is
             # told from the signal by its edge, however much of it the curve takes
             smooth = template.smooth_columns
-            bias0 = plain.extend(smooth, orthonormal=True) if smooth.shape[1] else plain
+            bias0 = plain.extend(smooth) if smooth.shape[1] else plain
         elif bbase.signal:
             keep = [j for j in range(bbase.p) if j not in bbase.signal]
             bias0 = Basis(bbase.block[use], bbase.columns[use][:, keep], n_blocks=bbase.n_blocks)

@@ -46,7 +46,7 @@ from numpy.typing import NDArray
 from scipy.linalg import eigh
 
 from accal.closure.basis import Basis
-from accal.closure.candidates import Context, Proposal, step_sizes
+from accal.closure.candidates import Context, Proposal
 from accal.closure.kinds import EFFECT_NAMES, IDENT_MIN, kind_of, plausible
 from accal.closure.periodic import _line_background, line_threshold
 from accal.closure.residual import WaldResult, wald_test
@@ -59,7 +59,6 @@ __all__ = [
     "competing_lines",
     "cross_validate",
     "identifiability",
-    "sharpness_test",
     "signal_proxy_test",
     "validate",
 ]
@@ -322,93 +321,6 @@ def competing_line_test(
     }  # fmt: skip
 
 
-#: Width [s] of the linear transition a bias step must fit better than (no reference).
-RAMP_WIDTH = 120.0
-
-
-def sharpness_test(prop: Proposal, ctx: Context, wald: WaldResult) -> dict[str, Any]:
-    """Whether a bias step is sharper than the signal can change: its test given a ramp.
-
-    An accelerometer's bias jumps within its filters' response (seconds); the
-    non-gravitational signal changes as fast as the density structures the satellite
-    flies through.  On the drag axis, with the fine smooth curve of
-    :func:`accal.closure.nuisance.choose_template` in the null, what is left of the
-    drag are transitions of ±1e-9 m/s² over ~100-300 s, and a step fits such a
-    transition better than the curve does (`tests.indep` clean day, seed 31: two
-    "steps" of −4e-9 m/s² at 4.7σ).  So without a reference a step must stay
-    significant with a linear transition of :data:`RAMP_WIDTH` centred at its epoch in
-    the model (:func:`_test_given`, the admitting test's noise PSD held, no
-    multiplicity: one pre-specified test per admitted step): only its edge, the part a
-    smooth change cannot make, then identifies it.  A real step keeps most of its
-    statistic (the part of a step a 120 s ramp misses has a squared norm of ~10 s ×
-    size², far above the high-frequency noise for any step the scan admits).
-    Returns ``p`` (uncorrected), ``stat`` and ``ramp_width_s``.
-    """
-    parts = prop.params.get("parts") or [(None, {"epoch": prop.params["epoch"]})]
-    half = 0.5 * RAMP_WIDTH
-    ramps = np.column_stack(
-        [np.clip((ctx.t_all - (p["epoch"] - half)) / RAMP_WIDTH, 0.0, 1.0) for _, p in parts]
-    )
-    ramps = np.concatenate([ramps * mk[:, None] for mk in _all_masks(ctx)], axis=1)
-    q_p = ctx.basis.complement(ramps[ctx.use])
-    given = _test_given(prop, ctx, q_p, wald, 1.0)
-    return {"p": given["p_adj"], "stat": given["stat"], "ramp_width_s": RAMP_WIDTH}
-
-
-#: Orbits either side at which a step is looked for again (:func:`recurrence_test`).
-RECUR_ORBITS = (-2, -1, 1, 2)
-#: Share of the step's size a same-phase step must reach (and be significant) to count.
-RECUR_SHARE = 0.5
-#: Half-width [s] of the window around the same phase (an eclipse edge drifts by tens of
-#: seconds per orbit), and the significance [σ] a step there needs (~240 epochs searched).
-RECUR_WINDOW = 120.0
-RECUR_SIGMAS = 4.0
-
-
-def recurrence_test(prop: Proposal, ctx: Context, wald: WaldResult) -> dict[str, Any]:
-    """Whether a step comes back one or two orbits away: a feature of the signal.
-
-    An instrument's bias step is one event; a transition at the same orbital phase in
-    the neighbouring orbits is the signal's (an eclipse edge whose phase drifts with β,
-    which the phase bins follow only in part).  With the step at its epoch fitted, the
-    sizes of steps at the same phase ±1 and ±2 orbits are read from the step scan's
-    sums (:func:`accal.closure.candidates.step_sizes`) within ±:data:`RECUR_WINDOW` of
-    the same phase; the step is not identifiable when one of them reaches
-    :data:`RECUR_SHARE` of its size and is itself beyond :data:`RECUR_SIGMAS` σ (σ from
-    the admitting test's variance).  `accal simulate` half day, radial axis
-    with the fine curve: three "steps" of 1.4-4.7e-10 m/s² one orbit apart.
-    """
-
-    period = float(ctx.basis.nuisance.period)
-    parts = prop.params.get("parts") or [(None, {"epoch": prop.params["epoch"]})]
-    var = float(np.max(np.diag(wald.cov))) if wald.cov.size else 0.0
-    worst = 0.0
-    for _, p in parts:
-        e = float(p["epoch"])
-        size_e, sizes, norms, t_u = step_sizes(ctx, e)
-        size_e = abs(size_e)
-        for k in RECUR_ORBITS:
-            lo, hi = np.searchsorted(
-                t_u, [e + k * period - RECUR_WINDOW, e + k * period + RECUR_WINDOW]
-            )
-            idx = np.arange(max(lo, 1), min(hi, t_u.size - 1))
-            idx = idx[norms[idx] > 0]
-            if idx.size == 0:
-                continue
-            sig = np.sqrt(var / norms[idx]) if var > 0 else np.zeros(idx.size)
-            hit = np.abs(sizes[idx]) > RECUR_SIGMAS * sig
-            if hit.any():
-                worst = max(worst, float(np.max(np.abs(sizes[idx][hit]))) / max(size_e, 1e-300))
-    return {"share": worst, "threshold": RECUR_SHARE}
-
-
-def _all_masks(ctx: Context) -> list[NDArray[np.float64]]:
-    """Per data channel, its samples (all samples: 1.0) on all samples, as floats."""
-    if ctx.channel_all is None:
-        return [np.ones(ctx.t_all.size)]
-    return [(ctx.channel_all == c).astype(np.float64) for c in range(max(ctx.n_chan, 1))]
-
-
 def _gram_ratio(a: NDArray[np.float64], b: NDArray[np.float64]) -> float:
     """Smallest generalised eigenvalue of ``a x = λ b x`` (``b`` positive semi-definite)."""
     if a.shape[0] == 1:
@@ -562,26 +474,6 @@ def validate(
                 f"{lines['explained_coupling']:.4g} (m/s²)² for the coupling, Mallows' Cp) "
                 f"and it adds nothing significant to them (corrected p "
                 f"{lines['p_adj_given_lines']:.2g}, needs < {alpha:g})"
-            )
-    if (
-        wald is not None
-        and prop.name == "bias_step"
-        and ctx.reference is None
-        and ctx.basis.nuisance is not None
-    ):
-        sharp = sharpness_test(prop, ctx, wald)
-        if not sharp["p"] < alpha:
-            return verdict(
-                f"not identifiable: a linear change over {RAMP_WIDTH:.0f} s explains it as "
-                f"well (p {sharp['p']:.2g} of the step given that ramp, needs < {alpha:g}): "
-                "the signal can change that fast"
-            )
-        recur = recurrence_test(prop, ctx, wald)
-        if recur["share"] >= RECUR_SHARE:
-            return verdict(
-                "not identifiable: a step at the same orbital phase one or two orbits away "
-                f"has {recur['share']:.0%} of its size (a feature of the signal, e.g. an "
-                "eclipse edge)"
             )
     if cv["applicable"] and not cv["gain"] > 0:
         return verdict(
