@@ -171,20 +171,3 @@ def test_appended_columns_equal_a_full_qr_and_a_dependent_one_falls_back():
     dep = inc.extend(z1[:, :1] + 2.0 * z2[:, 1:])
     assert dep.keep.size == 5 and np.isnan(dep.fit(y).gamma).sum() == 1
     np.testing.assert_allclose(dep.fit(y).resid, fi.resid, atol=1e-12 * np.abs(y).max())
-
-
-def test_orthonormal_columns_are_taken_as_their_own_qr():
-    block, cols, _, _, rng = _tiled(11)
-    n = block.size
-    b = Basis(block, cols)
-    z = rng.standard_normal((n, 4))
-    z = np.linalg.qr(z - b.project(z))[0]  # orthonormal, orthogonal to the blocks
-    fast = b.extend(z, orthonormal=True)
-    assert fast.qe is z and np.array_equal(fast.re, np.eye(4))
-    y = rng.standard_normal(n)
-    np.testing.assert_allclose(
-        fast.fit(y).resid, b.extend(z).fit(y).resid, atol=1e-12 * np.abs(y).max()
-    )
-    # not orthogonal to the blocks: the flag is checked and the QR made
-    bad = b.extend(z + cols[:, :1] * 0.1, orthonormal=True)
-    assert bad.qe is not z

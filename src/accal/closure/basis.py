@@ -477,13 +477,8 @@ class Basis:
         self.qe = qe
         self.re = re
 
-    def extend(self, z: NDArray[np.float64], orthonormal: bool = False) -> Basis:
-        """A new basis with the raw columns ``z`` (n, q) appended to the extra ones.
-
-        ``orthonormal``: ``z`` is known to be orthonormal and orthogonal to this basis
-        (a template's smooth curve beside the bias); checked on the blocks, then taken
-        as its own QR factor.
-        """
+    def extend(self, z: NDArray[np.float64]) -> Basis:
+        """A new basis with the raw columns ``z`` (n, q) appended to the extra ones."""
         z = np.asarray(z, dtype=np.float64)
         if z.ndim == 1:
             z = z[:, None]
@@ -491,11 +486,6 @@ class Basis:
         new = Basis.__new__(Basis)
         new.__dict__.update(self.__dict__)
         new.extra = np.column_stack([self.extra, z])
-        if orthonormal and self.n_extra == 0 and self.nuisance is None:
-            inside = np.abs(self.block_project(z)).max(initial=0.0)
-            if inside < 1e-9 * max(float(np.abs(z).max(initial=0.0)), 1e-300):
-                new.qe, new.re, new.keep = z, np.eye(z.shape[1]), np.arange(z.shape[1])
-                return new
         if not (self.keep.size == self.n_extra and new._append_extra(z)):
             new._build_extra()
         return new
