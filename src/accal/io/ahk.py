@@ -153,7 +153,7 @@ def _check_time_ref(time_ref: NDArray[np.bytes_], path: Path) -> list[str]:
     return []
 
 
-def _read_ahk1b(raw: bytes, path: Path) -> Housekeeping:
+def read_ahk1b(raw: bytes, path: Path) -> Housekeeping:
     flavour, header, data_start, first_line = split_header(raw, path)
     info = (_interpret_gracefo if flavour == "gracefo" else _interpret_grace)(header, path)
     cols, present, positional = _parse_records(raw[data_start:], first_line, info["fields"], path)

@@ -94,13 +94,10 @@ from accal.io.common import (
     shorten,
     tidy,
 )
+from accal.io.grace.checks import check_header_span
+from accal.io.grace.header import header_span, header_time, record_count, yaml_line
 from accal.io.grace_l1b import (
     SATELLITES,
-    _check_header_span,
-    _header_time,
-    _record_count,
-    _span,
-    _yaml_line,
     header_satellite,
     load_yaml_header,
     parse_grace_header,
@@ -516,14 +513,14 @@ def _interpret_grace(header: bytes, path: Path) -> dict[str, Any]:
     refuse_binary(meta, lines, path, "SCA1B")
     letter = header_satellite(meta, lines, path)
     first, last = (
-        _header_time(meta.get(key), key, path, lines.get(key))
+        header_time(meta.get(key), key, path, lines.get(key))
         for key in ("TIME FIRST OBS(SEC PAST EPOCH)", "TIME LAST OBS(SEC PAST EPOCH)")
     )
     return {
         "meta": {"grace": meta},
         "letter": letter,
-        "n_header": _record_count(meta, lines, path),
-        "span": _span(first, last, path),
+        "n_header": record_count(meta, lines, path),
+        "span": header_span(first, last, path),
     }
 
 
@@ -538,7 +535,7 @@ def _interpret_gracefo(header: bytes, path: Path) -> dict[str, Any]:
             f"columns {shorten(' '.join(names[:9]), 100)} are not the SCA1B columns "
             f"({' '.join(COLUMNS)})",
             path,
-            _yaml_line(header, "variables"),
+            yaml_line(header, "variables"),
         )
     dims = hdr.get("dimensions")
     try:
@@ -553,20 +550,20 @@ def _interpret_gracefo(header: bytes, path: Path) -> dict[str, Any]:
             f"YAML header: platform is {shorten(str(platform), 40)}, "
             "expected 'GRACE C' or 'GRACE D'",
             path,
-            _yaml_line(header, "platform"),
+            yaml_line(header, "platform"),
         )
     nsa = hdr.get("non-standard_attributes") or {}
     if not isinstance(nsa, dict):
         raise FormatError("YAML header: 'non-standard_attributes' is not a mapping", path)
     first, last = (
-        _header_time(nsa.get(key), key, path, _yaml_line(header, key))
+        header_time(nsa.get(key), key, path, yaml_line(header, key))
         for key in ("start_time_epoch_secs", "stop_time_epoch_secs")
     )
     return {
         "meta": {"gracefo": hdr},
         "letter": letter,
         "n_header": n_header,
-        "span": _span(first, last, path),
+        "span": header_span(first, last, path),
     }
 
 
@@ -717,7 +714,7 @@ def read_attitude(path: str | Path) -> Attitude:
         )
         letter = uniq[0]
     lines = cols["lines"]
-    warn += _check_header_span(cols["time"], info["span"], path, lambda i: lines[i])
+    warn += check_header_span(cols["time"], info["span"], path, lambda i: lines[i])
     arrays = {k: cols[k] for k in ("quat", "sca_id", "qual_rss", "qualflg")}
     t = tidy(cols["time"], arrays)
     n_rows = t.report["n_rows"]

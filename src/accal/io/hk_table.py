@@ -42,7 +42,7 @@ def _to_si(values: NDArray[np.float64], unit: str) -> tuple[NDArray[np.float64],
     return values, unit
 
 
-def _read_table(raw: bytes, path: Path) -> Housekeeping:
+def read_hk_table(raw: bytes, path: Path) -> Housekeeping:
     reader = read_parquet_table if raw.startswith(PARQUET_MAGIC) else read_csv_table
     try:
         table, units, fmeta, first_line = reader(raw, path)

@@ -18,8 +18,8 @@ the accelerations against temperatures, voltages and the like.  Supported inputs
 The AHK1B record and the sources of its field names and units are described in
 :mod:`accal.io.ahk_spec`; the AHK1B reader is :mod:`accal.io.ahk`, the table reader
 :mod:`accal.io.hk_table`, :class:`Housekeeping` lives in :mod:`accal.io.hk_data`.
-Every name this module defined before the split, public or not, is importable from
-here as before.
+Every public name this module defined before the split is importable from here as
+before; the private helpers are their modules' own.
 
 Units
 -----
@@ -32,53 +32,18 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from accal.io.ahk import (  # noqa: F401 (names kept importable from here)
-    _BIT_MEANING_RE,
-    _bit_meanings,
-    _check_ids,
-    _check_time_ref,
-    _interpret_grace,
-    _interpret_gracefo,
-    _read_ahk1b,
-)
-from accal.io.ahk_records import (  # noqa: F401 (names kept importable from here)
-    _WHITESPACE,
-    _bits,
-    _convert,
-    _gather,
-    _parse_records,
-    _tokenize,
-    _Tokens,
-)
-from accal.io.ahk_spec import (  # noqa: F401 (names kept importable from here)
-    ABSOLUTE_ZERO_C,
+from accal.io.ahk import read_ahk1b
+from accal.io.ahk_spec import (
     GRACE_FIELDS,
-    GRACE_FILE_TYPES,
     GRACEFO_BIT_MEANINGS,
     GRACEFO_FIELDS,
     GRACEFO_INFERRED_UNITS,
-    N_FIXED,
-    RECORD_COLUMNS,
-    TIME_RANGE,
     Field,
 )
 from accal.io.common import PARQUET_MAGIC
-from accal.io.grace.header import _GRACE_END_RE, _GRACE_KEY_RE, read_l1b_bytes
-from accal.io.hk_data import (  # noqa: F401 (names kept importable from here)
-    _NOT_PRESENT,
-    DEFAULT_MAX_GAP,
-    Housekeeping,
-    _first_valid,
-    _interp_gapped,
-    _listing,
-    _sort_merge,
-)
-from accal.io.hk_table import (  # noqa: F401 (names kept importable from here)
-    SI_PREFIXED,
-    TIME_COLUMNS,
-    _read_table,
-    _to_si,
-)
+from accal.io.grace.header import GRACE_END_RE, GRACE_KEY_RE, read_l1b_bytes
+from accal.io.hk_data import DEFAULT_MAX_GAP, Housekeeping
+from accal.io.hk_table import SI_PREFIXED, TIME_COLUMNS, read_hk_table
 
 
 def _flavour(raw: bytes) -> str:
@@ -87,8 +52,8 @@ def _flavour(raw: bytes) -> str:
     if raw.startswith(b"header:"):
         return "gracefo"
     first = raw[:4096].split(b"\n", 1)[0]
-    if _GRACE_END_RE.search(raw[: 1 << 20]) or (
-        _GRACE_KEY_RE.match(first) and not first.startswith(b"#")
+    if GRACE_END_RE.search(raw[: 1 << 20]) or (
+        GRACE_KEY_RE.match(first) and not first.startswith(b"#")
     ):
         return "grace"
     return "table"
@@ -136,12 +101,14 @@ def read_housekeeping(path: str | Path) -> Housekeeping:
     path = Path(path)
     raw = read_l1b_bytes(path)
     if _flavour(raw) == "table":
-        return _read_table(raw, path)
-    return _read_ahk1b(raw, path)
+        return read_hk_table(raw, path)
+    return read_ahk1b(raw, path)
 
 
 __all__ = [
     "DEFAULT_MAX_GAP",
+    "SI_PREFIXED",
+    "TIME_COLUMNS",
     "GRACEFO_BIT_MEANINGS",
     "GRACEFO_FIELDS",
     "GRACEFO_INFERRED_UNITS",

@@ -15,7 +15,7 @@ from accal.errors import ValidationError
 from accal.io.common import tidy
 from accal.io.grace.ascii import _parse_ascii
 from accal.io.grace.binary import _parse_binary
-from accal.io.grace.checks import _check_header_span, _check_ids, _name_letter
+from accal.io.grace.checks import _check_ids, _name_letter, check_header_span
 from accal.io.grace.header import (
     _interpret_grace,
     _interpret_gracefo,
@@ -86,7 +86,7 @@ def read_grace_acc1b(path: str | Path, *, invalid_bits: int = DEFAULT_INVALID_BI
         warn.append(f"the header names no satellite; the file name's {letter!r} is used")
     warn = [*cols.get("warnings", ()), *warn]
     time = cols["gps_time"]
-    warn += _check_header_span(time, info.get("span"), path, cols["line_of"])
+    warn += check_header_span(time, info.get("span"), path, cols["line_of"])
     acc = cols["acc"]
     arrays = {"acc": acc, "quality": cols["qualflg"], **{c: cols[c] for c in AUX_COLUMNS}}
     t = tidy(time, arrays)

@@ -79,7 +79,7 @@ def _check_ids(
 HEADER_SPAN_TOLERANCE = 3600.0
 
 
-def _check_header_span(
+def check_header_span(
     time: NDArray[np.float64],
     span: tuple[float, float] | None,
     path: Path,

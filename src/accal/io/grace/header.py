@@ -20,9 +20,9 @@ from accal.errors import FormatError, UnsupportedFormatError
 from accal.io.common import GPS_TIME_RANGE, check_binary, peek, read_bytes, read_head, shorten
 from accal.io.grace.spec import COLUMNS, GRACEFO_COLUMNS, HEADER_END, SATELLITES, YAML_MAX_DEPTH
 
-_GRACE_END_RE = re.compile(rb"^(?:# )?END OF HEADER[ \t]*\r?$", re.M)
+GRACE_END_RE = re.compile(rb"^(?:# )?END OF HEADER[ \t]*\r?$", re.M)
 _GRACEFO_END_RE = re.compile(rb"^# End of YAML header[ \t]*\r?$", re.M)
-_GRACE_KEY_RE = re.compile(rb"^(?:# )?[A-Z][A-Za-z0-9 ()=/.\-]{3,}:")
+GRACE_KEY_RE = re.compile(rb"^(?:# )?[A-Z][A-Za-z0-9 ()=/.\-]{3,}:")
 _HEADER_SEARCH = 1 << 20
 _SNIFF_BYTES = 8192
 
@@ -97,7 +97,7 @@ def sniff_grace_acc1b(path: str | Path) -> bool:
         return b"num_records" in head and b"GRACE" in head
     first = head.split(b"\n", 1)[0]
     return (
-        _GRACE_KEY_RE.match(first) is not None
+        GRACE_KEY_RE.match(first) is not None
         and b"\nSATELLITE NAME" in head
         and (b"FILE FORMAT 0=BINARY 1=ASCII" in head or b"END OF HEADER" in head)
     )
@@ -143,7 +143,7 @@ def split_header(raw: bytes, path: Path) -> tuple[str, bytes, int, int]:
     """Return (flavour, header bytes, offset of data, 1-based line of first data row)."""
     head = raw[:_HEADER_SEARCH]
     flavour = "gracefo" if head.startswith(b"header:") else "grace"
-    m = (_GRACEFO_END_RE if flavour == "gracefo" else _GRACE_END_RE).search(head)
+    m = (_GRACEFO_END_RE if flavour == "gracefo" else GRACE_END_RE).search(head)
     if m is None:
         check_binary(head[:4096], path)
         want = " or ".join(repr(s) for s in HEADER_END[flavour])
@@ -190,7 +190,7 @@ def grace_int(meta: dict, lines: dict, key: str, path: Path) -> int | None:
         ) from None
 
 
-def _record_count(meta: dict, lines: dict, path: Path) -> int | None:
+def record_count(meta: dict, lines: dict, path: Path) -> int | None:
     """The header's NUMBER OF DATA RECORDS (None if absent); negative is an error."""
     key = "NUMBER OF DATA RECORDS"
     n = grace_int(meta, lines, key, path)
@@ -216,20 +216,20 @@ def _interpret_grace(header: bytes, path: Path) -> dict[str, Any]:
     if fmt not in (None, 0, 1):
         raise FormatError(f"header 'FILE FORMAT' is {fmt}, expected 0 or 1", path)
     first, last = (
-        _header_time(meta.get(key), key, path, lines.get(key))
+        header_time(meta.get(key), key, path, lines.get(key))
         for key in ("TIME FIRST OBS(SEC PAST EPOCH)", "TIME LAST OBS(SEC PAST EPOCH)")
     )
     return {
         "meta": {"grace": meta},
         "letter": letter,
-        "n_header": _record_count(meta, lines, path),
+        "n_header": record_count(meta, lines, path),
         "binary": fmt == 0,
         "columns": COLUMNS,
-        "span": _span(first, last, path),
+        "span": header_span(first, last, path),
     }
 
 
-def _header_time(value: Any, key: str, path: Path, line: int | None) -> float | None:
+def header_time(value: Any, key: str, path: Path, line: int | None) -> float | None:
     """A header's observation time [s GPS]: None if absent, FormatError if not a time.
 
     GRACE headers give it as ``116769600.0 (2003-09-14 00:00:00.00)``: the first word.
@@ -249,7 +249,7 @@ def _header_time(value: Any, key: str, path: Path, line: int | None) -> float | 
     return t
 
 
-def _span(first: float | None, last: float | None, path: Path) -> tuple[float, float] | None:
+def header_span(first: float | None, last: float | None, path: Path) -> tuple[float, float] | None:
     """The header's (first, last) observation times, both or None; last before first is wrong."""
     if first is None or last is None:
         return None
@@ -319,7 +319,7 @@ def _interpret_gracefo(header: bytes, path: Path) -> dict[str, Any]:
     if not isinstance(nsa, dict):
         raise FormatError("YAML header: 'non-standard_attributes' is not a mapping", path)
     first, last = (
-        _header_time(nsa.get(key), key, path, _yaml_line(header, key))
+        header_time(nsa.get(key), key, path, yaml_line(header, key))
         for key in ("start_time_epoch_secs", "stop_time_epoch_secs")
     )
     return {
@@ -328,11 +328,11 @@ def _interpret_gracefo(header: bytes, path: Path) -> dict[str, Any]:
         "n_header": n_header,
         "binary": False,
         "columns": GRACEFO_COLUMNS,
-        "span": _span(first, last, path),
+        "span": header_span(first, last, path),
     }
 
 
-def _yaml_line(header: bytes, key: str) -> int | None:
+def yaml_line(header: bytes, key: str) -> int | None:
     """1-based line of the header where ``key:`` first appears (for messages)."""
     i = header.find(key.encode() + b":")
     return None if i < 0 else header.count(b"\n", 0, i) + 1
