@@ -497,10 +497,10 @@ class Basis:
         ``c = Q_eᵀ z̃`` and ``q r`` the QR of ``z̃ − Q_e c`` (``z̃`` the columns with the
         blocks and the nuisance projected out; Gram-Schmidt twice, Giraud et al. 2005,
         *Numer. Math.* 101, 87): ``O(n k q)`` instead of the ``O(n (k+q)²)`` of a new
-        QR, which a smooth curve of a few hundred columns made the main cost.  The QR
-        of the new block is CholeskyQR2 (Fukaya et al. 2014, *ScalA*, 31), matrix
-        products only.  A column dependent on the others returns False (the caller's
-        pivoted QR decides).
+        QR each time the search adds an effect to a basis with ``k`` extra columns.
+        The QR of the new block is CholeskyQR2 (Fukaya et al. 2014, *ScalA*, 31),
+        matrix products only.  A new column whose part outside the others is under
+        1e-6 of its norm returns False (the caller's pivoted QR decides what to keep).
         """
         ez = z if self.nuisance is None else self.nuisance.residualize(z)
         et = ez - self.block_project(ez)
