@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from accal.errors import FormatError, check_option
-from accal.io.common import GZIP_MAGIC, missing, peek, read_bytes
+from accal.io.common import GZIP_MAGIC, missing, open_error, peek, read_bytes
 from accal.io.grace_l1b import read_grace_acc1b, sniff_grace_acc1b, write_grace_acc1b
 from accal.io.tables import read_table_series, sniff_table, write_series
 from accal.series import AccSeries
@@ -32,10 +32,8 @@ def _check_path(path: Path) -> None:
     try:
         with open(path, "rb") as fh:
             fh.read(1)
-    except PermissionError:
-        raise FormatError("permission denied (file not readable)", path) from None
     except OSError as exc:
-        raise FormatError(f"cannot read file: {exc.strerror or exc}", path) from None
+        raise open_error(exc, path) from None
 
 
 def detect_format(path: str | Path) -> str:

@@ -58,6 +58,16 @@ def implausible(arr: NDArray, limit: float = MAX_ABS_ACCELERATION) -> NDArray[np
     return np.flatnonzero(np.abs(np.where(np.isfinite(a), a, 0.0)) > limit)
 
 
+def open_error(exc: OSError, path: str | Path) -> FormatError:
+    """The one-line error of an input that could not be opened or read: missing
+    (:func:`missing` says how), not readable, or the system's reason."""
+    if isinstance(exc, FileNotFoundError) or exc.errno == errno.ELOOP:
+        return FormatError(missing(path), path)
+    if isinstance(exc, PermissionError):
+        return FormatError("permission denied (file not readable)", path)
+    return FormatError(f"cannot read file: {exc.strerror or exc}", path)
+
+
 def implausible_message(name: str, value: float, unit: str = "m/s²") -> str:
     """The reader message for a value beyond :data:`MAX_ABS_ACCELERATION`."""
     return (
@@ -120,14 +130,8 @@ def read_bytes(path: str | Path, limit: int | None = None, why: str = "") -> byt
             if fh.read(3) != UTF8_BOM:
                 fh.seek(0)
             raw = fh.readall()
-    except FileNotFoundError:
-        raise FormatError(missing(p), p) from None
-    except PermissionError:
-        raise FormatError("permission denied (file not readable)", p) from None
     except OSError as exc:
-        if exc.errno == errno.ELOOP:
-            raise FormatError(missing(p), p) from None
-        raise FormatError(f"cannot read file: {exc.strerror or exc}", p) from None
+        raise open_error(exc, p) from None
     if raw[:2] == GZIP_MAGIC:
         raw = gunzip(raw, p, limit, why)
         if raw.startswith(UTF8_BOM):

@@ -5,7 +5,6 @@ Used by :mod:`accal.io.rawlog` for files too large to hold whole.
 
 from __future__ import annotations
 
-import errno
 import gzip
 import io
 import zlib
@@ -19,8 +18,8 @@ from accal.io.common import (
     UTF8_BOM,
     check_binary,
     csv_read_options,
-    missing,
     one_line,
+    open_error,
     read_bytes,
 )
 from accal.io.table_meta import _comment, _json_object, _plain_name, _units_object
@@ -63,14 +62,8 @@ def _open_binary(path: Path) -> Any:
         raise FormatError("is a directory, not a file", path)
     try:
         fh = open(path, "rb")  # noqa: SIM115 (returned to the caller, who closes it)
-    except FileNotFoundError:
-        raise FormatError(missing(path), path) from None
-    except PermissionError:
-        raise FormatError("permission denied (file not readable)", path) from None
     except OSError as exc:
-        if exc.errno == errno.ELOOP:
-            raise FormatError(missing(path), path) from None
-        raise FormatError(f"cannot read file: {exc.strerror or exc}", path) from None
+        raise open_error(exc, path) from None
     try:
         magic = fh.read(2)
         fh.seek(0)
