@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from accal.closure import close_loop
-from accal.closure.lagprofile import _crossing, _side
+from accal.closure.lagprofile import _crossing, _side, profile_intervals
 from accal.closure.report import to_markdown
 
 N = 20_000
@@ -135,3 +135,59 @@ def test_a_repeating_channel_lists_the_lags_a_cycle_apart():
     if close:
         assert d["lag_sigma"] >= 0.5 * (max(a["lag"] for a in close) - e.lag)
     assert ("lag not identified" in to_markdown(res)) == d["lag_ambiguous"]
+
+
+def _parabola(lag_hat: float, sigma: float, wald: float, notch=None):
+    """``P(L)`` whose profile ``ΔW = W(1 − P/P̂)`` is ``((L − L̂)/σ)²``, optionally with a
+    narrow notch ``(centre, ΔW there, half-width)`` of lower ``ΔW``."""
+    p_hat = 1.0
+
+    def power(lg: float) -> float:
+        dw = ((lg - lag_hat) / sigma) ** 2
+        if notch is not None:
+            c, dw_c, w = notch
+            if abs(lg - c) < w:
+                dw = min(dw, dw_c + (dw - dw_c) * abs(lg - c) / w)
+        return p_hat * (1.0 - dw / wald)
+
+    return power
+
+
+def test_profile_of_a_parabola_gives_its_sigma_from_both_sets():
+    """Exact case: ``ΔW = ((L − L̂)/σ)²``: the 68 % set is ``L̂ ± σ``, the 95 % set
+    ``L̂ ± 2σ``, and ``lag_sigma`` is σ (to the bisection's tenth of a step)."""
+    for sigma in (3.0, 17.5, 120.0):
+        info = profile_intervals(_parabola(700.0, sigma, 400.0), 700.0, 400.0, 1800.0, 1.0)
+        lo, hi = info["lag_interval"]
+        lo95, hi95 = info["lag_interval_95"]
+        assert abs(lo - (700.0 - sigma)) <= 0.1 and abs(hi - (700.0 + sigma)) <= 0.1
+        assert abs(lo95 - (700.0 - 2 * sigma)) <= 0.1 and abs(hi95 - (700.0 + 2 * sigma)) <= 0.1
+        assert abs(info["lag_sigma"] - sigma) <= 0.1
+        assert not info["lag_ambiguous"]
+
+
+def test_a_narrow_island_of_the_two_sigma_set_widens_the_sigma():
+    """The case of a walking channel read with white noise (`tests.indep`, 7405): a broad
+    hill at L̂ and, 12 s away, a 1 s wide notch with ``ΔW = 2.2``.  The 68 % set stays
+    the hill's; the 95 % set reaches the notch and σ is a quarter of its width, so the
+    notch's lag is 2.5σ away, not 3.4σ (its ``ΔW`` of 2.2 says 1.5σ: a σ cannot say both
+    that and the hill's width)."""
+    power = _parabola(785.5, 3.6, 670.0, notch=(797.8, 2.2, 0.6))
+    info = profile_intervals(power, 785.5, 670.0, 1800.0, 1.0)
+    lo, hi = info["lag_interval"]
+    assert abs(lo - 781.9) <= 0.1 and abs(hi - 789.1) <= 0.1
+    assert abs(info["lag_sigma_68"] - 3.6) <= 0.1
+    lo95, hi95 = info["lag_interval_95"]
+    assert abs(lo95 - (785.5 - 7.2)) <= 0.1
+    assert 797.8 <= hi95 <= 798.4
+    assert abs(info["lag_sigma"] - 0.25 * (hi95 - lo95)) < 1e-12
+    assert 2.4 < (797.8 - 785.5) / info["lag_sigma"] < 2.6
+    # without the notch the same hill keeps σ = 3.6
+    plain = profile_intervals(_parabola(785.5, 3.6, 670.0), 785.5, 670.0, 1800.0, 1.0)
+    assert abs(plain["lag_sigma"] - 3.6) <= 0.1
+
+
+def test_profile_with_no_information_spans_the_range():
+    info = profile_intervals(_parabola(100.0, 5.0, 400.0), 100.0, 0.5, 1800.0, 1.0)
+    assert info["lag_interval"] == [0.0, 1800.0] and info["lag_ambiguous"]
+    assert profile_intervals(lambda lg: 0.0, 100.0, 400.0, 1800.0, 1.0) == {}

@@ -27,6 +27,18 @@ lags a whole period apart that explain at least :data:`ALIAS_SHARE` of the power
 aliases (:func:`_is_alias`) and widen the interval too: the lag is known modulo the
 period only.
 
+The profile need not be a parabola: a channel with both slow and sample-to-sample
+variation (a walking temperature read with white noise) has a broad hill from the slow
+part and, at the true lag, a narrow notch from the fast one, a few samples wide.  On a
+`tests.indep` day (1e-8 m/s²/K, true lag 797.8 s) the hill peaked at 785.5 s with
+``ΔW ≤ 1`` over ±3.6 s, while the notch at the truth had ``ΔW = 2.2``: the 68 % set
+was right to leave it out, but a σ of 3.6 s put the truth at 3.4σ where the profile
+says ~1.5σ.  So the 95 % set ``{ΔW ≤ 4}`` is found too (:func:`_two_sigma_set`: its
+contiguous part by bisection, then a scan at a quarter sample step, at most
+:data:`ISLAND_POINTS` lags, of a window as wide again each side for such islands),
+and ``lag_sigma`` is at least a quarter of its width (``ΔW = 4`` is 2σ on a
+parabola, where both give the same σ).  Reported as ``lag_interval_95``.
+
 A second σ, the least-squares sandwich of the lag under the residual's coloured noise
 (:func:`lag_sandwich_sigma`), is computed beside the profile's; ``lag_sigma`` is the
 larger (below a sample step the profile is widened by the channel's linear
@@ -51,7 +63,13 @@ from accal.closure.wald import sandwich_cov
 if TYPE_CHECKING:  # annotations only: the search imports the candidates
     from accal.closure.search import Found, Search
 
-__all__ = ["ALT_DELTA_W", "add_lag_uncertainties", "lag_sandwich_sigma", "lag_uncertainty"]
+__all__ = [
+    "ALT_DELTA_W",
+    "add_lag_uncertainties",
+    "lag_sandwich_sigma",
+    "lag_uncertainty",
+    "profile_intervals",
+]
 
 #: ``ΔW`` up to which another lag is listed as an alternative (2σ).
 ALT_DELTA_W = 4.0
@@ -59,6 +77,10 @@ ALT_DELTA_W = 4.0
 PROFILE_POINTS = 121
 #: Local maxima of that profile refined and checked at most.
 MAX_ALTERNATIVES = 6
+#: ``ΔW`` of the 95 % profile set (2σ on a parabola).
+TWO_SIGMA_DELTA_W = 4.0
+#: Lags scanned at most on each side for islands of the 95 % set beside its contiguous part.
+ISLAND_POINTS = 200
 #: Share of the explained power at which a lag a whole period away is an alias
 #: (the coupling search's rule, :func:`accal.closure.couplings._shortest_lag`).
 ALIAS_SHARE = 0.98
@@ -124,12 +146,45 @@ def lag_uncertainty(
         Empty when the coupling explains nothing at ``lag``.
     """
     step = ctx.grid.step
-    tol = 0.1 * step
     top = max(float(top), float(lag))
 
     def power(lg: float) -> float:
         return _power_at(ctx, name, x, tau, float(min(max(lg, 0.0), top)))
 
+    period = float(ctx.options.get("lag_period") or 0.0)
+    return profile_intervals(power, float(lag), float(wald), top, step, period)
+
+
+def profile_intervals(
+    power, lag: float, wald: float, top: float, step: float, period: float = 0.0
+) -> dict[str, Any]:
+    """The lag's 68 % and 95 % profile sets from the explained power ``power(L)``.
+
+    Parameters
+    ----------
+    power : callable
+        ``P(L)``, the explained power at lag ``L`` (the rest of the model held).
+    lag : float
+        ``L̂``, the lag maximising ``P`` [s].
+    wald : float
+        ``W(L̂)`` (see :func:`lag_uncertainty`).
+    top : float
+        Longest lag searched [s].
+    step : float
+        Sample step [s]: the interval ends are found to a tenth of it.
+    period : float
+        Per-period base's period [s] (lags a whole period apart are aliases), 0 if none.
+
+    Returns
+    -------
+    dict
+        As :func:`lag_uncertainty`, plus ``lag_interval_95`` [s, s] and
+        ``lag_sigma_68`` (half the 68 % interval's width) [s].  ``lag_sigma`` is the
+        larger of ``lag_sigma_68`` and a quarter of the 95 % interval's width
+        (eq. 1 of the module docstring's profile: ``ΔW = 1`` and ``ΔW = 4`` are 1σ and
+        2σ on a parabola).
+    """
+    tol = 0.1 * step
     p_hat = power(lag)
     if not (p_hat > 0 and np.isfinite(wald)):
         return {}
@@ -137,6 +192,8 @@ def lag_uncertainty(
         return {
             "lag_sigma": 0.5 * top,
             "lag_interval": [0.0, top],
+            "lag_interval_95": [0.0, top],
+            "lag_sigma_68": 0.5 * top,
             "lag_alternatives": [],
             "lag_ambiguous": True,
             "lag_sigma_method": "profile",
@@ -145,25 +202,60 @@ def lag_uncertainty(
     def delta_w(p: float) -> float:
         return wald * (1.0 - p / p_hat)
 
-    def inside(lg: float) -> float:
-        return 1.0 - delta_w(power(lg))  # ≥ 0 inside the 68 % set
+    def inside(lg: float, level: float = 1.0) -> float:
+        return level - delta_w(power(lg))  # ≥ 0 inside the set
 
     lo = _side(inside, lag, 0.0, step, tol) if lag > 0 else 0.0
     hi = _side(inside, lag, top, step, tol) if lag < top else top
-    period = float(ctx.options.get("lag_period") or 0.0)
     alts = _alternatives(power, delta_w, (lag, p_hat, period), lo, hi, top, step)
     alike = [a["lag"] for a in alts if a["delta_w"] <= 1.0 or a.get("alias")]
     ambiguous = bool(alike)
     half = 0.5 * (hi - lo)  # each other lag is as uncertain as the chosen one
     lo_all = max(min([lo] + [v - half for v in alike]), 0.0)
     hi_all = min(max([hi] + [v + half for v in alike]), top)
+    lo95, hi95 = _two_sigma_set(lambda lg: inside(lg, TWO_SIGMA_DELTA_W), lag, top, step)
+    lo95, hi95 = min(lo95, lo_all), max(hi95, hi_all)
+    sigma68 = 0.5 * (hi_all - lo_all)
     return {
-        "lag_sigma": 0.5 * (hi_all - lo_all),
+        "lag_sigma": max(sigma68, 0.25 * (hi95 - lo95)),
         "lag_interval": [lo_all, hi_all],
+        "lag_interval_95": [lo95, hi95],
+        "lag_sigma_68": sigma68,
         "lag_alternatives": alts,
         "lag_ambiguous": bool(ambiguous),
         "lag_sigma_method": "profile",
     }
+
+
+def _two_sigma_set(inside, lag: float, top: float, step: float) -> tuple[float, float]:
+    """Hull ``[lo, hi]`` of the 95 % set ``{inside ≥ 0}`` near ``lag``: its contiguous
+    part by doubling and bisection (:func:`_side`), then islands in a window as wide
+    again on each side (at least 10 steps), scanned at a quarter step or, for a wide
+    window, at :data:`ISLAND_POINTS` lags; the outermost island's outer edge is bisected."""
+    tol = 0.1 * step
+    lo = _side(inside, lag, 0.0, step, tol) if lag > 0 else 0.0
+    hi = _side(inside, lag, top, step, tol) if lag < top else top
+    ext = max(hi - lo, 10.0 * step)
+    for a, b in ((max(lo - ext, 0.0), lo), (hi, min(hi + ext, top))):
+        if b - a <= tol:
+            continue
+        n = int(min(np.ceil((b - a) / (0.25 * step)), ISLAND_POINTS)) + 1
+        grid = np.linspace(a, b, n)
+        ok = np.flatnonzero([inside(g) >= 0 for g in grid])
+        if not ok.size:
+            continue
+        first, last = ok[0], ok[-1]  # the hull's new ends, to the bisection's tolerance
+        if grid[first] < lo:
+            edge = (
+                grid[first] if first == 0 else _crossing(inside, grid[first], grid[first - 1], tol)
+            )
+            lo = min(lo, float(edge))
+        if grid[last] > hi:
+            edge = (
+                grid[last] if last == n - 1 else _crossing(inside, grid[last], grid[last + 1], tol)
+            )
+            hi = max(hi, float(edge))
+    return lo, hi
 
 
 def _is_alias(d_lag: float, p: float, p_hat: float, period: float) -> bool:
@@ -298,7 +390,12 @@ def add_lag_uncertainties(search: Search, final: Sequence[Found], effects: list[
         if not info:
             continue
         sand = lag_sandwich_sigma(
-            ctx, name, np.asarray(x, float), tau, float(lag), max(info["lag_sigma"], ctx.grid.step)
+            ctx,
+            name,
+            np.asarray(x, float),
+            tau,
+            float(lag),
+            max(info["lag_sigma_68"], ctx.grid.step),
         )
         info["lag_sigma_profile"] = info["lag_sigma"]
         if np.isfinite(sand):
