@@ -10,6 +10,8 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 OUT    ?= out
 FUZZ_MINUTES ?= 10
+# pytest processes (pytest-xdist): one per core; TEST_WORKERS=0 runs in one process
+TEST_WORKERS ?= auto
 
 .PHONY: install run demo test test-all lint bench bench-readers bench-archive bench-demod-year bench-closure closure-detection fuzz-cli mc-sigma mc-sigma-indep mc-sigma-demod mc-reference bench-reference clean
 
@@ -47,11 +49,11 @@ demo: $(STAMP)
 
 ## test: the full default test suite (what CI runs)
 test: $(STAMP)
-	$(BIN)/python -m pytest -q -m "not slow"
+	$(BIN)/python -m pytest -q -m "not slow" -n $(TEST_WORKERS)
 
 ## test-all: also the long Monte-Carlo studies
 test-all: $(STAMP)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n $(TEST_WORKERS)
 
 lint: $(STAMP)
 	$(BIN)/ruff check src tests properties benchmarks
