@@ -13,7 +13,7 @@ FUZZ_MINUTES ?= 10
 # pytest processes (pytest-xdist): one per core; TEST_WORKERS=0 runs in one process
 TEST_WORKERS ?= auto
 
-.PHONY: install run demo test test-all lint bench bench-readers bench-archive bench-demod-year bench-closure closure-detection fuzz-cli mc-sigma mc-sigma-indep mc-sigma-demod mc-reference bench-reference clean
+.PHONY: install run demo test test-all lint bench bench-readers bench-archive bench-demod-year bench-closure closure-detection fuzz-cli mc-sigma mc-sigma-indep mc-sigma-demod mc-reference bench-reference compare-outputs clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -50,6 +50,12 @@ demo: $(STAMP)
 ## test: the full default test suite (what CI runs)
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -m "not slow" -n $(TEST_WORKERS)
+
+## compare-outputs: the outputs of make run, make demo and the README walk-through with
+##       accal of git revision BASE and of the working tree, file by file (issue 21)
+BASE ?= HEAD
+compare-outputs: $(STAMP)
+	$(BIN)/python benchmarks/compare_outputs.py $(BASE) --out $(OUT)/compare
 
 ## test-all: also the long Monte-Carlo studies
 test-all: $(STAMP)
