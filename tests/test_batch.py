@@ -196,6 +196,46 @@ def test_unreachable_scheduler_is_a_clear_error(archive, tmp_path):
     assert len(err.strip().splitlines()) == 1
 
 
+def _closed_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_refused_scheduler_is_said_at_once_without_the_connect_timeout(archive, tmp_path):
+    """Nothing listens at the address: the TCP probe says "refused" (the client would
+    retry for its 30 s connect timeout, left at its default here); no output written."""
+    pytest.importorskip("distributed")
+    port = _closed_port()
+    out = tmp_path / "o"
+    code, _, err = invoke(
+        "grace-bias", next(archive.rglob("*.asc")), "--out", out, "--scheduler",
+        f"tcp://127.0.0.1:{port}", "-q",
+    )  # fmt: skip
+    assert code == 1
+    assert err.strip() == (
+        f"accal: cannot connect to the dask scheduler 'tcp://127.0.0.1:{port}': Connection refused"
+    )
+    assert not list(out.glob("*.parquet")) and not list(out.glob("*.csv"))
+
+
+def test_scheduler_probe_leaves_what_it_cannot_judge_to_the_client():
+    from accal.batch import _refused
+
+    assert _refused(f"127.0.0.1:{_closed_port()}") == "Connection refused"
+    assert "unknown host" in _refused("tcp://no-such-host.invalid:8786")
+    for address in ("tls://127.0.0.1:1", "inproc://10.0.0.1/123/1", "scheduler.json", ""):
+        assert _refused(address) is None
+    import socket
+
+    with socket.socket() as srv:  # something listens: the client takes over
+        srv.bind(("127.0.0.1", 0))
+        srv.listen()
+        assert _refused(f"tcp://127.0.0.1:{srv.getsockname()[1]}") is None
+
+
 # ---------------------------------------------------------------- incremental
 
 

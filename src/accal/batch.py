@@ -31,6 +31,8 @@ re-run therefore ends with the same outputs as an uninterrupted one.
 from __future__ import annotations
 
 import os
+import re
+import socket
 import stat
 import warnings
 from collections.abc import Callable, Iterator, Sequence
@@ -326,6 +328,35 @@ def _death(codes: Sequence[int]) -> str:
     return "the worker process running this input ended abruptly (killed? out of memory?)"
 
 
+#: Seconds the TCP probe of a scheduler address waits for an answer (:func:`_refused`).
+PROBE_TIMEOUT = 3.0
+
+
+def _refused(address: str) -> str | None:
+    """Why a ``tcp://host:port`` (or ``host:port``) scheduler address cannot be reached
+    at once, or ``None``.
+
+    ``distributed.Client`` retries a refused connection until its connect timeout
+    (30 s by default) before it fails; a plain TCP connection (:func:`socket.create_connection`)
+    says "refused", "no route" or "unknown host" at once.  Only such immediate answers are
+    reported: a probe that times out, another scheme (``tls://``, ``inproc://``, ``ucx://``)
+    or an address that does not parse is left to the client and its timeout.
+    """
+    m = re.fullmatch(r"(?:tcp://)?\[?([^\]\s/]+?)\]?:(\d{1,5})/?", address.strip())
+    if not m:
+        return None
+    host, port = m.group(1), int(m.group(2))
+    try:
+        with socket.create_connection((host, port), timeout=PROBE_TIMEOUT):
+            return None
+    except TimeoutError:
+        return None
+    except socket.gaierror as exc:
+        return f"unknown host {host!r} ({exc.strerror or exc})"
+    except OSError as exc:
+        return exc.strerror or str(exc)
+
+
 def _execute_dask(
     task: Callable[[Any], Any],
     paths: Sequence[Any],
@@ -337,6 +368,10 @@ def _execute_dask(
     except ImportError:  # pragma: no cover - depends on the install
         raise AccalError("--scheduler needs dask.distributed: pip install 'accal[dask]'") from None
     own = not isinstance(scheduler, Client)
+    if own:
+        refused = _refused(str(scheduler))
+        if refused:
+            raise AccalError(f"cannot connect to the dask scheduler {scheduler!r}: {refused}")
     try:
         client = Client(scheduler) if own else scheduler
     except (OSError, TimeoutError, ValueError) as exc:
