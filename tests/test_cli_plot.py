@@ -11,10 +11,10 @@ from click.testing import CliRunner
 
 from accal.cli import main
 from accal.errors import AccalError
+from accal.plot_style import accel_scale
 from accal.products.archive_plot import (
     BIAS_SCALE,
     DRIFT_SCALE,
-    _accel_scale,
     bias_drift_figure,
     periods_figure,
 )
@@ -124,11 +124,11 @@ def test_the_periods_figure_shows_the_table_values(demod_dir):
     table = pd.read_parquet(demod_dir / "periods.parquet")
     table["t_mid_utc"] = pd.to_datetime(table["t_mid_utc"], utc=True)
     fig = periods_figure(table, source="t")
-    factor, unit = _accel_scale(table[["a_Y", "a_Z"]].to_numpy())
+    factor, unit = accel_scale(table[["a_Y", "a_Z"]].to_numpy())
     assert 1.0 <= np.nanmax(np.abs(table[["a_Y", "a_Z"]].to_numpy())) * factor < 1000.0
     for ax, comp in zip(fig.axes[:2], ("Y", "Z"), strict=True):
         assert ax.get_ylabel() == f"a_{comp} [{unit}]"
         shown = sorted(float(y) for c in ax.containers for y in c.lines[0].get_ydata())
         np.testing.assert_allclose(shown, sorted(table[f"a_{comp}"] * factor), rtol=1e-12)
-    assert _accel_scale(np.array([3e-13, np.nan])) == (1e12, "pm/s²")
-    assert _accel_scale(np.array([2.0])) == (1.0, "m/s²")
+    assert accel_scale(np.array([3e-13, np.nan])) == (1e12, "pm/s²")
+    assert accel_scale(np.array([2.0])) == (1.0, "m/s²")

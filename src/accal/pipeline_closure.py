@@ -357,7 +357,7 @@ def close_the_loop(
         out[ax] = {"summary": summary, "instrument": inst, "model": "+".join(labels)}
         cols.append(y - inst)
         if opts.plots:
-            plots += _plot_closure(res, prefix, ax)
+            plots += _plot_closure(res, prefix, ax, title=f"{path.name}, axis {ax}")
     fit_series = fit_series.replace(acc=np.column_stack(cols)).with_history(
         f"accal {__version__}: close_loop(alpha={opts.alpha}) removed "
         + "; ".join(f"{ax}: {out[ax]['model']}" for ax in series.axes)
@@ -394,13 +394,14 @@ def _detrended(t: np.ndarray, y: np.ndarray) -> np.ndarray:
     return y - a @ np.linalg.lstsq(a, y, rcond=None)[0]
 
 
-def write_closure_plots(res: Any, prefix: Path, ax: str) -> list[Path]:
+def write_closure_plots(res: Any, prefix: Path, ax: str, title: str | None = None) -> list[Path]:
     """Write ``<prefix>.closure{,-psd,-effects}.<ax>.png`` of a closure result (none
-    without matplotlib); returns the paths written."""
-    return _plot_closure(res, prefix, ax)
+    without matplotlib; ``title``: the input and axis, on every figure); returns the
+    paths written."""
+    return _plot_closure(res, prefix, ax, title)
 
 
-def _plot_closure(res: Any, prefix: Path, ax: str) -> list[Path]:
+def _plot_closure(res: Any, prefix: Path, ax: str, title: str | None = None) -> list[Path]:
     try:
         import matplotlib  # noqa: F401
     except ImportError:
@@ -414,7 +415,7 @@ def _plot_closure(res: Any, prefix: Path, ax: str) -> list[Path]:
     with contextlib.ExitStack() as stack:
         tmps = [stack.enter_context(atomic_path(p, sync=False)) for p in names]
         pngs = [t.with_name(t.name + ".png") for t in tmps]  # matplotlib wants the suffix
-        plot_closure(res, *pngs)
+        plot_closure(res, *pngs, title=title)
         for png, t in zip(pngs, tmps, strict=True):
             png.replace(t)
     return names

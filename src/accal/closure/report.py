@@ -1,7 +1,8 @@
-"""Reports of a :class:`~accal.closure.select.ClosureResult`: dict, Markdown, plots.
+"""Reports of a :class:`~accal.closure.select.ClosureResult`: dict, Markdown (and the
+plots of :mod:`accal.closure.plots`, re-exported here).
 
-The only module of :mod:`accal.closure` that writes files, and only to the paths
-its caller gives.  ``result_to_dict`` is the ``closure.json`` layout::
+With :mod:`accal.closure.plots`, the only modules of :mod:`accal.closure` that write
+files, and only to the paths their caller gives.  ``result_to_dict`` is the ``closure.json`` layout::
 
     {"effects": [{"name", "channel", "axis", "coefficient", "sigma", "significance",
                   "epoch", "frequency", "lag", "tau", "details"}, ...],
@@ -35,10 +36,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from accal.closure.kinds import effect_label
+from accal.closure.plots import plot_closure, plot_effects
 
 if TYPE_CHECKING:
-    from numpy.typing import NDArray
-
     from accal.closure.residual import ResidualStats
     from accal.closure.select import ClosureResult, Effect
 
@@ -310,159 +310,3 @@ def to_markdown(
         for k, v in result.true_error(truth).items():
             lines.append(f"| {k} | {_fmt(v['before'])} | {_fmt(v['after'])} |")
     return "\n".join(lines) + "\n"
-
-
-def _break_gaps(x, *ys):
-    """Insert NaN where ``x`` jumps by more than 1.5 median steps (lines do not bridge gaps)."""
-    if x.size < 3:
-        return (x, *ys)
-    cut = np.flatnonzero(np.diff(x) > 1.5 * np.median(np.diff(x))) + 1
-    return tuple(np.insert(np.asarray(a, dtype=float), cut, np.nan) for a in (x, *ys))
-
-
-def _channels(result: ClosureResult) -> list[tuple[str | None, NDArray[np.bool_]]]:
-    if not result.channel_names or result.channel is None:
-        return [(None, result.use)]
-    return [(nm, result.use & (result.channel == c)) for c, nm in enumerate(result.channel_names)]
-
-
-def plot_closure(
-    result: ClosureResult,
-    residual_path: str | Path,
-    psd_path: str | Path,
-    effects_path: str | Path | None = None,
-) -> tuple[Path, ...]:
-    """Plot residuals and their PSDs before/after (matplotlib, Agg backend).
-
-    Parameters
-    ----------
-    result : ClosureResult
-    residual_path, psd_path : str or Path
-        Output image files (format from the suffix), chosen by the caller.
-    effects_path : str or Path, optional
-        Also plot every effect's regressor against the residual
-        (:func:`plot_effects`).
-
-    Returns
-    -------
-    tuple of Path
-        The files written, in the order given.
-    """
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    from matplotlib.figure import Figure
-
-    chans = _channels(result)
-    t_first = result.time[result.use][0]
-    fig = Figure(figsize=(9, 3.2 * len(chans) + 1.0))
-    axes = fig.subplots(len(chans), 1, squeeze=False, sharex=True)[:, 0]
-    for ax, (nm, m) in zip(axes, chans, strict=True):
-        hours = (result.time[m] - t_first) / 3600.0
-        rb, ra = result.residual_before[m], result.residual_after[m]
-        hb, rb_p, ra_p = _break_gaps(hours, rb, ra)
-        ax.plot(hb, rb_p, lw=0.4, label=f"before (RMS {np.sqrt(np.mean(rb**2)):.3g})")
-        ax.plot(hb, ra_p, lw=0.4, label=f"after (RMS {np.sqrt(np.mean(ra**2)):.3g})")
-        for e in result.effects:
-            if e.epoch is not None:
-                ax.axvline((e.epoch - t_first) / 3600.0, color="k", ls="--", lw=0.8)
-        ax.set_ylabel("residual [m/s²]" if nm is None else f"residual {nm} [m/s²]")
-        ax.legend(loc="best", fontsize=8)
-    axes[-1].set_xlabel("time since first used sample [h]")
-    names = ", ".join(e.name for e in result.effects) or "none"
-    axes[0].set_title(f"residual before/after closing the loop (effects: {names})", fontsize=10)
-    fig.tight_layout()
-    residual_path = Path(residual_path)
-    fig.savefig(residual_path, dpi=110)
-
-    fig = Figure(figsize=(7, 4.5))
-    ax = fig.subplots()
-    for st, lab in ((result.stats_before, "before"), (result.stats_after, "after")):
-        asd = np.sqrt(st.psd[1:]) if st.freq.size > 1 else np.zeros(0)
-        ok = asd > 0  # an exact fit (a residual of zeros) has nothing to draw on a log scale
-        if ok.any():
-            ax.loglog(st.freq[1:][ok], asd[ok], lw=0.8, label=lab)
-    for e in result.effects:
-        if e.frequency:
-            ax.axvline(e.frequency, color="k", ls=":", lw=0.8)
-    ax.set_xlabel("frequency [Hz]")
-    ax.set_ylabel("residual ASD [m/s²/√Hz]")
-    ax.set_title("residual amplitude spectral density", fontsize=10)
-    if ax.get_lines():
-        ax.legend(loc="best")
-    fig.tight_layout()
-    psd_path = Path(psd_path)
-    fig.savefig(psd_path, dpi=110)
-    out: tuple[Path, ...] = (residual_path, psd_path)
-    if effects_path is not None:
-        out = (*out, plot_effects(result, effects_path))
-    return out
-
-
-def plot_effects(result: ClosureResult, path: str | Path, max_points: int = 4000) -> Path:
-    """Each effect's fitted contribution against the residual without it.
-
-    One panel per effect (and data channel), an added-variable plot against time:
-    the fitted contribution ``regressor × coefficient`` with the base model
-    projected out (colour: what only this effect explains) and the *partial
-    residual* ``residual_after + contribution`` (grey, decimated to
-    ``max_points``).  An effect that explains the residual follows it; one found
-    in noise would not.
-    """
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    from matplotlib.figure import Figure
-
-    chans = _channels(result)
-    effects = list(result.effects)
-    path = Path(path)
-    rows = max(len(effects), 1)
-    fig = Figure(figsize=(9, 2.6 * rows + 0.6))
-    axes = fig.subplots(rows, len(chans), squeeze=False)
-    if not effects:
-        axes[0, 0].text(0.5, 0.5, "no effect found", ha="center", va="center")
-        axes[0, 0].set_axis_off()
-        fig.savefig(path, dpi=110)
-        return path
-    from accal.closure.basis import Basis
-
-    t_first = result.time[result.use][0]
-    use = result.use
-    bb = result.base_design
-    base = Basis(bb.block[use], bb.columns[use], n_blocks=bb.n_blocks)
-    j = result.n_base
-    for i, e in enumerate(effects):
-        q = _n_columns(result, j, e)
-        full = (
-            result.effect_columns[:, j - result.n_base : j - result.n_base + q]
-            @ (result.coef[j : j + q])
-        )
-        # what only the effect explains: its contribution with the base projected out
-        contrib = np.full(full.shape, np.nan)
-        contrib[use] = full[use] - base.project(full[use])
-        j += q
-        for k, (nm, m) in enumerate(chans):
-            ax = axes[i, k]
-            idx = np.flatnonzero(m)
-            if idx.size > max_points:
-                idx = idx[np.linspace(0, idx.size - 1, max_points).astype(int)]
-            hours = (result.time[idx] - t_first) / 3600.0
-            ax.plot(hours, result.residual_after[idx] + contrib[idx], ".", ms=1, color="0.6")
-            ax.plot(hours, contrib[idx], lw=1.0, color="C3")
-            lab = e.name if e.channel is None else f"{e.name} ({e.channel})"
-            ax.set_title(lab if nm is None else f"{lab} — {nm}", fontsize=9)
-            ax.set_ylabel("[m/s²]", fontsize=8)
-            if i == rows - 1:
-                ax.set_xlabel("time since first used sample [h]", fontsize=8)
-    fig.suptitle(
-        "partial residual (grey) and fitted effect (red), base model projected out", fontsize=10
-    )
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    return path
-
-
-def _n_columns(result: ClosureResult, start: int, effect: Effect) -> int:
-    """Number of design columns of ``effect`` (its columns start at ``start``)."""
-    return int(effect.details.get("n_columns", 1))

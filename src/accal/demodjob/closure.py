@@ -303,7 +303,7 @@ def _closure_plots(res: Any, out_dir: Path, stem: str) -> list[Path]:
     with contextlib.ExitStack() as stack:
         tmps = [stack.enter_context(atomic_path(p)) for p in names]
         pngs = [t.with_name(t.name + ".png") for t in tmps]
-        plot_closure(res, *pngs)
+        plot_closure(res, *pngs, title=f"{stem} (accal demod)")
         for png, t in zip(pngs, tmps, strict=True):
             png.replace(t)
     return names

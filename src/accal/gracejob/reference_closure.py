@@ -296,7 +296,7 @@ def _close_axes(
         out[ax] = {"summary": summary, "instrument": inst, "model": summary["model"]}
         out[ax]["coupled"] = coupled
         if opts.plots:
-            plots += write_closure_plots(res, prefix, ax)
+            plots += write_closure_plots(res, prefix, ax, f"{path.name}, axis {ax} (reference fit)")
     return out, plots, warnings, covered
 
 

@@ -20,6 +20,7 @@ import pandas as pd
 
 from accal.errors import AccalError
 from accal.io.writers import atomic_path
+from accal.plot_style import accel_scale
 
 if TYPE_CHECKING:  # matplotlib is imported when a figure is drawn (~0.4 s)
     from matplotlib.figure import Figure
@@ -70,21 +71,6 @@ def _save(fig: Figure, path: str | Path) -> Path:
     return path
 
 
-#: SI prefixes for the periods plot: (factor, unit), the first whose scaled values
-#: reach 1 is used.
-ACCEL_SCALES = ((1.0, "m/s²"), (1e3, "mm/s²"), (1e6, "µm/s²"), (1e9, "nm/s²"), (1e12, "pm/s²"))
-
-
-def _accel_scale(values: np.ndarray) -> tuple[float, str]:
-    """The :data:`ACCEL_SCALES` entry in which the largest finite ``|values|`` is ≥ 1."""
-    finite = np.abs(values[np.isfinite(values)])
-    top = float(finite.max()) if finite.size else 0.0
-    for factor, unit in ACCEL_SCALES:
-        if top * factor >= 1.0:
-            return factor, unit
-    return ACCEL_SCALES[-1]
-
-
 def periods_figure(table: pd.DataFrame, *, source: str) -> Figure:
     """a_Y and a_Z of every demodulation period against its mid-time, with 1σ bars.
 
@@ -121,7 +107,7 @@ def periods_figure(table: pd.DataFrame, *, source: str) -> Figure:
             "directory with fewer runs, or use accal table --export and your own plot"
         )
     values = rows[["a_Y", "a_Z"]].to_numpy(dtype=float)
-    factor, unit = _accel_scale(values)
+    factor, unit = accel_scale(values)
     fig, panels = plt.subplots(2, 1, figsize=(11, 6.0), sharex=True, squeeze=False)
     for i, comp in enumerate(("Y", "Z")):
         ax = panels[i][0]
