@@ -6,8 +6,9 @@ commands with two versions of accal, each from its own tree (``PYTHONPATH=<tree>
 the same Python and dependencies), on the same inputs, into two output directories,
 and compares them file by file:
 
-* tables (``.parquet``, ``.csv``): columns, dtypes and values (exactly; for floats the
-  largest absolute and relative difference is printed when they differ);
+* tables (``.parquet``, ``.csv``): columns only in one of them, then the dtypes and values
+  of the common columns (exactly; for floats the largest absolute and relative
+  difference is printed when they differ);
 * JSON: the whole document, after the output roots are replaced by ``<OUT>``, the keys
   that record when or how long something ran (:data:`VOLATILE`) are removed and strings
   are masked as text (below);
@@ -188,26 +189,43 @@ def _read_table(path: Path) -> pd.DataFrame:
 
 
 def compare_tables(a: Path, b: Path) -> str | None:
-    """``None`` when equal, else what differs (first difference)."""
+    """``None`` when equal, else what differs: columns only in one of the two, then the
+    first common column whose values differ (so an added column does not hide a changed
+    number)."""
     ta, tb = _read_table(a), _read_table(b)
-    if list(ta.columns) != list(tb.columns):
-        return f"columns {list(ta.columns)} vs {list(tb.columns)}"
-    if ta.shape != tb.shape:
-        return f"shape {ta.shape} vs {tb.shape}"
-    for c in ta.columns:
-        x, y = ta[c], tb[c]
-        if x.dtype != y.dtype:
-            return f"column {c}: dtype {x.dtype} vs {y.dtype}"
-        if pd.api.types.is_float_dtype(x):
-            xv, yv = x.to_numpy(), y.to_numpy()
-            if not np.array_equal(xv, yv, equal_nan=True):
-                d = np.abs(xv - yv)
-                rel = d / np.maximum(np.abs(xv), np.finfo(float).tiny)
-                return f"column {c}: max |Δ| {np.nanmax(d):.3g}, max relative {np.nanmax(rel):.3g}"
-        elif not x.equals(y):
-            k = int(np.flatnonzero((x != y).to_numpy())[0])
-            return f"column {c}, row {k}: {x.iloc[k]!r} vs {y.iloc[k]!r}"
-    return None
+    out = []
+    only_a = [c for c in ta.columns if c not in tb.columns]
+    only_b = [c for c in tb.columns if c not in ta.columns]
+    if only_a:
+        out.append(f"columns only before: {only_a}")
+    if only_b:
+        out.append(f"columns only after: {only_b}")
+    if len(ta) != len(tb):
+        return "; ".join(out + [f"rows {len(ta)} vs {len(tb)}"])
+    for c in (c for c in ta.columns if c in tb.columns):
+        diff = _column_difference(c, ta[c], tb[c])
+        if diff:
+            out.append(diff)
+            break
+    if not out and list(ta.columns) != list(tb.columns):
+        out.append(f"column order {list(ta.columns)} vs {list(tb.columns)}")
+    return "; ".join(out) or None
+
+
+def _column_difference(c: str, x: pd.Series, y: pd.Series) -> str | None:
+    if x.dtype != y.dtype:
+        return f"column {c}: dtype {x.dtype} vs {y.dtype}"
+    if pd.api.types.is_float_dtype(x):
+        xv, yv = x.to_numpy(), y.to_numpy()
+        if np.array_equal(xv, yv, equal_nan=True):
+            return None
+        d = np.abs(xv - yv)
+        rel = d / np.maximum(np.abs(xv), np.finfo(float).tiny)
+        return f"column {c}: max |Δ| {np.nanmax(d):.3g}, max relative {np.nanmax(rel):.3g}"
+    if x.equals(y):
+        return None
+    k = int(np.flatnonzero((x != y).to_numpy())[0])
+    return f"column {c}, row {k}: {x.iloc[k]!r} vs {y.iloc[k]!r}"
 
 
 def compare_file(

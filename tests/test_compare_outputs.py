@@ -35,7 +35,14 @@ def test_tables_equal_and_one_ulp_apart(tmp_path):
     diff = co.compare_file(oa / "t.parquet", ob / "t.parquet", roots)
     assert diff is not None and diff.startswith("column bias")
     df.rename(columns={"n": "count"}).to_parquet(ob / "t.parquet")
-    assert "columns" in co.compare_file(oa / "t.parquet", ob / "t.parquet", roots)
+    assert co.compare_file(oa / "t.parquet", ob / "t.parquet", roots) == (
+        "columns only before: ['n']; columns only after: ['count']"
+    )
+    added = df.assign(t_utc=["a", "b"])
+    added.loc[0, "bias"] = 2e-7
+    added.to_parquet(ob / "t.parquet")
+    diff = co.compare_file(oa / "t.parquet", ob / "t.parquet", roots)
+    assert diff.startswith("columns only after: ['t_utc']; column bias: max")
 
 
 def test_json_ignores_run_times_and_roots_but_not_values(tmp_path):
