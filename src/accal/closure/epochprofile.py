@@ -20,7 +20,8 @@ neighbourhood) make ``epoch_ambiguous`` true and widen ``epoch_interval`` to the
 Reported in the effect's details: ``epoch_interval`` [s, s] (the set widened by one
 sample on each side: which of two neighbouring samples starts a sharp step is decided by
 their own noise), ``epoch_sigma`` (half its width, at least one sample step),
-``epoch_ambiguous``.
+``epoch_ambiguous``, and ``epoch_interval_local``, the contiguous part of the set around
+the epoch (widened likewise).
 """
 
 from __future__ import annotations
@@ -91,6 +92,8 @@ def epoch_uncertainty(ctx: Context, epoch: float, wald: float) -> dict[str, Any]
         "epoch_interval": [t_lo, t_hi],
         "epoch_sigma": max(0.5 * (t_hi - t_lo), dt),
         "epoch_ambiguous": ambiguous,
+        # the contiguous part around the epoch, widened the same way
+        "epoch_interval_local": [float(t[max(lo - 1, 0)]), float(t[min(hi + 1, t.size - 1)])],
     }
 
 

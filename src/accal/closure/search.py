@@ -35,7 +35,7 @@ from accal.closure.final import with_jacobian
 from accal.closure.kinds import kind_of
 from accal.closure.residual import Grid
 from accal.closure.significance import Tested, p_given_others, test_proposal
-from accal.closure.validation import SignalProxies, Verdict, validate
+from accal.closure.validation import SignalProxies, Verdict, epoch_reason, validate
 
 __all__ = ["MAX_REJECTED", "Found", "Search", "run"]
 
@@ -212,13 +212,38 @@ class Search:
 
         ``n_new``: effects just added (a pair of steps is two, each re-tested too).
         """
-        while len(self.found) > 1:
-            last = len(self.found) - (1 if n_new <= 1 else 0)
-            ps = [self.p_without(i) for i in range(last)]
-            worst = int(np.argmax(ps))
-            if ps[worst] < self.alpha:
+        while True:
+            while len(self.found) > 1:
+                last = len(self.found) - (1 if n_new <= 1 else 0)
+                ps = [self.p_without(i) for i in range(last)]
+                worst = int(np.argmax(ps))
+                if ps[worst] < self.alpha:
+                    break
+                self.removed.append(self.found.pop(worst))
+            if not self._drop_undetermined_step():
                 return
-            self.removed.append(self.found.pop(worst))
+
+    def _drop_undetermined_step(self) -> bool:
+        """Move the first step whose epoch is no longer determined given the other
+        effects (:func:`~accal.closure.validation.epoch_reason`) to the rejected ones;
+        whether one was."""
+        if len(self.found) < 2:
+            return False  # the model it was admitted to
+        for i, f in enumerate(self.found):
+            if f.prop.name != "bias_step" or f.prop.params.get("pair"):
+                continue
+            others = [g for j, g in enumerate(self.found) if j != i]
+            basis, fit, lev = self.state(others)
+            tested = self.test(basis, fit, lev, f.prop)
+            if tested is None:
+                continue
+            why = epoch_reason(f.prop, self.context(others, basis, fit, lev), tested.wald)
+            if why:
+                self.found.pop(i)
+                verdict = dataclasses.replace(f.verdict, ok=False, reason=why)
+                self.rejected.append(dataclasses.replace(f, verdict=verdict))
+                return True
+        return False
 
 
 def run(s: Search, max_effects: int, stop: Callable[[Search], bool] | None = None) -> Search:

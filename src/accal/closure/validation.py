@@ -47,6 +47,7 @@ from scipy.linalg import eigh
 
 from accal.closure.basis import Basis
 from accal.closure.candidates import Context, Proposal
+from accal.closure.epochprofile import EPOCH_DELTA_W, epoch_uncertainty
 from accal.closure.kinds import EFFECT_NAMES, IDENT_MIN, kind_of, plausible
 from accal.closure.periodic import _line_background, line_threshold
 from accal.closure.residual import WaldResult, wald_test
@@ -415,6 +416,95 @@ def _coefficient(prop: Proposal, zp, zb, r) -> tuple[float, float]:
     return float(c[j]), float(ext[j])
 
 
+#: How many standard deviations the profile at the other epoch may exceed what a single
+#: step at the chosen epoch explains there (:func:`distant_epoch`).  The spread is a
+#: white-noise approximation: 5 leaves room for coloured noise (a real weak step: 3.1;
+#: the stand-ins that displaced a coupling: 24-47).
+EPOCH_EXCESS_Z = 5.0
+
+
+def _step_columns(ctx: Context, epoch: float) -> NDArray[np.float64]:
+    """A step at ``epoch`` on the used samples, one column per data channel, with the
+    model in ``ctx`` projected out."""
+    cols = np.column_stack([m & (ctx.t >= epoch) for m in ctx.channel_masks()]).astype(float)
+    return cols - ctx.basis.project(cols)
+
+
+def distant_epoch(prop: Proposal, ctx: Context, wald: WaldResult) -> dict[str, float] | None:
+    """Another epoch that fits a step as well as its own, where one step could not, or
+    ``None``.
+
+    A step is identified by where it happens.  The profile of its fit over the epoch
+    (:func:`accal.closure.epochprofile.epoch_uncertainty`, the model in ``ctx`` held)
+    gives the epochs ``e`` with ``W(e) ≥ W(ê) − 3``.  Were the data one step at ``ê``
+    and noise, the step column at ``e`` (model projected out, ``z_e``) would pick it up
+    only through its correlation ``ρ`` with ``z_ê``: ``W(e)`` is then a noncentral
+    χ²₁ with non-centrality ``ρ²W`` (mean ``ρ²W + 1``, standard deviation about
+    ``2ρ√W + √2``; ``ρ² = (z_êᵀz_e)² / (‖z_ê‖²‖z_e‖²)`` pooled over data channels, the
+    noise taken as white between the two columns).  When the furthest such epoch fits
+    more than :data:`EPOCH_EXCESS_Z` standard deviations above that, the "step" explains
+    something spread over the record (a slow change, a coupling's contribution, an
+    anomaly at both ends) and cannot be told from it.
+
+    Seen on an `accal simulate` storm + thruster day with a lagged, low-passed
+    temperature coupling on z (the README's walk-through): z "steps" of 1.4-2.3e-9 m/s²
+    near eclipse edges at 167 s, 2,356 s and 81,739 s whose profiles reached
+    ``ΔW ≤ 3`` 3,600-85,000 s away (excess 5-80σ) displaced the coupling, which had
+    been found with the right lag and time constant.  A real 5e-9 m/s² step of a
+    3-hour record with a reference (corrected p 0.003) also has an epoch within
+    ``ΔW ≤ 3`` 689 s away, but there one step explains it (ρ² ≈ 0.8).  ``W`` is the
+    admitting test's Wald statistic (``stat × q``).  Returns ``other`` (the epoch, from
+    the record's start [s]), ``distance`` [s], ``rho2`` and ``excess`` (in standard
+    deviations).
+    """
+    epoch = float(prop.params["epoch"])
+    t = ctx.t
+    q = max(int(np.shape(wald.cov)[0]), 1) if np.ndim(wald.cov) == 2 else 1
+    w = float(wald.stat) * q
+    info = epoch_uncertainty(ctx, epoch, w)
+    if not info or not info["epoch_ambiguous"]:
+        return None
+    lo, hi = info["epoch_interval"]
+    a, b = info["epoch_interval_local"]
+    far = [e for e in (lo, hi) if not a <= e <= b]
+    if not far:
+        return None
+    other = max(far, key=lambda e: abs(e - epoch))
+    z_hat, z_far = _step_columns(ctx, epoch), _step_columns(ctx, other)
+    num = float(np.sum(np.einsum("ij,ij->j", z_hat, z_far) ** 2))
+    den = float(np.sum(np.einsum("ij,ij->j", z_hat, z_hat) * np.einsum("ij,ij->j", z_far, z_far)))
+    rho2 = num / den if den > 0 else 0.0
+    expected = rho2 * w + 1.0
+    spread = 2.0 * np.sqrt(rho2 * w) + np.sqrt(2.0)
+    excess = (w - EPOCH_DELTA_W - expected) / spread
+    if not excess > EPOCH_EXCESS_Z:
+        return None
+    return {
+        "other": float(other - t[0]),
+        "distance": float(abs(other - epoch)),
+        "rho2": float(rho2),
+        "excess": float(excess),
+    }
+
+
+def epoch_reason(prop: Proposal, ctx: Context, wald: WaldResult) -> str:
+    """Why a single bias step is not identifiable by its epoch (:func:`distant_epoch`), or
+    ``""`` (also for anything else).  Checked when a step is admitted and again whenever
+    the model around it changes (:meth:`accal.closure.search.Search.eliminate`): a step
+    whose epoch was sharp beside one effect can lose it when that effect is dropped."""
+    if prop.name != "bias_step" or prop.params.get("pair") or "epoch" not in prop.params:
+        return ""
+    far = distant_epoch(prop, ctx, wald)
+    if far is None:
+        return ""
+    return (
+        f"not identifiable: a step {far['distance']:.0f} s away, at {far['other']:.0f} s, "
+        f"fits within ΔW {EPOCH_DELTA_W:g} of it, {far['excess']:.1f}σ more than one step "
+        f"would there (correlation² {far['rho2']:.2g}): it stands in for structure that is "
+        "not a step"
+    )
+
+
 def validate(
     prop: Proposal,
     ctx: Context,
@@ -475,6 +565,10 @@ def validate(
                 f"and it adds nothing significant to them (corrected p "
                 f"{lines['p_adj_given_lines']:.2g}, needs < {alpha:g})"
             )
+    if wald is not None:
+        why = epoch_reason(prop, ctx, wald)
+        if why:
+            return verdict(why)
     if cv["applicable"] and not cv["gain"] > 0:
         return verdict(
             "not confirmed on held-out stretches: fitted on the rest of the record it "
