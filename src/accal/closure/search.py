@@ -12,7 +12,9 @@
    confirmed on held-out stretches, physically plausible); the first that passes is
    added, those that fail are reported with the reason and not proposed again;
 4. re-tests every earlier effect given the others and drops one that is no longer
-   significant (it was standing in for the new one).
+   significant (it was standing in for the new one), and rejects a bias step whose
+   epoch is no longer determined given the others
+   (:func:`accal.closure.validation.epoch_reason`).
 
 It stops when nothing significant is left, after ``max_effects`` effects, or after
 :data:`MAX_REJECTED` rejections.  :class:`Search` holds the state and its caches.
@@ -208,7 +210,9 @@ class Search:
             self.notes[key] = d
 
     def eliminate(self, n_new: int = 1) -> None:
-        """Drop the least significant earlier effect while one is no longer significant.
+        """Drop the least significant earlier effect while one is no longer significant,
+        then a step whose epoch is no longer determined (:meth:`_drop_undetermined_step`),
+        until neither is left.
 
         ``n_new``: effects just added (a pair of steps is two, each re-tested too).
         """
@@ -227,8 +231,6 @@ class Search:
         """Move the first step whose epoch is no longer determined given the other
         effects (:func:`~accal.closure.validation.epoch_reason`) to the rejected ones;
         whether one was."""
-        if len(self.found) < 2:
-            return False  # the model it was admitted to
         for i, f in enumerate(self.found):
             if f.prop.name != "bias_step" or f.prop.params.get("pair"):
                 continue
