@@ -353,6 +353,19 @@ def test_table_odd_column_names_stay_on_one_line(tmp_path):
     expect(p, r"no time column .* columns are 'a\\nb', c")
 
 
+def test_a_huge_column_name_keeps_the_message_short(tmp_path):
+    """Found by the deep fuzz (seed 12): 400 '9's glued to the time column's name made the
+    'no time column' message 500 characters long."""
+    p = write(tmp_path, "hk.csv", b"9" * 400 + b'"gps_time","tesu"\n1,2\n3,4\n')
+    err = expect(p, r"no time column .* columns are 9{39}…, tesu")
+    assert len(str(err)) < len(str(p)) + 300
+    many = ",".join(f"column_{k:03d}" for k in range(60)).encode()
+    err = expect(
+        write(tmp_path, "many.csv", many + b"\n" + b",".join([b"1"] * 60) + b"\n"), "no time column"
+    )
+    assert len(str(err)) < len(str(p)) + 300 and "more)" in str(err)
+
+
 # ---------------------------------------------------------------- quirks of AHK1B files
 
 
@@ -549,3 +562,17 @@ def test_bad_headers(samples, tmp_path):
     expect(write(tmp_path, "p.txt", plat + b"".join(flines)), "platform is 'GRACE X'")
     yaml_bad = fheader.replace(b"  dimensions:\n", b"  dimensions: [\n", 1)
     expect(write(tmp_path, "y.txt", yaml_bad + b"".join(flines)), "YAML header")
+
+
+def test_gracefo_global_attributes_not_a_mapping(samples, tmp_path):
+    """Found by the deep fuzz (seed 34): a YAML header whose global_attributes is a list
+    raised AttributeError instead of the one-line error naming the file."""
+    header, lines = split_sample(samples["gracefo_ahk_c"])
+    text = header.decode()
+    start = text.index("  global_attributes:\n")
+    end = text.index("\n  ", start + len("  global_attributes:\n") + 1)
+    while text[end + 3] == " ":  # the mapping's indented lines
+        end = text.index("\n  ", end + 1)
+    mutated = text[:start] + "  global_attributes:\n    - platform: GRACE C" + text[end:]
+    p = write(tmp_path, "AHK1B_2023-06-01_C_04.txt", mutated.encode() + b"".join(lines))
+    expect(p, "'global_attributes' is not a mapping")

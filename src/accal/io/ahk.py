@@ -25,6 +25,7 @@ from accal.io.ahk_spec import (
     N_FIXED,
     RECORD_COLUMNS,
 )
+from accal.io.common import shorten
 from accal.io.grace.header import (
     grace_int,
     header_satellite,
@@ -115,11 +116,15 @@ def _interpret_gracefo(header: bytes, path: Path) -> dict[str, Any]:
                 "(unknown AHK1B layout)",
                 path,
             )
-    platform = str((hdr.get("global_attributes") or {}).get("platform", ""))
+    attrs = hdr.get("global_attributes") or {}
+    if not isinstance(attrs, dict):  # as the ACC1B header (io.grace.header)
+        raise FormatError("YAML header: 'global_attributes' is not a mapping", path)
+    platform = str(attrs.get("platform", ""))
     letter = platform.split()[-1] if platform.split() else ""
     if letter not in ("C", "D"):
         raise FormatError(
-            f"YAML header: platform is {platform!r}, expected 'GRACE C' or 'GRACE D'", path
+            f"YAML header: platform is {shorten(platform, 40)}, expected 'GRACE C' or 'GRACE D'",
+            path,
         )
     return {
         "meta": {"gracefo": hdr},

@@ -164,11 +164,24 @@ class Housekeeping:
         return out
 
 
+#: Longest name, and longest listing, in a one-line message [characters].
+NAME_CHARS, LISTING_CHARS = 40, 160
+
+
 def _listing(names: Any, limit: int = 20) -> str:
-    """Names for a one-line message: non-printable ones quoted, at most ``limit`` shown."""
-    names = [n if str(n).isprintable() else repr(n) for n in names]
-    more = f", ... ({len(names) - limit} more)" if len(names) > limit else ""
-    return (", ".join(map(str, names[:limit])) + more) or "none"
+    """Names for a one-line message: non-printable ones quoted, each cut to
+    :data:`NAME_CHARS`, at most ``limit`` shown and at most :data:`LISTING_CHARS` in all
+    (the deep fuzz found a 400-character column name making the message 500 long)."""
+    shown: list[str] = []
+    names = list(names)
+    for n in names[:limit]:
+        text = str(n) if str(n).isprintable() else repr(n)
+        text = text if len(text) <= NAME_CHARS else text[: NAME_CHARS - 1] + "…"
+        if shown and len(", ".join([*shown, text])) > LISTING_CHARS:
+            break
+        shown.append(text)
+    more = f", ... ({len(names) - len(shown)} more)" if len(names) > len(shown) else ""
+    return (", ".join(shown) + more) or "none"
 
 
 def _interp_gapped(
