@@ -27,6 +27,7 @@ from accal.io.ahk_spec import (
 )
 from accal.io.common import shorten
 from accal.io.grace.header import (
+    global_attributes,
     grace_int,
     header_satellite,
     load_yaml_header,
@@ -116,10 +117,7 @@ def _interpret_gracefo(header: bytes, path: Path) -> dict[str, Any]:
                 "(unknown AHK1B layout)",
                 path,
             )
-    attrs = hdr.get("global_attributes") or {}
-    if not isinstance(attrs, dict):  # as the ACC1B header (io.grace.header)
-        raise FormatError("YAML header: 'global_attributes' is not a mapping", path)
-    platform = str(attrs.get("platform", ""))
+    platform = str(global_attributes(hdr, path).get("platform", ""))
     letter = platform.split()[-1] if platform.split() else ""
     if letter not in ("C", "D"):
         raise FormatError(

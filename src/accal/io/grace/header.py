@@ -284,6 +284,20 @@ def load_yaml_header(header: bytes, path: Path) -> dict[str, Any]:
     return doc["header"]
 
 
+def global_attributes(hdr: dict, path: Any) -> dict:
+    """The ``global_attributes`` mapping of a GRACE-FO YAML header (empty when absent).
+
+    Raises
+    ------
+    accal.errors.FormatError
+        It is there but not a mapping (naming ``path``).
+    """
+    attrs = hdr.get("global_attributes") or {}
+    if not isinstance(attrs, dict):
+        raise FormatError("YAML header: 'global_attributes' is not a mapping", path)
+    return attrs
+
+
 def _interpret_gracefo(header: bytes, path: Path) -> dict[str, Any]:
     hdr = load_yaml_header(header, path)
     dims = hdr.get("dimensions")
@@ -303,10 +317,7 @@ def _interpret_gracefo(header: bytes, path: Path) -> dict[str, Any]:
             "(only accelerometer data are supported)",
             path,
         )
-    attrs = hdr.get("global_attributes") or {}
-    if not isinstance(attrs, dict):
-        raise FormatError("YAML header: 'global_attributes' is not a mapping", path)
-    platform = attrs.get("platform", "")
+    platform = global_attributes(hdr, path).get("platform", "")
     letter = platform.split()[-1] if isinstance(platform, str) and platform.split() else ""
     if platform is None or (isinstance(platform, str) and not platform.strip()):
         letter = ""  # no platform: the records' GRACEFO_id, else the file name (issue 23)
