@@ -114,3 +114,19 @@ def test_a_real_step_among_pulses_is_found():
     assert len(steps) == 1
     assert abs(steps[0].epoch - 0.6 * t.size) <= 2.0
     assert abs(steps[0].coefficient - 1e-9) < 3 * steps[0].sigma
+
+
+def test_spikes_keeps_a_step_edge_on_a_steep_slope():
+    """On the signal's slope (here 2e-10 m/s² per sample, a 4e-7 m/s² orbit term) the
+    sample after an upward 3e-9 step is above both one-sided medians, like a pulse (it
+    was left out with its neighbours, 1995-2003); lines fitted either side tell it is an
+    edge between two levels, and a pulse on the same signal is still flagged."""
+    rng = np.random.default_rng(3)
+    n = 6000
+    t = np.arange(n, dtype=float)
+    x = 4e-7 * np.sin(2 * np.pi * t / 5600.0 + 2.0) + 3e-9 * (t >= 2000)
+    x += _smooth_noise(n, 1e-10, rng)
+    x[3000:3003] += 2e-8  # a 3-sample pulse
+    hit = spikes(x, None, t)
+    assert not hit[1980:2020].any(), np.flatnonzero(hit[1980:2020]) + 1980
+    assert hit[3000:3003].all()

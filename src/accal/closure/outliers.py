@@ -156,7 +156,7 @@ def spikes(
         if not sig > 0:
             continue
         # off the centred median *and* off both one-sided ones (a step's edge fits one side)
-        hit = finite & (np.minimum(dev, side) > OUTLIER_SIGMAS * sig)
+        hit = _pulses_only(finite & (np.minimum(dev, side) > OUTLIER_SIGMAS * sig), x, tt)
         if 0 < hit.sum() <= OUTLIER_MAX_FRACTION * idx.size:
             pad = np.convolve(hit, np.ones(2 * OUTLIER_PAD + 1), mode="same") > 0
             bad[idx[pad]] = True
@@ -214,6 +214,43 @@ def _bursts_only(hit: NDArray[np.bool_], x: NDArray[np.float64]) -> NDArray[np.b
             continue  # at a segment's end: edge_runs decides
         mb, ma, mr = np.median(before), np.median(after), np.median(x[a:b])
         if abs(ma - mb) > 0.5 * max(abs(mr - ma), abs(mr - mb)):
+            out[a:b] = False
+    return out
+
+
+def _pulses_only(
+    hit: NDArray[np.bool_], x: NDArray[np.float64], t: NDArray[np.float64]
+) -> NDArray[np.bool_]:
+    """``hit`` of :func:`spikes` without the runs that are a step's edge on a slope.
+
+    On the raw signal's slope (the drag changes by ~2.5e-10 m/s² a second in a storm's
+    decline), the sample after an upward step is above both one-sided medians (they
+    lag by slope × 7 samples): `accal simulate` storm day, a 3e-9 m/s² step on x left
+    out with its neighbours, so the step's edge, which tells it from the signal
+    (:mod:`accal.closure.jumps`), was gone.  A pulse returns to the line it left; a
+    step does not: lines are fitted to :data:`LEVEL_SAMPLES` unflagged samples before
+    and after the run and evaluated at the run's samples, and a run is kept for the
+    analysis when every one of its samples is nearer one of the lines than half their
+    separation (a pulse stands off both; a run that merged a pulse with a ramp's
+    corner keeps the pulse's samples off both).
+    """
+    edges = np.flatnonzero(np.diff(np.r_[0, hit.astype(np.int8), 0]))
+    out = hit.copy()
+    for a, b in zip(edges[::2], edges[1::2], strict=True):
+        sides = []
+        for lo, hi in ((max(0, a - LEVEL_SAMPLES), a), (b, min(x.size, b + LEVEL_SAMPLES))):
+            keep = ~hit[lo:hi]
+            if keep.sum() < 5:
+                break
+            tt, xx = t[lo:hi][keep], x[lo:hi][keep]
+            c = np.polyfit(tt - t[a], xx, 1)
+            sides.append(np.polyval(c, t[a:b] - t[a]))
+        if len(sides) < 2:
+            continue
+        # every sample of the run near one of the two lines (within half their
+        # separation there): an edge between two levels, not a pulse off both
+        off = np.minimum(np.abs(x[a:b] - sides[0]), np.abs(x[a:b] - sides[1]))
+        if np.all(off <= 0.5 * np.abs(sides[1] - sides[0])):
             out[a:b] = False
     return out
 
