@@ -44,6 +44,7 @@ from accal.closure.inputs import (
     screen_channels,
     usable_proxies,
 )
+from accal.closure.jumps import add_jump_covariance, jump_columns, jump_effects, jumps_first
 from accal.closure.kinds import EFFECT_NAMES, kind_of, unit_of
 from accal.closure.lagprofile import add_lag_uncertainties
 from accal.closure.nuisance import (
@@ -299,10 +300,17 @@ def close_loop(
     use, n_spikes = _spikes_out(t_all, y_all, chan_all, use)
     st = setup.build(use)
     st, use, notes = _leave_out_outliers(setup, st, use, aux_all, n_spikes)
+    families = _families(builders, orbit_period, st["template"] is not None)
+    jumps = jumps_first(st, {name for name, _ in builders}, alpha / (2.0 * families), notes)
+    if jumps.jumps:  # the rest of the search on the data with the jumps taken out
+        setup.y_all = y_all - jump_columns(t_all, jumps.jumps) @ np.array(
+            [j.size for j in jumps.jumps]
+        )
+        st = setup.build(use)
     fit0 = st["fit0"]
     proxies = usable_proxies(proxies_all, use, notes) if st["template"] else None
     opts.update(
-        families=_families(builders, orbit_period, st["template"] is not None),
+        families=families,
         enabled=tuple(name for name, _ in builders),
         alpha=alpha,
         residual_ptp=float(np.ptp(fit0.resid)),
@@ -316,7 +324,9 @@ def close_loop(
     swap_smooth(search)
     search, st = _without_unknown_history(search, st, use, setup, make, max_effects, stop)
     floored = stop is not None and stop(search)
-    return _finish(search, setup, st, catchall_knots, noise_psd, floored, considered, opts)
+    return _finish(
+        search, setup, st, catchall_knots, noise_psd, floored, considered, opts, jumps.jumps
+    )
 
 
 def _search_maker(
@@ -459,6 +469,7 @@ class _Setup:
 
     def __init__(self, t_all, y_all, base, chan_all, names, signal_model, orbit_period, fixed):
         self.t_all, self.y_all, self.base = t_all, y_all, base
+        self.y_all_given = y_all  # the data as given (y_all: less the jumps taken out)
         self.chan_all, self.names = chan_all, names
         self.signal_model, self.orbit_period = signal_model, orbit_period
         self.period_fixed = bool(fixed)
@@ -572,10 +583,16 @@ def _rejected_effect(f: Found, channel_units: dict[str, str]) -> Effect:
     )
 
 
-def _finish(search: Search, setup: _Setup, st, knots, noise_psd, floored, considered, opts):
+def _finish(
+    search: Search, setup: _Setup, st, knots, noise_psd, floored, considered, opts, jumps=()
+):
+    """The final fit and the :class:`ClosureResult`.  ``jumps`` (taken out of the data
+    before the search, :func:`~accal.closure.jumps.jumps_first`) come first among the effects; the "before"
+    values are the null fit of the data as given."""
     grid, use, t_all, y_all = search.grid, search.use, search.t_all, setup.y_all
     t_u, chan_u, names = st["t_u"], st["chan_u"], search.names
-    bbase, basis0, fit0 = st["bbase"], st["basis0"], st["fit0"]
+    bbase, basis0 = st["bbase"], st["basis0"]
+    fit0 = basis0.fit(setup.y_all_given[use]) if jumps else st["fit0"]
     final = _final_effects(search)
     ps = [search.p_without(i, final) for i in range(len(final))] if final else []
     basis = basis0
@@ -584,6 +601,8 @@ def _finish(search: Search, setup: _Setup, st, knots, noise_psd, floored, consid
     fit = basis.fit(y_all[use])
     lev = search.leverage(basis)
     cov = covariances(grid, basis, fit, lev, basis0, fit0, st["lev0"], noise_psd)
+    jcols = jump_columns(t_all, tuple(jumps))
+    add_jump_covariance(cov, basis, jcols[use], tuple(jumps))
     units = dict(opts.get("channel_units", {}))
     found = [
         (f.prop, p, {"p_accept": f.p_adj, **f.verdict.details()})
@@ -606,8 +625,9 @@ def _finish(search: Search, setup: _Setup, st, knots, noise_psd, floored, consid
         )
         if w is not None and w.pvalue < search.alpha:
             unexplained.append(describe_smooth(grid, t_u, zt @ w.gamma, w))
+    effects = jump_effects(tuple(jumps)) + list(effects)
     base_out = _base_coefficients(basis, bbase, fit0, fit, cov)
-    k = fit.w_gamma.shape[0]
+    k = fit.w_gamma.shape[0] + len(jumps)
     nb, p = bbase.n_blocks, bbase.p
     seg_of = basis.seg_of_block()
     has = seg_of >= 0
@@ -615,11 +635,10 @@ def _finish(search: Search, setup: _Setup, st, knots, noise_psd, floored, consid
     cross = np.full((nb, p, k), np.nan)
     base_cov[has] = cov["cov_b"][seg_of[has]]
     cross[has] = cov["cov_bg"][seg_of[has]]
-    eff_cols = (
-        np.column_stack([f.prop.columns for f in final]) if final else np.zeros((t_all.size, 0))
-    )
-    res_before = y_all - bbase.matvec(fit0.beta)
-    res_after = y_all - bbase.matvec(fit.beta) - eff_cols @ fit.gamma
+    eff_cols = np.column_stack([jcols] + [f.prop.columns for f in final])
+    gamma = np.concatenate([[j.size for j in jumps], fit.gamma])
+    res_before = setup.y_all_given - bbase.matvec(fit0.beta)
+    res_after = y_all - bbase.matvec(fit.beta) - eff_cols[:, len(jumps) :] @ fit.gamma
     if st["template"] is not None:
         # the signal model is part of both fits and known on the used samples only
         res_before = np.full(t_all.size, np.nan)
@@ -640,8 +659,10 @@ def _finish(search: Search, setup: _Setup, st, knots, noise_psd, floored, consid
         residual_after=res_after,
         base_design=bbase,
         effect_columns=eff_cols,
-        labels=bbase.column_labels() + tuple(lb for f in final for lb in f.prop.labels),
-        coef=np.concatenate([fit.beta, fit.gamma]),
+        labels=bbase.column_labels()
+        + tuple(f"step@{j.epoch!r}" for j in jumps)
+        + tuple(lb for f in final for lb in f.prop.labels),
+        coef=np.concatenate([fit.beta, gamma]),
         base_cov=base_cov,
         cross_cov=cross.reshape(nb * p, k),
         effects_cov=cov["v_ww"],

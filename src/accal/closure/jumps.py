@@ -1,0 +1,631 @@
+"""Bias jumps told by their edge: a step test weighted by the residual's own spectrum.
+
+Why a second step test
+----------------------
+The step scan of the search (:func:`accal.closure.candidates.bias_step`) ranks and
+tests a step by its least-squares fit, whose weight lies where a step has its power:
+at the lowest frequencies.  Without a reference that is where the real signal the
+null model cannot follow lives: on the along-track (drag) axis the thermosphere's
+non-periodic density variations leave 1.4-4.8e-9 m/s² of red "noise" below ~1 mHz,
+and an injected 1e-8 m/s² step had a least-squares statistic of 0-9 at its own epoch
+(`tests/indep` days; docs/closure.md).  The optimal linear test under coloured
+noise is generalised least squares (Aitken 1935, Proc. R. Soc. Edinb. 55, 42):
+weight each frequency by ``1/S(f)``.  Its estimator of a step at sample ``e`` is a
+short kernel around ``e`` where the noise is red, so a step is told by its *edge*,
+which a smooth signal cannot make, not by its level.
+
+The estimator (frequency-domain GLS, the Whittle approximation of ``C⁻¹`` by the
+circulant ``F* diag(1/S) F``; e.g. Percival & Walden 1993, ch. 9): with ``D(f) = 1
+− e^{−2πifΔ}`` the spectrum of a first difference, a step ``1[t ≥ e]`` is ``1/D``
+times an impulse at ``e`` and its GLS weights are
+
+.. math:: G_e(f) = e^{-2\\pi i f e} / (S(f)\\, D(f)),  \\qquad G_e(0) = 0,
+
+a kernel that vanishes on constants and decays within the time the noise takes to
+turn white (``S`` the binned, projection-corrected PSD of the null residual,
+:func:`accal.closure.noise_psd.estimate_psd`).  Any fixed weights give a valid test
+when their variance is computed exactly, so the kernel is taken as *weights*: the
+null design (base and orbit-signal template) is projected out of them
+(``G̃ = M G_e``), the size is ``ŝ = G̃ᵀr / G̃ᵀ1[t≥e]`` and its variance the sandwich
+``G̃ᵀ C G̃ / (G̃ᵀ1[t≥e])²`` on the same PSD (:func:`accal.closure.wald.quad_form`): an
+epoch where the template can follow a jump (the same orbit phase in every orbit)
+gets the large σ it deserves.
+
+The scan and its threshold
+--------------------------
+``⟨G_e, r⟩`` for every epoch is one inverse FFT (a cross-correlation); the
+:data:`TOP` best epochs of that ranking are evaluated exactly and the largest
+``|z|`` is tested (at most :data:`MAX_CHECKS` significant edges are examined in all) at the Bonferroni level over all epochs scanned (each epoch a
+two-sided normal test; the kernel's variance rests on the many high-frequency
+periodogram ordinates, so the PSD's own uncertainty is negligible).  Epochs within
+:data:`CLEAR` s (or the kernel's reach) of a missing or left-out sample, or within
+the persistence window of the record's ends, are not scanned.
+
+Persistence (a step, not a spike or a ramp)
+-------------------------------------------
+A jump in the sample-to-sample sense is also the edge of a spike or of a fast
+ramp (an eclipse's penumbra).  So the size is measured a second time, by a local
+least-squares fit of ``a + b(t − e) + s·1[t ≥ e]`` within ±:data:`WIDE` s (at least
+twice the kernel's half-width), and the jump is kept only when both agree (the
+difference within :data:`AGREE_Z` of its own σ, computed exactly as above) and the
+wide size is itself significant at :data:`WIDE_Z` σ: a spike has no wide size, a
+ramp's edge-by-edge size is a fraction of its wide one.
+
+When the residual is not red enough for the kernel to be local (half-width over
+:data:`HALF_MAX` s: the least-squares scan is then near optimal already) no scan is
+made.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.special import log_ndtr
+
+from accal.closure.noise_psd import Grid, estimate_psd, two_sided_weights
+from accal.closure.results import Effect
+from accal.closure.wald import quad_form
+
+__all__ = [
+    "AGREE_Z",
+    "CLEAR",
+    "HALF_MAX",
+    "MAX_CHECKS",
+    "TOP",
+    "WIDE",
+    "WIDE_Z",
+    "Jump",
+    "JumpScan",
+    "add_jump_covariance",
+    "jump_columns",
+    "jump_effects",
+    "jumps_first",
+    "scan_jumps",
+]
+
+#: Epochs of the ranking evaluated exactly per round.
+TOP = 24
+#: Most significant edges examined (checked for persistence and neighbours) in a scan:
+#: a residual with more sharp structure than that is not searched further (noted).
+MAX_CHECKS = 16
+#: Half-width [s] of the local fit that confirms a jump persists.
+WIDE = 120.0
+#: Largest kernel half-width [s] (99.9 % of its energy) for a scan to be made.
+HALF_MAX = 300.0
+#: Largest difference of the kernel and local sizes, in σ of the difference.
+AGREE_Z = 3.0
+#: Least significance of the local size, in σ (a confirmation of an edge already
+#: significant at the scan's Bonferroni level: one-sided ~2 %).
+WIDE_Z = 2.0
+#: Half-width [s] around an epoch that must hold no left-out sample: an outlier
+#: screen or the orbit template's steep bins may have taken the other edge of a box
+#: (`tests.indep` seed 31, cross-track: a lone 1.1e-9 m/s² eclipse edge whose pair 40 s
+#: away had been left out), and a thruster firing is not a bias step.
+CLEAR = 60.0
+#: Energy share that defines the kernel's half-width.
+ENERGY = 0.999
+
+
+@dataclass(frozen=True)
+class Jump:
+    """One bias jump accepted by :func:`scan_jumps`.
+
+    Attributes
+    ----------
+    epoch : float
+        First sample after the jump [s].
+    size : float
+        Its size by the spectrum-weighted kernel [m/s²].
+    sigma : float
+        1σ of ``size`` [m/s²].
+    p_adj : float
+        Two-sided p-value times the number of epochs scanned.
+    size_wide, sigma_wide : float
+        The size by the local fit within ±``wide`` s and its σ [m/s²].
+    halfwidth : float
+        Half-width of the kernel [s].
+    wide : float
+        Half-width of the local fit [s].
+    n_tests : int
+        Epochs scanned.
+    """
+
+    epoch: float
+    size: float
+    sigma: float
+    p_adj: float
+    size_wide: float
+    sigma_wide: float
+    halfwidth: float
+    wide: float
+    n_tests: int
+
+    def details(self) -> dict[str, Any]:
+        """JSON-able details for the effect's report."""
+        return {
+            "method": "spectrum-weighted jump (closure.jumps)",
+            "z": self.size / self.sigma if self.sigma > 0 else float("inf"),
+            "size_local_fit": self.size_wide,
+            "sigma_local_fit": self.sigma_wide,
+            "local_fit_halfwidth_s": self.wide,
+            "kernel_halfwidth_s": self.halfwidth,
+            "n_tests": self.n_tests,
+            "p_accept": self.p_adj,
+            "n_columns": 1,
+        }
+
+
+@dataclass(frozen=True)
+class JumpScan:
+    """Outcome of :func:`scan_jumps`.
+
+    ``jumps`` accepted; ``rejected``: significant epochs that failed the persistence
+    check (``{"epoch", "size", "sigma", "size_local_fit", "sigma_local_fit",
+    "reason"}``); ``halfwidth`` of the last kernel [s] (None: no scan, see ``note``).
+    """
+
+    jumps: tuple[Jump, ...] = ()
+    rejected: tuple[dict[str, Any], ...] = ()
+    halfwidth: float | None = None
+    n_tests: int = 0
+    note: str = ""
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+def _kernel(grid: Grid, r: NDArray[np.float64], lev: NDArray) -> tuple:
+    """The GLS step kernel at grid index 0, the PSD and the kernel's half-width [samples]."""
+    n = grid.size
+    psd = estimate_psd(grid, r, lev).psd
+    f = np.fft.rfftfreq(n, grid.step)
+    d = 1.0 - np.exp(-2j * np.pi * f * grid.step)
+    k = np.zeros(f.size, dtype=complex)
+    good = (psd[1:] > 0) & np.isfinite(psd[1:])
+    k[1:][good] = 1.0 / (psd[1:][good] * d[1:][good])
+    k0 = np.fft.irfft(k, n=n)
+    c = n // 2
+    cs = np.cumsum(np.roll(k0, c) ** 2)  # lag 0 at index c
+    tot = float(cs[-1])
+    if not tot > 0:
+        return k, k0, psd, n
+    m = np.arange(min(c, n - c - 1))
+    inner = cs[c + m] - np.r_[0.0, cs][c - m]  # energy within lags -m .. m
+    half = int(np.searchsorted(inner, ENERGY * tot))
+    return k, k0, psd, half
+
+
+def _local_weights(m: int) -> NDArray[np.float64]:
+    """Least-squares weights of ``s`` in ``a + b·j + s·1[j ≥ 0]`` on offsets ``−m .. m−1``."""
+    j = np.arange(-m, m, dtype=np.float64)
+    x = np.column_stack([np.ones_like(j), j / m, (j >= 0).astype(np.float64)])
+    return np.linalg.pinv(x)[2]
+
+
+def scan_jumps(
+    grid: Grid,
+    t: NDArray[np.float64],
+    r: NDArray[np.float64],
+    basis: Any,
+    leverage: NDArray,
+    *,
+    level: float,
+    max_jumps: int = 5,
+    period: float | None = None,
+) -> JumpScan:
+    """Bias jumps in the null residual ``r`` by the spectrum-weighted step test.
+
+    Parameters
+    ----------
+    grid : Grid
+        Placement of the used samples (one channel).
+    t : ndarray, shape (n,)
+        Times of the used samples [s].
+    r : ndarray, shape (n,)
+        Residual of the null model (orthogonal to ``basis``) [m/s²].
+    basis : Basis
+        The null model (:class:`accal.closure.basis.Basis`, with its orbit template).
+    leverage : ndarray
+        Its leverage spectrum (for the PSD estimate).
+    level : float
+        Family-wise level of the scan (Bonferroni over the epochs scanned).
+    max_jumps : int
+        Most jumps accepted.
+    period : float, optional
+        Orbit period [s]: a jump that recurs at the same orbital phase one or two
+        orbits away is the signal's (:func:`_recurrence`).
+
+    Returns
+    -------
+    JumpScan
+    """
+    n_grid = grid.size
+    if grid.n_chan != 1 or t.size < 100:
+        return JumpScan(note="not scanned: one channel of at least 100 samples needed")
+    r = np.array(r, dtype=np.float64)
+    used = np.zeros(n_grid, dtype=bool)
+    used[grid.idx] = True
+    pos = np.full(n_grid, -1)
+    pos[grid.idx] = np.arange(grid.idx.size)
+    # grid index -> number of missing samples before it (for "all used within ±m")
+    miss = np.r_[0, np.cumsum(~used)]
+    jumps: list[Jump] = []
+    rejected: list[dict[str, Any]] = []
+    taken = np.zeros(n_grid, dtype=bool)
+    n_tests, half_s = 0, None
+    log_level = float(np.log(level))
+    checks = 0
+    for _ in range(max_jumps):
+        kf, k0, psd, half = _kernel(grid, r, leverage)
+        half_s = half * grid.step
+        if half_s > HALF_MAX:
+            what = f"stopped after {len(jumps)} jump(s)" if jumps else "not scanned"
+            return JumpScan(
+                tuple(jumps),
+                tuple(rejected),
+                half_s,
+                n_tests,
+                note=f"{what}: the residual is not red enough for a local step test "
+                f"(kernel half-width {half_s:.0f} s > {HALF_MAX:g} s)",
+            )
+        m = max(int(round(WIDE / grid.step)), 2 * half, 2)
+        reach = max(half, int(round(CLEAR / grid.step))) + 1
+        idx = np.arange(n_grid)
+        lo, hi = idx - reach, idx + reach
+        ok = (idx >= m) & (idx + m <= n_grid) & used
+        ok[ok] &= miss[hi[ok]] - miss[lo[ok]] == 0
+        ok &= ~taken
+        n_tests = max(n_tests, int(ok.sum()))
+        if not ok.any():
+            break
+        score = _scores(grid, r, kf)
+        cand = _top(np.where(ok, score, -1.0), TOP, max(half, 1))
+        z, size, sd, gm = _exact(grid, t, r, basis, k0, psd, cand, pos)
+        log_p = np.log(2.0) + log_ndtr(-np.abs(z)) + np.log(max(n_tests, 1))
+        order = np.argsort(-np.abs(z))
+        accepted = False
+        for i in order:
+            if not log_p[i] < log_level:
+                break
+            if checks >= MAX_CHECKS:
+                break
+            checks += 1
+            e = int(cand[i])
+            wide = _wide(grid, t, r, basis, psd, e, m, gm[:, i] / _norm(gm[:, i], t, grid, e))
+            common = {
+                "epoch": float(grid_time(t, grid, e)),
+                "size": float(size[i]),
+                "sigma": float(sd[i]),
+                "size_local_fit": wide["size"] if wide else float("nan"),
+                "sigma_local_fit": wide["sigma"] if wide else float("nan"),
+            }
+            taken[max(0, e - m) : e + m] = True
+            # other edges are judged given this one (its kernel reaches its neighbours,
+            # and the orbit template spreads it to the same phase in other orbits)
+            step_col = (t >= common["epoch"]).astype(np.float64)
+            r_given = r - size[i] * (step_col - basis.project(step_col))
+            s_given = _scores(grid, r_given, kf)
+            # any used sample may hold the other edge, also beside a left-out stretch
+            args = (grid, t, r_given, basis, k0, psd, pos, s_given, used, e, size[i])
+            recur = _recurrence(*args, period)
+            if recur is None:
+                recur = _neighbour(*args, m)
+            if recur is not None:
+                rejected.append({**common, "reason": recur})
+                continue
+            if wide is None:
+                rejected.append({**common, "reason": "too few samples for the local fit"})
+                continue
+            if abs(wide["diff_z"]) > AGREE_Z or abs(wide["size"]) < WIDE_Z * wide["sigma"]:
+                why = (
+                    f"the size by a local fit within ±{m * grid.step:.0f} s "
+                    f"({wide['size']:.3g} ± {wide['sigma']:.2g}) "
+                    + (
+                        f"differs from the edge's by {abs(wide['diff_z']):.1f}σ"
+                        if abs(wide["diff_z"]) > AGREE_Z
+                        else f"is under {WIDE_Z:g}σ"
+                    )
+                    + ": a spike or a fast ramp, not a step"
+                )
+                rejected.append({**common, "reason": why})
+                continue
+            jumps.append(
+                Jump(
+                    common["epoch"],
+                    float(size[i]),
+                    float(sd[i]),
+                    float(min(1.0, np.exp(log_p[i]))),
+                    wide["size"],
+                    wide["sigma"],
+                    half_s,
+                    m * grid.step,
+                    n_tests,
+                )
+            )
+            r = r_given
+            accepted = True
+            break
+        if not accepted:
+            break
+    note = ""
+    if checks >= MAX_CHECKS:
+        note = (
+            f"stopped after examining {MAX_CHECKS} significant edges, none a lone, "
+            "persistent jump: the residual has sharp structure of its own (e.g. eclipse "
+            "edges the orbit template does not follow)"
+        )
+    return JumpScan(tuple(jumps), tuple(rejected), half_s, n_tests, note=note)
+
+
+def _scores(grid: Grid, r: NDArray[np.float64], kf: NDArray[np.complex128]) -> NDArray:
+    """``|⟨G_e, r⟩|`` for every grid epoch (one cross-correlation): the ranking."""
+    rg = grid.place(r)[0, 0]
+    return np.abs(np.fft.irfft(np.fft.rfft(rg) * np.conj(kf), n=grid.size))
+
+
+def grid_time(t: NDArray[np.float64], grid: Grid, e: int) -> float:
+    """Time of the used sample at grid index ``e``."""
+    return float(t[int(np.searchsorted(grid.idx, e))])
+
+
+def _top(score: NDArray[np.float64], k: int, sep: int) -> NDArray[np.int64]:
+    """The ``k`` best indices of ``score`` at least ``sep`` apart (positive scores only)."""
+    order = np.argsort(-score)
+    out: list[int] = []
+    blocked = np.zeros(score.size, dtype=bool)
+    for i in order:
+        if score[i] < 0 or len(out) >= k:
+            break
+        if blocked[i]:
+            continue
+        out.append(int(i))
+        blocked[max(0, i - sep) : i + sep + 1] = True
+    return np.array(out, dtype=np.int64)
+
+
+def _kernels(k0: NDArray[np.float64], grid: Grid, epochs: NDArray[np.int64]) -> NDArray:
+    """The kernel at each grid epoch, on the used samples: (n, k)."""
+    n = grid.size
+    rows = (grid.idx[:, None] - epochs[None, :]) % n
+    return k0[rows]
+
+
+def _norm(g: NDArray[np.float64], t, grid: Grid, e: int) -> float:
+    """``gᵀ 1[t ≥ t_e]`` (the weights' response to a unit step at grid index ``e``)."""
+    return float(g[int(np.searchsorted(grid.idx, e)) :].sum())
+
+
+def _exact(grid, t, r, basis, k0, psd, cand, pos):
+    """Size, σ and z of a step at each candidate grid epoch with the kernel as weights
+    (null design projected out of them).  Also returns the projected weights."""
+    g = _kernels(k0, grid, cand)
+    gm = g - basis.project(g)
+    first = pos[cand]  # used-sample position of each epoch
+    # response to the unit step: the sum of the weights from the epoch on
+    csum = np.cumsum(gm[::-1], axis=0)[::-1]
+    a = csum[first, np.arange(cand.size)]
+    size = (gm.T @ r) / a
+    w = two_sided_weights(grid.size, psd.size) * psd
+    var = (
+        np.einsum("ii->i", quad_form(grid.fft(gm), w, grid.size)) / a**2
+        if cand.size
+        else np.zeros(0)
+    )
+    sd = np.sqrt(np.maximum(var, 0.0))
+    z = np.where(sd > 0, size / np.where(sd > 0, sd, 1.0), 0.0)
+    return z, size, sd, gm
+
+
+def _wide(grid, t, r, basis, psd, e, m, g_sharp) -> dict[str, float] | None:
+    """The local fit's size at grid epoch ``e`` (used samples within ±``m``), its σ and
+    the difference to the kernel's size in σ of the difference (exact, same PSD).
+    None when either side holds fewer than ``m/2`` samples."""
+    lo, mid, hi = np.searchsorted(grid.idx, [e - m, e, e + m])
+    if mid - lo < m // 2 or hi - mid < m // 2:
+        return None
+    j = (grid.idx[lo:hi] - e).astype(np.float64)
+    x = np.column_stack([np.ones_like(j), j / m, (j >= 0).astype(np.float64)])
+    gw = np.zeros(t.size)
+    gw[lo:hi] = np.linalg.pinv(x)[2]
+    gw = gw - basis.project(gw)
+    gw = gw / _norm(gw, t, grid, e)
+    w = two_sided_weights(grid.size, psd.size) * psd
+    fw = grid.fft(np.column_stack([gw, g_sharp - gw]))
+    cov = quad_form(fw, w, grid.size)
+    size_w = float(gw @ r)
+    diff = float((g_sharp - gw) @ r)
+    sd_w = float(np.sqrt(max(cov[0, 0], 0.0)))
+    sd_d = float(np.sqrt(max(cov[1, 1], 0.0)))
+    return {"size": size_w, "sigma": sd_w, "diff_z": diff / sd_d if sd_d > 0 else 0.0}
+
+
+#: Orbits either side where a jump is looked for again, and the search window there [s].
+RECUR_ORBITS = (-2, -1, 1, 2)
+RECUR_WINDOW = 30.0
+#: A jump there of this share of the size (same sign) at :data:`RECUR_Z` σ is a recurrence.
+RECUR_SHARE = 0.5
+RECUR_Z = 4.0
+
+
+def _neighbour(grid, t, r, basis, k0, psd, pos, score, ok, e, size, m) -> str | None:
+    """Why the jump at grid epoch ``e`` is not a lone edge (None when it is).
+
+    A bias step is one edge.  The residual's sharp structures come with a second one
+    nearby: the 40 s boxes an eclipse penumbra leaves where the orbit template does
+    not follow it (`tests.indep` day seed 31, radial axis: +2.7e-10 and −2.7e-10 m/s²
+    40 s apart; cross-track: a 1.0e-9 m/s² edge 25σ beside its pair), a burst, a
+    ramp's successive samples.  Within ±``m`` samples (the local fit's window) there
+    must be no other edge (the :data:`NEIGHBOURS` best ranked, at least two samples
+    away) of :data:`RECUR_SHARE` of its size or more at :data:`RECUR_Z` σ.
+    """
+    a, b = max(e - m, 0), min(e + m + 1, grid.size)
+    s = np.where(ok[a:b], score[a:b], -1.0)
+    s[max(e - 2 - a, 0) : e + 3 - a] = -1.0
+    picks = a + _top(s, NEIGHBOURS, 2)
+    if picks.size == 0:
+        return None
+    z, sz, _, _ = _exact(grid, t, r, basis, k0, psd, picks, pos)
+    for zk, sk, ek in zip(z, sz, picks, strict=True):
+        if abs(sk) >= RECUR_SHARE * abs(size) and abs(zk) >= RECUR_Z:
+            return (
+                f"another edge of {sk:.3g} m/s² ({abs(zk):.0f}σ) {(ek - e) * grid.step:+.0f} s "
+                "away: a box, burst or ramp of the residual, not a bias step"
+            )
+    return None
+
+
+#: Edges looked at around a jump by :func:`_neighbour`.
+NEIGHBOURS = 4
+
+
+def _recurrence(grid, t, r, basis, k0, psd, pos, score, ok, e, size, period) -> str | None:
+    """Why the jump at grid epoch ``e`` is the signal's (None when it is not).
+
+    An eclipse edge that the orbit template does not follow exactly leaves a sharp
+    edge at nearly the same orbital phase in every orbit (a 40 s penumbra on the
+    cross-track axis: edges of ±5e-10 m/s² with a kernel σ of 2e-11 on `tests.indep`
+    days, one per orbit).  A bias jump happens once: within ±:data:`RECUR_WINDOW` s
+    of the same phase one and two orbits away there must be no jump of the same sign
+    and at least :data:`RECUR_SHARE` of its size at :data:`RECUR_Z` σ.
+    """
+    if not period or period <= 0:
+        return None
+    w = max(int(round(RECUR_WINDOW / grid.step)), 1)
+    picks = []
+    for k in RECUR_ORBITS:
+        c = e + int(round(k * period / grid.step))
+        a, b = max(c - w, 0), min(c + w + 1, grid.size)
+        if b <= a:
+            continue
+        s = np.where(ok[a:b], score[a:b], -1.0)
+        if s.max() < 0:
+            continue
+        picks.append(a + int(np.argmax(s)))
+    if not picks:
+        return None
+    z, sz, _, _ = _exact(grid, t, r, basis, k0, psd, np.array(picks, dtype=np.int64), pos)
+    for zk, sk, ek in zip(z, sz, picks, strict=True):
+        if (
+            np.sign(sk) == np.sign(size)
+            and abs(sk) >= RECUR_SHARE * abs(size)
+            and abs(zk) >= RECUR_Z
+        ):
+            dt = (ek - e) * grid.step
+            return (
+                f"a jump of {sk:.3g} m/s² ({abs(zk):.0f}σ) {dt:+.0f} s away, at the same "
+                "orbital phase: an edge of the orbit signal, not a bias step"
+            )
+    return None
+
+
+#: Significant jumps that failed their checks, reported in the notes (the largest).
+JUMP_NOTES = 3
+
+
+def jumps_first(st: dict[str, Any], enabled: set[str], level: float, notes: dict) -> JumpScan:
+    """Bias jumps before the search of :func:`accal.closure.select.close_loop`.
+
+    ``st`` is its null fit (``template``, ``grid``, ``t_u``, ``fit0``, ``basis0``,
+    ``lev0``); ``enabled`` the candidate kinds.
+
+    Made with the orbit-signal model in the null (no reference: the residual is then
+    red, and the least-squares step scan weak) when ``bias_step`` is a candidate; at
+    half the level of one family (``level``), beside the search's own step scan at a
+    whole one: the step family's false-detection bound is 1.5 times the others'.
+    Jumps that failed their checks go to ``notes``.
+    """
+    template = st["template"]
+    if template is None or "bias_step" not in enabled:
+        return JumpScan()
+    scan = scan_jumps(
+        st["grid"], st["t_u"], st["fit0"].resid, st["basis0"], st["lev0"],
+        level=level, period=template.period,
+    )  # fmt: skip
+    worst = sorted(scan.rejected, key=lambda d: -abs(d["size"]) / max(d["sigma"], 1e-300))
+    for d in worst[:JUMP_NOTES]:
+        notes[("bias_step", None, "jump", d["epoch"])] = {
+            "name": "bias_step",
+            "channel": None,
+            "note": f"a jump of {d['size']:.3g} ± {d['sigma']:.2g} m/s² at {d['epoch']:.1f} s "
+            f"was not removed: {d['reason']}",
+            "details": {k: v for k, v in d.items() if k != "reason"},
+        }
+    if scan.note:
+        notes[("bias_step", None, "jump-scan")] = {
+            "name": "bias_step", "channel": None, "note": f"edge scan for bias jumps {scan.note}",
+        }  # fmt: skip
+    return scan
+
+
+# ----------------------------------------------------------------- in the final fit
+def jump_columns(t_all: NDArray[np.float64], jumps: tuple[Jump, ...]) -> NDArray[np.float64]:
+    """The step indicator ``1[t ≥ epoch]`` of every jump on all samples: (N, n_jumps)."""
+    if not jumps:
+        return np.zeros((t_all.size, 0))
+    return np.column_stack([(t_all >= j.epoch).astype(np.float64) for j in jumps])
+
+
+def jump_effects(jumps: tuple[Jump, ...]) -> list[Any]:
+    """The jumps as :class:`accal.closure.results.Effect` (``bias_step``, an instrument
+    effect, removed from the calibrated series)."""
+    return [
+        Effect(
+            "bias_step",
+            None,
+            j.size,
+            j.sigma,
+            j.p_adj,
+            epoch=j.epoch,
+            details=j.details(),
+            instrument=True,
+            unit="m/s^2",
+        )
+        for j in jumps
+    ]
+
+
+def add_jump_covariance(
+    cov: dict[str, NDArray[np.float64]],
+    basis: Any,
+    cols_used: NDArray[np.float64],
+    jumps: tuple[Jump, ...],
+) -> None:
+    """Put the jumps' sizes into the final fit's covariances (in place).
+
+    The final fit is made on ``y − Σ ŝ_j J_j``, so its base coefficients are the fit of
+    ``y`` less ``Σ A_j ŝ_j`` and its effects' less ``Σ Γ_j ŝ_j`` (``A_j``, ``Γ_j``: the
+    fit of the column ``J_j``, :meth:`accal.closure.basis.Basis.fit`); with the sizes
+    taken as independent of that fit (they rest on the few samples around each edge,
+    the fit on the whole record): ``cov_b += Σ A_j A_jᵀ σ_j²`` (and ``cov_d``),
+    ``cov(b, ŝ_j) = −A_j σ_j²``, likewise for the effects.  The jumps' columns come
+    first in ``cov_bg`` and ``v_ww``.
+    """
+    var = np.array([j.sigma**2 for j in jumps])
+    nj = var.size
+    if nj == 0:
+        return
+    nb, p = cov["cov_b"].shape[:2]
+    a = np.zeros((nb, p, nj))
+    g = np.zeros((cov["v_ww"].shape[0], nj))
+    for j in range(nj):  # one jump at a time: Basis.fit takes one series
+        fj = basis.fit(cols_used[:, j])
+        a[:, :, j] = np.nan_to_num(fj.beta.reshape(-1, p)[:nb])
+        if g.shape[0]:
+            g[:, j] = np.nan_to_num(fj.gamma[basis.keep])
+    add_b = np.einsum("spj,sqj,j->spq", a, a, var)
+    cov["cov_b"] = cov["cov_b"] + add_b
+    cov["cov_d"] = cov["cov_d"] + add_b
+    cross_j = -a * var[None, None, :]  # (nb, p, nj)
+    cov_bg = cov["cov_bg"]
+    if g.shape[0]:
+        cov_bg = cov_bg - np.einsum("spj,kj,j->spk", a, g, var)
+    cov["cov_bg"] = np.concatenate([cross_j, cov_bg], axis=2)
+    v = cov["v_ww"] + (g * var) @ g.T if g.shape[0] else cov["v_ww"]
+    out = np.zeros((nj + v.shape[0], nj + v.shape[0]))
+    out[:nj, :nj] = np.diag(var)
+    out[nj:, nj:] = v
+    if g.shape[0]:
+        out[nj:, :nj] = -g * var
+        out[:nj, nj:] = (-g * var).T
+    cov["v_ww"] = out

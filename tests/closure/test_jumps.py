@@ -1,0 +1,129 @@
+"""Bias jumps told by their edge (accal.closure.jumps), on data drawn here.
+
+The generator below is written for these tests (not ``accal simulate`` nor
+``tests.indep``): an orbit-periodic signal whose amplitude drifts, a smooth
+non-periodic wander like the along-track drag's (a random walk, averaged over a
+minute: far above the white noise below ~1 mHz, so the least-squares step scan has
+its weight where the wander is), white noise, and what each test adds.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from accal.closure import close_loop, jumps
+
+P = 5600.0  # orbit period [s]
+
+
+def red_day(seed, n_orbits=6, step=None, boxes=None, wander=3e-11, white=1e-10):
+    """``(t, y)``: 1 Hz, ``n_orbits`` orbits; ``step=(epoch, size)``; ``boxes=(size,
+    width, phase)``: a box at that orbital phase in every orbit, drifting by 1 s per
+    orbit (an eclipse edge the orbit template does not follow exactly)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(int(n_orbits * P), dtype=np.float64)
+    w = 2 * np.pi / P
+    amp = 1.0 + 0.1 * t / t[-1]
+    y = amp * (2e-7 * np.cos(w * t) + 5e-8 * np.cos(2 * w * t + 1.0)) - 3e-7
+    walk = np.cumsum(rng.normal(0.0, wander, t.size))
+    y += np.convolve(walk, np.ones(60) / 60, mode="same")
+    y += rng.normal(0.0, white, t.size)
+    if step is not None:
+        y += step[1] * (t >= step[0])
+    if boxes is not None:
+        size, width, phase = boxes
+        for k in range(n_orbits):
+            a = k * P + phase * P + k * 1.0
+            y += size * ((t >= a) & (t < a + width))
+    return t, y
+
+
+def _run(t, y):
+    return close_loop(t, y, base="poly1", orbit_period=P, candidates=("bias_step",), alpha=0.01)
+
+
+def test_a_step_on_a_red_axis_is_found_by_its_edge():
+    epoch, size = 20_000.3, 3e-9
+    t, y = red_day(1, step=(epoch, size))
+    res = _run(t, y)
+    steps = [e for e in res.effects if e.name == "bias_step"]
+    assert len(steps) == 1, res.effects
+    e = steps[0]
+    assert e.instrument
+    assert "spectrum-weighted" in e.details["method"]
+    assert e.epoch == 20_001.0  # the first sample after the jump
+    assert abs(e.coefficient - size) < 2.0 * e.sigma, (e.coefficient, e.sigma)
+    assert e.sigma < 0.05 * size  # told by its edge: σ of a few 1e-11 m/s²
+    # the instrument model carries it, so grace-bias removes it
+    inst = res.instrument_model()
+    assert inst[t < epoch].max() == 0.0
+    np.testing.assert_allclose(inst[t >= epoch], e.coefficient, rtol=0, atol=1e-22)
+    # a line fitted through a later upward step starts low: taking the step out
+    # raises the bias, by far more than the change's σ (the jump's own σ is in it)
+    b = res.base_coefficient("bias")
+    assert b.change > 3 * b.sigma_change > 0
+
+
+def test_the_least_squares_scan_alone_misses_it():
+    """The reason for the edge test: the same day with the least-squares scan only."""
+    t, y = red_day(1, step=(20_000.3, 3e-9))
+    scan = jumps.scan_jumps
+    jumps.scan_jumps = lambda *a, **k: jumps.JumpScan()
+    try:
+        res = _run(t, y)
+    finally:
+        jumps.scan_jumps = scan
+    assert not [e for e in res.effects if e.name == "bias_step" and abs(e.epoch - 20_001) < 60]
+
+
+@pytest.mark.parametrize("seed", [2, 3, 4])
+def test_clean_red_days_lose_nothing(seed):
+    t, y = red_day(seed)
+    res = _run(t, y)
+    assert not [e for e in res.effects if e.instrument], res.effects
+
+
+def test_boxes_at_every_orbit_are_not_jumps():
+    """A 40 s box of 1e-9 m/s² at the same phase every orbit (drifting 1 s an orbit):
+    its edges are sharp and far above the noise, but come in pairs and recur."""
+    t, y = red_day(5, boxes=(1e-9, 40.0, 0.3))
+    res = _run(t, y)
+    assert not [e for e in res.effects if e.instrument], res.effects
+
+
+def test_a_step_beside_the_boxes_is_still_found():
+    epoch, size = 14_321.0, -4e-9
+    t, y = red_day(6, step=(epoch, size), boxes=(1e-9, 40.0, 0.3))
+    res = _run(t, y)
+    steps = [e for e in res.effects if e.name == "bias_step" and e.instrument]
+    assert len(steps) == 1, res.effects
+    assert steps[0].epoch == epoch
+    assert abs(steps[0].coefficient - size) < 2.0 * steps[0].sigma
+
+
+def test_jump_sigma_means_what_it_says():
+    """z = (size − truth)/σ over 12 noise draws: mean ~0, spread ~1."""
+    z = []
+    for seed in range(12):
+        epoch = 9_000.0 + 1397.0 * seed + 0.5
+        t, y = red_day(100 + seed, step=(epoch, 2e-9))
+        res = _run(t, y)
+        steps = [e for e in res.effects if e.name == "bias_step"]
+        assert len(steps) == 1, (seed, res.effects)
+        z.append((steps[0].coefficient - 2e-9) / steps[0].sigma)
+    z = np.asarray(z)
+    assert abs(z.mean()) < 0.75, z
+    assert 0.6 < z.std(ddof=1) < 1.5, z
+
+
+def test_white_noise_is_left_to_the_least_squares_scan():
+    """With white noise the GLS kernel of a step is the whole record, not an edge: no
+    edge scan (noted); what the least-squares scan makes of the step is its business."""
+    rng = np.random.default_rng(9)
+    t = np.arange(int(4 * P), dtype=np.float64)
+    y = 2e-7 * np.cos(2 * np.pi * t / P) + rng.normal(0, 1e-10, t.size) + 5e-10 * (t >= 9000.5)
+    res = _run(t, y)
+    notes = " ".join(n["note"] for n in res.notes)
+    assert "not red enough" in notes
+    assert not [e for e in res.effects if "method" in e.details]
