@@ -95,11 +95,15 @@ MAX_CHECKS = 16
 WIDE = 120.0
 #: Largest kernel half-width [s] (99.9 % of its energy) for a scan to be made.
 HALF_MAX = 300.0
-#: Largest difference of the kernel and local sizes, in σ of the difference.
-AGREE_Z = 3.0
-#: Least significance of the local size, in σ (a confirmation of an edge already
-#: significant at the scan's Bonferroni level: one-sided ~2 %).
-WIDE_Z = 2.0
+#: Largest difference of the kernel and local sizes, in σ of the difference (3 let a
+#: 2.6e-10 m/s² edge with a 2.8e-9 ± 1.0e-9 local change through: `tests.indep` C/D
+#: day seed 2026, radial; a step's own difference is N(0, 1): ~5 % of real jumps are
+#: left to the least-squares scan).
+AGREE_Z = 2.0
+#: Least significance of the local size, in σ (at 2σ a smooth 10 s rise of 3e-10 m/s²
+#: on a quiet radial axis, kernel size 2.2e-11 ± 1.7e-12, local 6.5e-11 ± 2.6e-11, was
+#: removed as a step: `accal simulate` day of tests/test_cli_closure.py).
+WIDE_Z = 3.0
 #: Half-width [s] around an epoch that must hold no left-out sample: an outlier
 #: screen or the orbit template's steep bins may have taken the other edge of a box
 #: (`tests.indep` seed 31, cross-track: a lone 1.1e-9 m/s² eclipse edge whose pair 40 s
@@ -396,11 +400,18 @@ def _norm(g: NDArray[np.float64], t, grid: Grid, e: int) -> float:
     return float(g[int(np.searchsorted(grid.idx, e)) :].sum())
 
 
-def _exact(grid, t, r, basis, k0, psd, cand, pos):
+def _exact(grid, t, r, basis, k0, psd, cand, pos, project=True):
     """Size, σ and z of a step at each candidate grid epoch with the kernel as weights
-    (null design projected out of them).  Also returns the projected weights."""
+    (null design projected out of them).  Also returns the projected weights.
+
+    ``project=False``: the edge of the residual ``r`` itself, the weights as they are
+    (:func:`_neighbour`, :func:`_recurrence`: whether the residual has another edge
+    there, not whether a step there could be told from the orbit template; where the
+    template follows an eclipse edge, a projected kernel's σ is 10-20× larger and the
+    box the template leaves had an edge at only 3σ).
+    """
     g = _kernels(k0, grid, cand)
-    gm = g - basis.project(g)
+    gm = g - basis.project(g) if project else g
     first = pos[cand]  # used-sample position of each epoch
     # response to the unit step: the sum of the weights from the epoch on
     csum = np.cumsum(gm[::-1], axis=0)[::-1]
@@ -465,7 +476,7 @@ def _neighbour(grid, t, r, basis, k0, psd, pos, score, ok, e, size, m) -> str | 
     picks = a + _top(s, NEIGHBOURS, 2)
     if picks.size == 0:
         return None
-    z, sz, _, _ = _exact(grid, t, r, basis, k0, psd, picks, pos)
+    z, sz, _, _ = _exact(grid, t, r, basis, k0, psd, picks, pos, project=False)
     for zk, sk, ek in zip(z, sz, picks, strict=True):
         if abs(sk) >= RECUR_SHARE * abs(size) and abs(zk) >= RECUR_Z:
             return (
@@ -504,7 +515,9 @@ def _recurrence(grid, t, r, basis, k0, psd, pos, score, ok, e, size, period) -> 
         picks.append(a + int(np.argmax(s)))
     if not picks:
         return None
-    z, sz, _, _ = _exact(grid, t, r, basis, k0, psd, np.array(picks, dtype=np.int64), pos)
+    z, sz, _, _ = _exact(
+        grid, t, r, basis, k0, psd, np.array(picks, dtype=np.int64), pos, project=False
+    )
     for zk, sk, ek in zip(z, sz, picks, strict=True):
         if (
             np.sign(sk) == np.sign(size)

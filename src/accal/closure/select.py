@@ -586,9 +586,12 @@ def _rejected_effect(f: Found, channel_units: dict[str, str]) -> Effect:
 def _finish(
     search: Search, setup: _Setup, st, knots, noise_psd, floored, considered, opts, jumps=()
 ):
-    """The final fit and the :class:`ClosureResult`.  ``jumps`` (taken out of the data
-    before the search, :func:`~accal.closure.jumps.jumps_first`) come first among the effects; the "before"
-    values are the null fit of the data as given."""
+    """The final fit and the :class:`ClosureResult`.
+
+    ``jumps`` (taken out of the data before the search,
+    :func:`~accal.closure.jumps.jumps_first`) come first among the effects; the
+    "before" values are the null fit of the data as given.
+    """
     grid, use, t_all, y_all = search.grid, search.use, search.t_all, setup.y_all
     t_u, chan_u, names = st["t_u"], st["chan_u"], search.names
     bbase, basis0 = st["bbase"], st["basis0"]
