@@ -59,7 +59,7 @@ made.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -183,7 +183,6 @@ class JumpScan:
     halfwidth: float | None = None
     n_tests: int = 0
     note: str = ""
-    extra: dict[str, Any] = field(default_factory=dict)
 
 
 def _kernel(grid: Grid, r: NDArray[np.float64], lev: NDArray) -> tuple:
@@ -288,7 +287,7 @@ def scan_jumps(
             break
         score = _scores(grid, r, kf)
         cand = _top(np.where(ok, score, -1.0), TOP, max(half, 1))
-        z, size, sd, gm = _exact(grid, t, r, basis, k0, psd, cand, pos)
+        z, size, sd, gm = _exact(grid, r, basis, k0, psd, cand, pos)
         log_p = np.log(2.0) + log_ndtr(-np.abs(z)) + np.log(max(n_tests, 1))
         order = np.argsort(-np.abs(z))
         accepted = False
@@ -299,7 +298,7 @@ def scan_jumps(
                 break
             checks += 1
             e = int(cand[i])
-            wide = _wide(grid, t, r, basis, psd, e, m, gm[:, i] / _norm(gm[:, i], t, grid, e))
+            wide = _wide(grid, t, r, basis, psd, e, m, gm[:, i] / _norm(gm[:, i], grid, e))
             common = {
                 "epoch": float(grid_time(t, grid, e)),
                 "size": float(size[i]),
@@ -420,12 +419,12 @@ def _kernels(k0: NDArray[np.float64], grid: Grid, epochs: NDArray[np.int64]) -> 
     return k0[rows]
 
 
-def _norm(g: NDArray[np.float64], t, grid: Grid, e: int) -> float:
+def _norm(g: NDArray[np.float64], grid: Grid, e: int) -> float:
     """``gᵀ 1[t ≥ t_e]`` (the weights' response to a unit step at grid index ``e``)."""
     return float(g[int(np.searchsorted(grid.idx, e)) :].sum())
 
 
-def _exact(grid, t, r, basis, k0, psd, cand, pos, project=True):
+def _exact(grid, r, basis, k0, psd, cand, pos, project=True):
     """Size, σ and z of a step at each candidate grid epoch with the kernel as weights
     (null design projected out of them).  Also returns the projected weights.
 
@@ -465,7 +464,7 @@ def _wide(grid, t, r, basis, psd, e, m, g_sharp) -> dict[str, float] | None:
     gw = np.zeros(t.size)
     gw[lo:hi] = np.linalg.pinv(x)[2]
     gw = gw - basis.project(gw)
-    gw = gw / _norm(gw, t, grid, e)
+    gw = gw / _norm(gw, grid, e)
     w = two_sided_weights(grid.size, psd.size) * psd
     fw = grid.fft(np.column_stack([gw, g_sharp - gw]))
     cov = quad_form(fw, w, grid.size)
@@ -501,7 +500,7 @@ def _neighbour(grid, t, r, basis, k0, psd, pos, score, ok, e, size, m) -> str | 
     picks = a + _top(s, NEIGHBOURS, 2)
     if picks.size == 0:
         return None
-    z, sz, _, _ = _exact(grid, t, r, basis, k0, psd, picks, pos, project=False)
+    z, sz, _, _ = _exact(grid, r, basis, k0, psd, picks, pos, project=False)
     for zk, sk, ek in zip(z, sz, picks, strict=True):
         if abs(sk) >= RECUR_SHARE * abs(size) and abs(zk) >= RECUR_Z:
             return (
@@ -542,7 +541,7 @@ def _recurrence(grid, t, r, basis, k0, psd, pos, score, ok, e, size, period) -> 
     if not picks:
         return None
     z, sz, _, _ = _exact(
-        grid, t, r, basis, k0, psd, np.array(picks, dtype=np.int64), pos, project=False
+        grid, r, basis, k0, psd, np.array(picks, dtype=np.int64), pos, project=False
     )
     for zk, sk, ek in zip(z, sz, picks, strict=True):
         if (

@@ -287,26 +287,13 @@ def close_loop(
         signal_model = "orbit" if ref_all is None and orbit_period else "none"
     builders = _resolve(candidates)
     opts = {**(options or {}), "channel_units": dict(channel_units or {})}
-    setup = _Setup(
-        t_all,
-        y_all,
-        base,
-        chan_all,
-        names,
-        signal_model,
-        orbit_period,
-        opts.get("orbit_period_fixed", False),
-    )
+    fixed = bool(opts.get("orbit_period_fixed", False))
+    setup = _Setup(t_all, y_all, base, chan_all, names, signal_model, orbit_period, fixed)
     use, n_spikes = _spikes_out(t_all, y_all, chan_all, use)
     st = setup.build(use)
     st, use, notes = _leave_out_outliers(setup, st, use, aux_all, n_spikes)
     families = _families(builders, orbit_period, st["template"] is not None)
-    jumps = jumps_first(st, {name for name, _ in builders}, alpha / (2.0 * families), notes)
-    if jumps.jumps:  # the rest of the search on the data with the jumps taken out
-        setup.y_all = y_all - jump_columns(t_all, jumps.jumps) @ np.array(
-            [j.size for j in jumps.jumps]
-        )
-        st = setup.build(use)
+    st, jumps = _take_out_jumps(setup, st, use, builders, alpha / (2.0 * families), notes)
     fit0 = st["fit0"]
     proxies = usable_proxies(proxies_all, use, notes) if st["template"] else None
     opts.update(
@@ -327,6 +314,18 @@ def close_loop(
     return _finish(
         search, setup, st, catchall_knots, noise_psd, floored, considered, opts, jumps.jumps
     )
+
+
+def _take_out_jumps(setup: _Setup, st, use, builders, level: float, notes: dict):
+    """Bias jumps told by their edge (:func:`~accal.closure.jumps.jumps_first`), taken
+    out of ``setup.y_all`` (the rest of the search runs on that) with the null fit
+    rebuilt: ``(st, scan)``."""
+    scan = jumps_first(st, {name for name, _ in builders}, level, notes)
+    if scan.jumps:
+        sizes = np.array([j.size for j in scan.jumps])
+        setup.y_all = setup.y_all_given - jump_columns(setup.t_all, scan.jumps) @ sizes
+        st = setup.build(use)
+    return st, scan
 
 
 def _search_maker(
