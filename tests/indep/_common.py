@@ -117,6 +117,35 @@ def crn_like_response(f: FloatArray, bandwidth: float | None, order: int = 7) ->
     return np.sinc(f / bandwidth) ** (2 * order)
 
 
+def crn_like_filter(
+    x: FloatArray, dt: float, bandwidth: float | None, order: int = 7
+) -> FloatArray:
+    """Apply the CRN-like low-pass of :func:`crn_like_response` along axis 0, zero phase.
+
+    The Level-1B processing filters everything the instrument measured (signal, thruster
+    pulses, instrument effects) with its CRN filter, not only the noise: a bias step in an
+    ACC1B file is a ramp over the filter's window (GRACE: ~70 s, the "CRN filter window" of
+    the ACC1B ``qualflg`` bits 5-7).  Amplitude response ``sinc(f/bandwidth) ** order``
+    applied by FFT; the record is extended at both ends by its odd reflection about the end
+    samples (``2 x[0] − x[k]``), which keeps constants and linear trends exact up to the
+    ends.  ``bandwidth=None`` returns a copy.
+    """
+    x = np.array(x, dtype=np.float64)
+    n = x.shape[0]
+    if bandwidth is None or n < 3:
+        return x
+    m = min(n - 1, int(np.ceil(4 * order / (bandwidth * dt))))
+    left = 2 * x[:1] - x[m:0:-1]
+    right = 2 * x[-1:] - x[-2 : -m - 2 : -1]
+    xp = np.concatenate([left, x, right], axis=0)
+    size = sfft.next_fast_len(xp.shape[0], real=True)
+    f = sfft.rfftfreq(size, dt)
+    h = np.sinc(f / bandwidth) ** order
+    shape = (-1,) + (1,) * (x.ndim - 1)
+    y = sfft.irfft(sfft.rfft(xp, n=size, axis=0) * h.reshape(shape), n=size, axis=0)
+    return y[m : m + n]
+
+
 def noise_psd(
     kind: str,
     level: float,

@@ -2,12 +2,13 @@
 
 The model (magnitudes and their sources in ``tests/indep/README.md``)::
 
-    lin_accl = s ⊙ a_true + b + d (t − t0) + Σ effects + noise        (raw-data sign)
+    lin_accl = H * (s ⊙ a_true + Σ effects) + b + d (t − t0) + noise   (raw-data sign)
 
 with ``a_true`` the non-gravitational acceleration in the science reference frame (x
 along the line of sight ≈ along-track, y cross-track, z radial), ``s`` the scale
 (``1/scale_TN02``), ``b`` the bias at ``t0`` (the first epoch of the day) and ``d`` the
-drift.  Nothing here imports ``accal``.
+drift, ``H *`` the CRN-like low-pass of the Level-1B processing (the noise is drawn with
+it).  Nothing here imports ``accal``.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from ._common import (
     DAY,
     FloatArray,
     boxcar_smooth,
+    crn_like_filter,
     crn_like_response,
     delayed,
     diff_std,
@@ -211,9 +213,12 @@ def grace_day(
     noise_tau : float
         AR(1) time constant [s].
     lowpass : float or None
-        Bandwidth [Hz] of the CRN-like low-pass applied to the noise (L1B data are
-        CRN-filtered: their sample-to-sample noise is far below the in-band level);
-        None for unfiltered noise.
+        Bandwidth [Hz] of the CRN-like low-pass (L1B data are CRN-filtered: their
+        sample-to-sample noise is far below the in-band level), applied to everything
+        measured: the noise, the true signal (thruster pulses, eclipse edges) and the
+        instrument effects (a step is a ~70 s ramp; :func:`tests.indep._common.crn_like_filter`);
+        ``signal`` and the effects' contributions in the truth are the filtered ones.  None:
+        nothing filtered.
     storm : bool
         Multiply the thermospheric density by 2-4 over a few hours.
     thrusters : bool
@@ -407,6 +412,12 @@ def grace_day(
     chan_full, chan_truth = make_channels(seed, channels, eff, n, dt, period)
     base_scaled = scale * signal
     eff, effects_total = apply_effects(eff, tr, dt, period, base_scaled, chan_full, 3)
+    if lowpass is not None:  # the L1B filter acts on all that was measured, not only the noise
+        signal = crn_like_filter(signal, dt, lowpass)
+        base_scaled = scale * signal
+        effects_total = crn_like_filter(effects_total, dt, lowpass)
+        for e in eff:
+            e["contribution"] = crn_like_filter(e["contribution"], dt, lowpass)
 
     lin = base_scaled + bias + np.outer(tr, drift) + effects_total + noise_series
 
@@ -424,11 +435,13 @@ def grace_day(
         sig = np.asarray(ANG_NOISE[sat])
         ang_psd = noise_psd("white+1/f", 1.0, corner=ANG_CORNER)
         unit = diff_std(ang_psd, dt) / np.sqrt(2)
+        # the measured part goes through the L1B filter like lin_accl (its thruster pulses
+        # stay simultaneous with the linear ones); the noise is scaled to the samples' own
+        # first differences (ANG_NOISE) as it is
+        ang = crn_like_filter(offs + np.outer(resp, amps) + ang_thr, dt, lowpass)
         for k in range(3):
             rk = rng_for(seed, "angular-noise", k)
-            nk = shaped_noise(n, dt, ang_psd, rk, pad=2) * (sig[k] / unit)
-            ang[:, k] = offs[k] + amps[k] * resp + nk
-        ang += ang_thr
+            ang[:, k] += shaped_noise(n, dt, ang_psd, rk, pad=2) * (sig[k] / unit)
         ang_truth = {"offset": offs.tolist(), "orbit_amp": amps.tolist(), "lag": lag, "tau": tau_a}
     rr = rng_for(seed, "residuals")
     res = rr.standard_t(5, (n, 3)) * (np.asarray(RES_NOISE[sat]) / np.sqrt(5 / 3))

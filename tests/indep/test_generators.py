@@ -148,12 +148,14 @@ def _timed(fn) -> float:
 
 
 def test_grace_raw_model_is_exact():
+    """Every term exactly as documented (no L1B filter: ``lowpass=None``)."""
     day = grace_day(
         3,
         "A",
         duration=7200,
         storm=True,
         thrusters=True,
+        lowpass=None,
         effects=[
             ("step", "y", 1000.0, 2e-9),
             ("coupling", "z", "temperature", 1e-9, 120.0, 0.0),
@@ -183,6 +185,25 @@ def test_grace_raw_model_is_exact():
     temp = day.channels["temperature"]
     assert np.allclose(eff["coupling"]["contribution"][120:], 1e-9 * temp[:-120], rtol=1e-14)
     assert eff["coupling"]["axis"] == "z" and 290 < temp.mean() < 296
+
+
+def test_grace_l1b_filter_acts_on_signal_and_effects():
+    """With the default CRN-like filter a step is a ramp over the filter's window (7 boxcars
+    of 10 s: ±35 s), the contributions are the filtered terms, and the model still adds up."""
+    kw = dict(duration=7200, thrusters=True, effects=[("step", "y", 1000.0, 2e-9)])
+    day, raw = grace_day(3, "A", **kw), grace_day(3, "A", lowpass=None, **kw)
+    tr = day.time - day.truth["t0"]
+    s, b, d = (np.asarray(day.truth[k]) for k in ("scale", "bias", "drift"))
+    model = s * day.signal + b + np.outer(tr, d) + day.truth["effects_total"]
+    assert np.allclose(day.lin_accl, model + day.truth["noise_series"], rtol=0, atol=1e-20)
+    step = day.truth["effects"][0]["contribution"]
+    assert np.all(np.abs(step[tr < 1000 - 36]) < 1e-12 * 2e-9)
+    assert np.all(np.abs(step[tr > 1000 + 36] - 2e-9) < 1e-12 * 2e-9)
+    assert 0.3e-9 < step[tr == 995][0] < 1e-9 < step[tr == 1005][0] < 1.7e-9
+    assert np.all(np.diff(step) >= -1e-12 * 2e-9)  # monotone to the FFT rounding
+    # the signal's sharp features (thruster pulses) are smoothed, not moved
+    assert np.abs(np.diff(day.signal, axis=0)).max() < np.abs(np.diff(raw.signal, axis=0)).max()
+    assert np.allclose(day.signal.mean(axis=0), raw.signal.mean(axis=0), rtol=1e-6)
 
 
 def test_grace_coupling_lowpass_and_lag():

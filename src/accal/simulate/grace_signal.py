@@ -2,7 +2,11 @@
 
 The simulated raw reading follows the wavelet paper's eq. (9) plus injected
 instrument effects, ``a_raw = s·a_true + b + d·(t − t0) + noise + Σ effects``
-(:func:`simulate_grace_day`):
+(:func:`simulate_grace_day`).  The Level-1B processing low-passes all that the
+instrument measured with its CRN filter, so ``a_true`` and the effects are the
+band-limited ones (:func:`accal.simulate.grace_noise.crn_smooth`: a thruster pulse or a
+bias step is spread over the filter's ~35 s; orbit-scale terms pass unchanged) and the
+noise is drawn through the same filter:
 
 * ``a_true``: the non-gravitational acceleration of :mod:`accal.simulate.orbit_signal`
   (drag with once- and twice-per-revolution terms and a slow density trend, solar
@@ -51,6 +55,7 @@ from accal.simulate.grace_noise import (
     CRN_ORDER,
     NOISE_CORNER,
     NOISE_RISE,
+    crn_smooth,
     instrument_noise,
 )
 from accal.simulate.grace_seeds import default_seed, stream
@@ -80,7 +85,8 @@ class SimulatedDay:
     raw : ndarray, shape (n, 3)
         Raw readings ``lin_accl_x/y/z`` [m/s²].
     true : ndarray, shape (n, 3)
-        True non-gravitational acceleration [m/s²] (thruster pulses included).
+        True non-gravitational acceleration [m/s²] (thruster pulses included), as the
+        Level-1B CRN filter band-limits it (:func:`~accal.simulate.grace_noise.crn_smooth`).
     valid : ndarray of bool, shape (n,)
         False for flagged samples.
     truth : dict
@@ -92,7 +98,8 @@ class SimulatedDay:
     aux : dict
         The other ACC1B columns: ``ang_accl_x/y/z`` [rad/s²], ``acl_x/y/z_res`` [m/s²].
     instrument : ndarray, shape (n, 3)
-        The sum of the injected effects [m/s²] (``raw`` minus the same day without them).
+        The sum of the injected effects [m/s²] (``raw`` minus the same day without them),
+        band-limited like ``true``.
     channel_time : ndarray, shape (m,)
         GPS seconds of the auxiliary channels [s] (empty without a coupling).
     channels : dict
@@ -246,15 +253,18 @@ def simulate_grace_day(
         dt=dt,
         duration=span,
     )
-    true = env.linear
     s, scale, prior_bias = _offsets(satellite, t0)
     bias = prior_bias if bias is None else np.asarray(bias, dtype=np.float64).reshape(3)
     tc, channels, channel_params = coupling_channels(
         parsed, t0, n, dt, seed, env.truth["orbit_period"]
     )
     instrument = effects_sum(
-        parsed, tau, span, s * true, {k: (tc, v) for k, v in channels.items()}, t0
+        parsed, tau, span, s * env.linear, {k: (tc, v) for k, v in channels.items()}, t0
     )
+    # the Level-1B filter acts on all that was measured (the noise is drawn with it): the
+    # true acceleration as the file band-limits it, and the effects
+    true = crn_smooth(env.linear, dt)
+    instrument = crn_smooth(instrument, dt)
     raw = (
         s * true
         + bias
