@@ -1,10 +1,12 @@
-"""Bias jumps told by their edge (accal.closure.jumps), on data drawn here.
+"""Bias jumps by the spectrum-weighted step test (accal.closure.jumps), on data drawn here.
 
 The generator below is written for these tests (not ``accal simulate`` nor
 ``tests.indep``): an orbit-periodic signal whose amplitude drifts, a smooth
 non-periodic wander like the along-track drag's (a random walk, averaged over a
 minute: far above the white noise below ~1 mHz, so the least-squares step scan has
-its weight where the wander is), white noise, and what each test adds.
+its weight where the wander is), white noise, and what each test adds; then, as the
+Level-1B processing does, all of it through a low-pass (seven 11-sample moving averages,
+zero phase: a step becomes a ±35 s ramp).
 """
 
 from __future__ import annotations
@@ -17,10 +19,11 @@ from accal.closure import close_loop, jumps
 P = 5600.0  # orbit period [s]
 
 
-def red_day(seed, n_orbits=6, step=None, boxes=None, wander=3e-11, white=1e-10):
+def red_day(seed, n_orbits=6, step=None, boxes=None, wander=3e-11, white=1e-10, l1b=True):
     """``(t, y)``: 1 Hz, ``n_orbits`` orbits; ``step=(epoch, size)``; ``boxes=(size,
     width, phase)``: a box at that orbital phase in every orbit, drifting by 1 s per
-    orbit (an eclipse edge the orbit template does not follow exactly)."""
+    orbit (an eclipse edge the orbit template does not follow exactly); ``l1b``: the
+    low-pass of the Level-1B processing on all of it."""
     rng = np.random.default_rng(seed)
     t = np.arange(int(n_orbits * P), dtype=np.float64)
     w = 2 * np.pi / P
@@ -36,6 +39,11 @@ def red_day(seed, n_orbits=6, step=None, boxes=None, wander=3e-11, white=1e-10):
         for k in range(n_orbits):
             a = k * P + phase * P + k * 1.0
             y += size * ((t >= a) & (t < a + width))
+    if l1b:
+        for _ in range(7):  # centred 11-sample moving average, ends held
+            y = np.convolve(
+                np.r_[np.full(5, y[0]), y, np.full(5, y[-1])], np.ones(11) / 11, "valid"
+            )
     return t, y
 
 
@@ -43,7 +51,7 @@ def _run(t, y):
     return close_loop(t, y, base="poly1", orbit_period=P, candidates=("bias_step",), alpha=0.01)
 
 
-def test_a_step_on_a_red_axis_is_found_by_its_edge():
+def test_a_filtered_step_on_a_red_axis_is_found():
     epoch, size = 20_000.3, 3e-9
     t, y = red_day(1, step=(epoch, size))
     res = _run(t, y)
@@ -52,13 +60,13 @@ def test_a_step_on_a_red_axis_is_found_by_its_edge():
     e = steps[0]
     assert e.instrument
     assert "spectrum-weighted" in e.details["method"]
-    assert e.epoch == 20_001.0  # the first sample after the jump
+    assert abs(e.epoch - 20_001.0) <= 3.0  # the ramp's middle, not the kernel's epoch
     assert abs(e.coefficient - size) < 2.0 * e.sigma, (e.coefficient, e.sigma)
-    assert e.sigma < 0.05 * size  # told by its edge: σ of a few 1e-11 m/s²
+    assert e.sigma < 0.2 * size  # levels either side of the ramp: σ ~3e-10 m/s²
     # the instrument model carries it, so grace-bias removes it
     inst = res.instrument_model()
-    assert inst[t < epoch].max() == 0.0
-    np.testing.assert_allclose(inst[t >= epoch], e.coefficient, rtol=0, atol=1e-22)
+    assert inst[t < e.epoch].max() == 0.0
+    np.testing.assert_allclose(inst[t >= e.epoch], e.coefficient, rtol=0, atol=1e-22)
     # a line fitted through a later upward step starts low: taking the step out
     # raises the bias, by far more than the change's σ (the jump's own σ is in it)
     b = res.base_coefficient("bias")
@@ -98,7 +106,7 @@ def test_a_step_beside_the_boxes_is_still_found():
     res = _run(t, y)
     steps = [e for e in res.effects if e.name == "bias_step" and e.instrument]
     assert len(steps) == 1, res.effects
-    assert steps[0].epoch == epoch
+    assert abs(steps[0].epoch - epoch) <= 3.0
     assert abs(steps[0].coefficient - size) < 2.0 * steps[0].sigma
 
 
@@ -107,11 +115,11 @@ def test_jump_sigma_means_what_it_says():
     z = []
     for seed in range(12):
         epoch = 9_000.0 + 1397.0 * seed + 0.5
-        t, y = red_day(100 + seed, step=(epoch, 2e-9))
+        t, y = red_day(100 + seed, step=(epoch, 3e-9))
         res = _run(t, y)
         steps = [e for e in res.effects if e.name == "bias_step"]
         assert len(steps) == 1, (seed, res.effects)
-        z.append((steps[0].coefficient - 2e-9) / steps[0].sigma)
+        z.append((steps[0].coefficient - 3e-9) / steps[0].sigma)
     z = np.asarray(z)
     assert abs(z.mean()) < 0.75, z
     assert 0.6 < z.std(ddof=1) < 1.5, z
@@ -122,6 +130,7 @@ def test_white_noise_is_left_to_the_least_squares_scan():
     edge scan (noted); what the least-squares scan makes of the step is its business."""
     rng = np.random.default_rng(9)
     t = np.arange(int(4 * P), dtype=np.float64)
+    # unfiltered: white up to the Nyquist frequency
     y = 2e-7 * np.cos(2 * np.pi * t / P) + rng.normal(0, 1e-10, t.size) + 5e-10 * (t >= 9000.5)
     res = _run(t, y)
     notes = " ".join(n["note"] for n in res.notes)
