@@ -31,7 +31,8 @@ added to the model (and, for an instrument effect, removed from the data):
 Without a reference, an instrument effect must also not be a change of the signal
 seen on the other axes (:func:`signal_proxy_test`, with ``proxies``), and a coupling
 must explain more than lines at its channel's own periods do
-(:func:`competing_line_test`, without a reference).
+(:func:`competing_line_test`, without a reference), and a coupling to an angular
+acceleration must hold outside the channel's bursts (:func:`firing_test`).
 
 A candidate that fails is reported with the reason and never removed.
 """
@@ -44,11 +45,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 from scipy.linalg import eigh
+from scipy.ndimage import median_filter
 
 from accal.closure.basis import Basis
 from accal.closure.candidates import Context, Proposal
 from accal.closure.epochprofile import EPOCH_DELTA_W, epoch_uncertainty
-from accal.closure.kinds import EFFECT_NAMES, IDENT_MIN, kind_of, plausible
+from accal.closure.kinds import EFFECT_NAMES, IDENT_MIN, kind_of, plausible, unit_class
 from accal.closure.periodic import _line_background, line_threshold
 from accal.closure.residual import WaldResult, wald_test
 
@@ -59,6 +61,7 @@ __all__ = [
     "competing_line_test",
     "competing_lines",
     "cross_validate",
+    "firing_test",
     "identifiability",
     "signal_proxy_test",
     "validate",
@@ -97,6 +100,9 @@ class Verdict:
     competing_lines : dict
         :func:`competing_line_test` (couplings only; empty when not made):
         ``periods_s``, ``explained_coupling``, ``explained_lines``, ``score``.
+    events : dict
+        :func:`firing_test` (couplings to an angular acceleration only; empty when not
+        made): ``samples``, ``applicable``, ``stat``, ``p_adj``.
     """
 
     ok: bool
@@ -107,6 +113,7 @@ class Verdict:
     plausible: bool = True
     signal_proxy: dict[str, Any] = field(default_factory=dict)
     competing_lines: dict[str, Any] = field(default_factory=dict)
+    events: dict[str, Any] = field(default_factory=dict)
 
     def details(self) -> dict[str, Any]:
         """The checks as ``closure.json`` details."""
@@ -119,6 +126,8 @@ class Verdict:
             out["signal_proxy"] = dict(self.signal_proxy)
         if self.competing_lines:
             out["competing_lines"] = dict(self.competing_lines)
+        if self.events:
+            out["events"] = dict(self.events)
         return out
 
 
@@ -200,6 +209,76 @@ def _test_given(
         return {"stat": 0.0, "p_adj": 1.0}
     w = wald_test(ctx.grid, r_p, u[:, keep], ctx.leverage, psd=wald.psd, psd_dof=wald.dof)
     return {"stat": float(w.stat), "p_adj": float(min(1.0, w.pvalue * factor))}
+
+
+#: Bursts of an angular acceleration: samples more than :data:`BURST_SIGMAS` robust σ off
+#: its running median over :data:`BURST_WINDOW` samples, and :data:`BURST_MARGIN` s either
+#: side of them (the Level-1B filter's spread of a firing).
+BURST_SIGMAS = 5.0
+BURST_WINDOW = 241
+BURST_MARGIN = 40.0
+#: Largest share of the samples that may be bursts for :func:`firing_test` to be made.
+BURST_MAX_SHARE = 0.2
+
+
+def _angular(prop: Proposal, ctx: Context) -> bool:
+    """Whether ``prop`` couples to an angular acceleration (by the channel's unit)."""
+    units = dict(ctx.options.get("channel_units", {}))
+    return unit_class(units.get(str(prop.channel or "").removesuffix("^2"), "")) == "angular"
+
+
+def _bursts(x: NDArray[np.float64], step: float) -> NDArray[np.bool_]:
+    """Samples of ``x`` :data:`BURST_SIGMAS` robust σ off the centred running median of
+    :data:`BURST_WINDOW` samples (σ: 1.4826 × the median absolute deviation from it),
+    grown by :data:`BURST_MARGIN` s."""
+    if x.size < 2 * BURST_WINDOW:
+        return np.zeros(x.size, dtype=bool)
+    dev = np.abs(x - median_filter(x, size=BURST_WINDOW, mode="nearest"))
+    sig = 1.4826 * float(np.median(dev))
+    if not sig > 0:
+        return np.zeros(x.size, dtype=bool)
+    m = max(int(round(BURST_MARGIN / step)), 0)
+    return np.convolve(dev > BURST_SIGMAS * sig, np.ones(2 * m + 1), mode="same") > 0
+
+
+def firing_test(prop: Proposal, ctx: Context, wald: WaldResult, factor: float) -> dict[str, Any]:
+    """A coupling to an angular acceleration tested with the channel's bursts left out.
+
+    The angular accelerations of a GRACE day are dominated by attitude-thruster
+    firings, and a firing also moves the linear accelerations directly (a thruster
+    pair's residual force), at the same samples; through the Level-1B filter both are
+    ±35 s bumps, wider than the spike screen's window.  A lever-arm coupling fitted to
+    them rests on a few coincident bumps, and the Wald test's stationary PSD makes its
+    σ far too small: a coupling of y to ``ang_accl_z``, 4.9e-4 ± 2.8e-5 m/s² per
+    rad/s², was removed on a `tests.indep` storm day with thrusters (seed 4010) and
+    moved the y bias 17σ; a heteroskedasticity- and autocorrelation-consistent σ
+    (Newey & West 1987, Econometrica 55, 703; Bartlett weights, 300 lags) gave 2.2σ.
+    A lever arm acts between firings too.  So the columns are replaced on the bursts
+    (:func:`_bursts`) by their running median, orthogonalised against the model and
+    tested on the same
+    residual with the admitting test's PSD and degrees of freedom
+    (:func:`accal.closure.residual.wald_test`); ``p_adj`` is its p-value times
+    ``factor``.  Not made (``applicable`` False) without bursts or when they cover
+    over :data:`BURST_MAX_SHARE` of the samples.
+    """
+    z = prop.columns[ctx.use]
+    ev = _bursts(np.asarray(z[:, 0], dtype=np.float64), ctx.grid.step)
+    n_ev = int(ev.sum())
+    out: dict[str, Any] = {"samples": n_ev, "applicable": False}
+    if n_ev == 0 or n_ev > BURST_MAX_SHARE * ev.size or wald.psd is None:
+        return out
+    # the bursts replaced by the channel's running median: its slow part stays whole (a
+    # column with holes in its orbital cycle would be tested on the holes' pattern)
+    smooth = np.column_stack(
+        [median_filter(z[:, j], size=BURST_WINDOW, mode="nearest") for j in range(z.shape[1])]
+    )
+    u, sv, _ = np.linalg.svd(ctx.basis.complement(np.where(ev[:, None], smooth, z)), False)
+    keep = sv > 1e-8 * max(float(sv[0]) if sv.size else 0.0, 1e-300)
+    if not keep.any():
+        return {**out, "applicable": True, "stat": 0.0, "p_adj": 1.0}
+    w = wald_test(ctx.grid, ctx.residual, u[:, keep], ctx.leverage, psd=wald.psd, psd_dof=wald.dof)
+    p_adj = float(min(1.0, w.pvalue * factor))
+    return {**out, "applicable": True, "stat": float(w.stat), "p_adj": p_adj}
 
 
 #: Spectral lines of a coupling's regressor (per column) tried as competing lines.
@@ -537,9 +616,10 @@ def validate(
     ok_plaus, why = plausible(prop, coef, ctx, extent)
     proxy: dict[str, Any] = {}
     lines: dict[str, Any] = {}
+    events: dict[str, Any] = {}
 
     def verdict(reason: str = "") -> Verdict:
-        return Verdict(not reason, reason, ident, cv, coef, ok_plaus, proxy, lines)
+        return Verdict(not reason, reason, ident, cv, coef, ok_plaus, proxy, lines, events)
 
     if ident < ident_min:
         return verdict(
@@ -564,6 +644,15 @@ def validate(
                 f"{lines['explained_coupling']:.4g} (m/s²)² for the coupling, Mallows' Cp) "
                 f"and it adds nothing significant to them (corrected p "
                 f"{lines['p_adj_given_lines']:.2g}, needs < {alpha:g})"
+            )
+    if wald is not None and prop.name == "auxiliary" and _angular(prop, ctx):
+        events = firing_test(prop, ctx, wald, factor)
+        if events["applicable"] and not events["p_adj"] < alpha:
+            return verdict(
+                f"not identifiable: carried by the {events['samples']} samples around its "
+                "channel's bursts (thruster firings move linear and angular accelerations "
+                f"at once): without them it is not significant (corrected p "
+                f"{events['p_adj']:.2g}, needs < {alpha:g})"
             )
     if wald is not None:
         why = epoch_reason(prop, ctx, wald)

@@ -1,0 +1,65 @@
+"""Couplings to an angular acceleration and thruster firings (validation.firing_test).
+
+Data drawn here (numpy only, not ``accal simulate`` nor ``tests.indep``): an
+orbit-periodic signal, white noise, and thruster firings that move the linear and the
+angular accelerations at the same samples with independent amplitudes, both through
+the same low-pass as Level-1B data (seven 11-sample moving averages: ±35 s bumps).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from accal.closure import close_loop
+
+P = 5600.0  # orbit period [s]
+N = 86_400  # one day at 1 Hz
+
+
+def _lowpass(x):
+    for _ in range(7):  # centred 11-sample moving average, ends held
+        x = np.convolve(np.r_[np.full(5, x[0]), x, np.full(5, x[-1])], np.ones(11) / 11, "valid")
+    return x
+
+
+def firing_day(seed, lever=0.0):
+    """``(t, lin, ang)``: 4 firings an hour, 1-5 s long, linear 3e-9-3e-8 m/s² and
+    angular 5e-6-3e-5 rad/s² of random signs; ``lever`` [m] couples lin to ang."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(N, dtype=np.float64)
+    lin_f, ang_f = np.zeros(N), np.zeros(N)
+    for start in rng.uniform(100, N - 100, int(4 * N / 3600)):
+        on = (t >= start) & (t < start + rng.uniform(1, 5))
+        lin_f[on] += rng.choice([-1, 1]) * np.exp(rng.uniform(np.log(3e-9), np.log(3e-8)))
+        ang_f[on] += rng.choice([-1, 1]) * rng.uniform(5e-6, 3e-5)
+    w = 2 * np.pi / P
+    ang = _lowpass(3e-7 * np.cos(w * t + 0.4) + ang_f) + rng.normal(0, 3e-8, N)
+    lin = _lowpass(2e-7 * np.cos(w * t) + 5e-8 * np.sin(2 * w * t) + lin_f)
+    lin = lin - 3e-7 + rng.normal(0, 1e-10, N) + lever * ang
+    return t, lin, ang
+
+
+def _run(t, lin, ang):
+    return close_loop(
+        t, lin, base="poly1", orbit_period=P, candidates=("auxiliary",), alpha=0.01,
+        aux={"ang_accl_z": ang}, channel_units={"ang_accl_z": "rad/s^2"},
+    )  # fmt: skip
+
+
+def test_coincident_firings_are_not_a_lever_arm():
+    """Independent linear and angular kicks at the same samples: no coupling is removed
+    (seed 1 without the firing test: a "lever arm" of −8.4e-5 ± 4.8e-6 m, 17σ)."""
+    for seed in (1, 2):
+        res = _run(*firing_day(seed))
+        assert not [e for e in res.effects if e.name == "auxiliary"], res.effects
+
+
+def test_a_lever_arm_outside_the_firings_is_found():
+    """A 5 cm lever arm acts on the angular channel's whole variation: found, to 0.1 %.
+
+    (Its σ, 1.0e-5 m, comes from the stationary PSD and is too small for an estimate
+    that the firings dominate: the error is 3.4e-5 m, 3.2σ; docs/closure.md.)"""
+    res = _run(*firing_day(3, lever=0.05))
+    (c,) = [e for e in res.effects if e.name == "auxiliary"]
+    assert c.channel == "ang_accl_z" and abs(c.coefficient - 0.05) < 1e-3 * 0.05
+    assert c.details["events"]["applicable"] and c.details["events"]["p_adj"] < 0.01
