@@ -33,7 +33,7 @@ from scipy.linalg import lapack
 from scipy.optimize import minimize, minimize_scalar
 
 from accal.closure.candidates import Context, Proposal, channel_power
-from accal.closure.kinds import unit_class
+from accal.closure.kinds import channel_class
 from accal.closure.significance import test_proposal
 
 __all__ = [
@@ -136,11 +136,6 @@ def lag_multiplicity(h: NDArray[np.float64], step: float, top_lag: float) -> flo
     return float(min(max(m, min(N_LAGS, top_lag / step + 1.0)), top_lag / step + 1.0))
 
 
-def _unit_class(ctx: Context, name: str) -> str:
-    units = dict(ctx.options.get("channel_units", {}))
-    return unit_class(units.get(name.removesuffix(SQUARED), ""))
-
-
 def _response(
     ctx: Context, name: str, x: NDArray[np.float64], lead: int, tc: float, cache: bool = True
 ) -> NDArray[np.float64]:
@@ -180,7 +175,7 @@ def _channels(ctx: Context) -> list[tuple[str, NDArray[np.float64]]]:
                 out.append((name, x))
             continue
         sq = name + SQUARED
-        angular = _unit_class(ctx, name) == "angular"
+        angular = channel_class(ctx.options, name) == "angular"
         if not angular and not ctx.has_label(f"aux:{sq}") and not ctx.is_blocked("auxiliary", sq):
             out.append((sq, square_about_mean(x)))
     return out
@@ -367,7 +362,7 @@ def auxiliary(ctx: Context) -> list[Proposal]:
         ok = np.isfinite(x)
         if ok.sum() < 10 or np.ptp(x[ok]) == 0:
             continue
-        angular = _unit_class(ctx, name) == "angular"
+        angular = channel_class(ctx.options, name) == "angular"
         top = min(top_all, ANGULAR_MAX_LAG) if angular else top_all
         taus = (0.0,) if angular else tuple(ctx.options.get("aux_taus", AUX_TAUS))
         n_l = int(ctx.options.get("n_lags", N_LAGS))
@@ -439,7 +434,7 @@ def _proposals(ctx: Context, name: str, x, tc: float, lag: float, mult: float) -
             jacobian=_jacobian(ctx, name, x, lag, tc),
         )
     ]
-    if not name.endswith(SQUARED) and _unit_class(ctx, name) != "angular":
+    if not name.endswith(SQUARED) and channel_class(ctx.options, name) != "angular":
         # the channel and its square together, at the same lag and response: a strong
         # quadratic dependence masks the linear one (QA: c1·T + 2e-9·(T − 20 K)² gave
         # "unexplained" structure only); the selection takes the pair only when no

@@ -211,8 +211,7 @@ def _kernel(grid: Grid, r: NDArray[np.float64], lev: NDArray) -> tuple:
     n = grid.size
     psd = estimate_psd(grid, r, lev).psd
     w = max(1, min(int(round(TRANSITION / grid.step)), n // 8))
-    k0 = _gapped(psd, n, grid.step, w)
-    k2 = _gapped(psd, n, grid.step, 2 * w)
+    k0, k2 = _gapped(psd, n, grid.step, (w, 2 * w))
     c = n // 2
     cs = np.cumsum(np.roll(k0, c) ** 2)  # lag 0 at index c
     tot = float(cs[-1])
@@ -224,8 +223,11 @@ def _kernel(grid: Grid, r: NDArray[np.float64], lev: NDArray) -> tuple:
     return np.fft.rfft(k0), k0, psd, max(half, w), k2
 
 
-def _gapped(psd: NDArray[np.float64], n: int, step: float, w: int) -> NDArray[np.float64]:
-    """GLS weights of a step at grid index 0 with the samples ``−w .. w−1`` left out.
+def _gapped(
+    psd: NDArray[np.float64], n: int, step: float, widths: tuple[int, ...]
+) -> list[NDArray[np.float64]]:
+    """GLS weights of a step at grid index 0 with the samples ``−w .. w−1`` left out,
+    for each ``w`` of ``widths`` (one PSD, so ``Q`` and the step's weights are shared).
 
     With ``Q = C⁻¹`` the Whittle inverse of the noise covariance (circulant, ``1/S(f)``;
     zero at f = 0: constants are the base's), the GLS weights of a unit step ``u``
@@ -233,8 +235,8 @@ def _gapped(psd: NDArray[np.float64], n: int, step: float, w: int) -> NDArray[np
     by the partitioned inverse ``(C_OO)⁻¹ = Q_OO − Q_OΓ (Q_ΓΓ)⁻¹ Q_ΓO``:
     ``g = a − Q (Q_ΓΓ)⁻¹ a_Γ`` with ``a = Q (u with Γ zeroed)``, which vanishes on Γ
     (e.g. Golub & Van Loan 2013, Matrix Computations, §3.2.10 for the block inverse).
-    Three FFTs and one ``2w × 2w`` solve.  Any transition of the step inside Γ (the
-    Level-1B filter's ramp) leaves the weights' response ``Σ_{k≥0} g_k`` unchanged.
+    Per width two FFTs and one ``2w × 2w`` solve.  Any transition of the step inside Γ
+    (the Level-1B filter's ramp) leaves the weights' response ``Σ_{k≥0} g_k`` unchanged.
     """
     f = np.fft.rfftfreq(n, step)
     inv = np.zeros(f.size)
@@ -244,18 +246,21 @@ def _gapped(psd: NDArray[np.float64], n: int, step: float, w: int) -> NDArray[np
     d = 1.0 - np.exp(-2j * np.pi * f[good] * step)
     kf = np.zeros(f.size, dtype=complex)
     kf[good] = inv[good] / d  # Q u: the step's GLS weights, all samples used
-    gap = np.arange(-w, w) % n
-    u_gap = np.zeros(n)
-    u_gap[:w] = 1.0  # the step's samples inside Γ (indices 0 .. w−1)
-    a = np.fft.irfft(kf - np.fft.rfft(u_gap) * inv, n=n)
     q = np.fft.irfft(inv, n=n)
-    j = np.arange(2 * w)
-    b = linalg.solve(q[np.abs(j[:, None] - j[None, :])], a[gap], assume_a="pos")
-    b_full = np.zeros(n)
-    b_full[gap] = b
-    g = a - np.fft.irfft(np.fft.rfft(b_full) * inv, n=n)
-    g[gap] = 0.0  # zero there to rounding (the construction)
-    return g
+    out = []
+    for w in widths:
+        gap = np.arange(-w, w) % n
+        u_gap = np.zeros(n)
+        u_gap[:w] = 1.0  # the step's samples inside Γ (indices 0 .. w−1)
+        a = np.fft.irfft(kf - np.fft.rfft(u_gap) * inv, n=n)
+        j = np.arange(2 * w)
+        b = linalg.solve(q[np.abs(j[:, None] - j[None, :])], a[gap], assume_a="pos")
+        b_full = np.zeros(n)
+        b_full[gap] = b
+        g = a - np.fft.irfft(np.fft.rfft(b_full) * inv, n=n)
+        g[gap] = 0.0  # zero there to rounding (the construction)
+        out.append(g)
+    return out
 
 
 def scan_jumps(

@@ -67,11 +67,13 @@ if TYPE_CHECKING:
 __all__ = [
     "EFFECT_NAMES",
     "Kind",
+    "channel_class",
     "effect_label",
     "instrument_kinds",
     "kind_of",
     "kinds",
     "plausible",
+    "unit_class",
     "unit_of",
 ]
 
@@ -226,6 +228,13 @@ def unit_class(unit: str) -> str:
     return "other"
 
 
+def channel_class(options: dict[str, Any], channel: str) -> str:
+    """:func:`unit_class` of a coupling's channel (its square: the channel's) by
+    ``options["channel_units"]``."""
+    units = dict(options.get("channel_units", {}))
+    return unit_class(units.get(str(channel).removesuffix("^2"), ""))
+
+
 def plausible(prop: Proposal, coef: float, ctx: Context, extent: float) -> tuple[bool, str]:
     """Whether coefficient ``coef`` of ``prop`` is physically plausible (see the notes).
 
@@ -269,8 +278,7 @@ def plausible(prop: Proposal, coef: float, ctx: Context, extent: float) -> tuple
     if name == "auxiliary":
         channel = str(prop.channel or "")
         squared = channel.endswith("^2")
-        unit = dict(ctx.options.get("channel_units", {})).get(channel.removesuffix("^2"), "")
-        cls = unit_class(unit)
+        cls = channel_class(ctx.options, channel)
         if cls == "angular" and not squared and abs(coef) > LEVER_ARM_MAX:
             return False, (
                 f"a lever arm of {abs(coef):.3g} m (coupling to an angular acceleration) "

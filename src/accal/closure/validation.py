@@ -50,7 +50,7 @@ from scipy.ndimage import median_filter
 from accal.closure.basis import Basis
 from accal.closure.candidates import Context, Proposal
 from accal.closure.epochprofile import EPOCH_DELTA_W, epoch_uncertainty
-from accal.closure.kinds import EFFECT_NAMES, IDENT_MIN, kind_of, plausible, unit_class
+from accal.closure.kinds import EFFECT_NAMES, IDENT_MIN, channel_class, kind_of, plausible
 from accal.closure.periodic import _line_background, line_threshold
 from accal.closure.residual import WaldResult, wald_test
 
@@ -223,8 +223,7 @@ BURST_MAX_SHARE = 0.2
 
 def _angular(prop: Proposal, ctx: Context) -> bool:
     """Whether ``prop`` couples to an angular acceleration (by the channel's unit)."""
-    units = dict(ctx.options.get("channel_units", {}))
-    return unit_class(units.get(str(prop.channel or "").removesuffix("^2"), "")) == "angular"
+    return channel_class(ctx.options, str(prop.channel or "")) == "angular"
 
 
 def _bursts(x: NDArray[np.float64], step: float) -> NDArray[np.bool_]:
