@@ -8,6 +8,8 @@ values still work.
 
 from __future__ import annotations
 
+import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -257,6 +259,25 @@ def test_demod_valid_tau_still_works(run_file, tmp_path):
         "demod", run_file, "--tau", "1.5", "--mask", "0", "--out", tmp_path / "p", "-q"
     )
     assert code == 1 and "use tau = 1 s or 2 s" in err
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="/proc")
+def test_demod_tau_check_leaves_the_workers_forked(run_file, tmp_path):
+    """The τ check reads a chunk of a Parquet run in the batch process; pyarrow's
+    thread pool, started by that read, made every demod batch start its workers
+    from a fork server (~0.4 s more per batch)."""
+    import shutil
+    import subprocess
+
+    second = tmp_path / "second.parquet"
+    shutil.copy(run_file, second)
+    env = {k: v for k, v in os.environ.items() if k != "ACCAL_START_METHOD"}
+    out = tmp_path / "o"
+    cmd = [sys.executable, "-m", "accal", "demod", str(run_file), str(second)]
+    cmd += ["--tau", "600", "--mask", "200", "--out", str(out), "-j", "2", "-q"]
+    subprocess.run(cmd, check=True, env=env, capture_output=True)
+    (start,) = [x for x in (out / "accal.log").read_text().splitlines() if "inputs run in" in x]
+    assert start.endswith("2 worker processes (fork)"), start
 
 
 # --- grace-bias: --scale, --alpha, --format (R4, R11) ------------------------------

@@ -36,7 +36,8 @@ def too_coarse_for_tau(runs: Sequence[Path], opts: DemodOptions) -> list[tuple[P
     coarse = []
     for path in runs:
         try:
-            stream = open_rawlog(path, rows=int(opts.chunk_rows))
+            # no pyarrow pool in this process: the workers can then be forked
+            stream = open_rawlog(path, rows=int(opts.chunk_rows), threads=False)
             step = sampling_step(stream, opts)
         except Exception:  # noqa: BLE001 (a bad run fails in run_demod, with its message)
             continue

@@ -130,7 +130,9 @@ class RawlogStream:
         (:func:`name_mismatch`), and of the last pass (non-numeric columns ignored).
     """
 
-    def __init__(self, path: str | Path, rows: int | None = STREAM_ROWS) -> None:
+    def __init__(
+        self, path: str | Path, rows: int | None = STREAM_ROWS, *, threads: bool = True
+    ) -> None:
         self.path = Path(path)
         self.rows = rows
         if rows is None:
@@ -138,7 +140,7 @@ class RawlogStream:
             table, units, fmeta, first_line = self._whole
             names = list(table.column_names)
         else:
-            self._stream = TableStream(self.path, rows=rows)
+            self._stream = TableStream(self.path, rows=rows, threads=threads)
             units, fmeta = self._stream.units, self._stream.meta
             names, first_line = list(self._stream.names), self._stream.first_line
         missing = [c for c in REQUIRED_COLUMNS if c not in names]
@@ -332,7 +334,9 @@ def name_mismatch(path: str | Path, *, parquet: bool) -> str | None:
     return None
 
 
-def open_rawlog(path: str | Path, *, rows: int | None = STREAM_ROWS) -> RawlogStream:
+def open_rawlog(
+    path: str | Path, *, rows: int | None = STREAM_ROWS, threads: bool = True
+) -> RawlogStream:
     """Open a rotating-platform run file for reading in chunks.
 
     Parameters
@@ -341,6 +345,9 @@ def open_rawlog(path: str | Path, *, rows: int | None = STREAM_ROWS) -> RawlogSt
         Parquet, CSV or gzipped CSV table (columns as in :func:`read_rawlog`).
     rows : int or None
         Rows per chunk; ``None`` reads the whole file as one chunk.
+    threads : bool
+        Whether pyarrow may use its thread pool for a chunked Parquet read
+        (:class:`accal.io.table_stream.TableStream`).
 
     Returns
     -------
@@ -356,7 +363,7 @@ def open_rawlog(path: str | Path, *, rows: int | None = STREAM_ROWS) -> RawlogSt
         non-finite or not strictly increasing time (checked across chunks, with
         the CSV line or the Parquet row).
     """
-    return RawlogStream(path, rows)
+    return RawlogStream(path, rows, threads=threads)
 
 
 def read_rawlog(path: str | Path) -> AccSeries:

@@ -101,11 +101,18 @@ class TableStream:
         1-based line of the first data row (CSV); 0 for Parquet.
     rows : int
         Rows per chunk.
+    threads : bool
+        Whether pyarrow may decode Parquet column chunks on its thread pool (CSV is
+        always read on the calling thread, :func:`accal.io.common.csv_read_options`).
+        False for a read in a process that forks workers afterwards: the pool's
+        threads would make :func:`accal.batch_workers.start_method` choose the
+        slower fork server.
     """
 
-    def __init__(self, path: str | Path, *, rows: int = STREAM_ROWS) -> None:
+    def __init__(self, path: str | Path, *, rows: int = STREAM_ROWS, threads: bool = True) -> None:
         self.path = Path(path)
         self.rows = int(rows)
+        self.threads = bool(threads)
         if self.rows < 1:
             raise ValidationError(f"rows per chunk must be >= 1, got {rows}")
         with _open_binary(self.path) as fh:
@@ -164,7 +171,7 @@ class TableStream:
         pf = self._parquet_file()
         row = 0
         try:
-            for batch in pf.iter_batches(batch_size=self.rows):
+            for batch in pf.iter_batches(batch_size=self.rows, use_threads=self.threads):
                 if batch.num_rows:
                     yield row, pa.Table.from_batches([batch])
                     row += batch.num_rows
