@@ -499,6 +499,30 @@ def test_summary_reports_the_workers_peak_memory(tmp_path):
         assert m and 30 < int(m.group(1)) < 4000
 
 
+@pytest.mark.skipif(not Path("/proc/self/clear_refs").exists(), reason="Linux /proc")
+def test_an_inputs_peak_memory_is_its_own_not_the_workers_lifetime_one(tmp_path):
+    """A worker that ran something big before (a Dask worker lives beyond the batch)
+    reports, for the next input, the peak while that input ran."""
+    code = (
+        "import numpy as np, sys\n"
+        "from pathlib import Path\n"
+        "from accal.gracejob.process import process_one\n"
+        "from accal.gracejob.options import GraceBiasOptions\n"
+        "from accal.batch_summary import peak_rss_mb\n"
+        "big = np.ones(100_000_000); del big  # 763 MiB, then freed\n"
+        "lifetime = peak_rss_mb()\n"
+        "o = process_one(Path(sys.argv[1]), Path(sys.argv[2]), GraceBiasOptions())\n"
+        "print(lifetime, o.peak_rss, o.ok)\n"
+    )
+    res = subprocess.run(
+        [sys.executable, "-c", code, str(GRACE_A), str(tmp_path)],
+        capture_output=True, text=True, check=True,
+    )  # fmt: skip
+    lifetime, peak, ok = res.stdout.split()
+    assert ok == "True"
+    assert float(lifetime) > 700 and 30 < float(peak) < 400, res.stdout
+
+
 def test_file_system_errors_of_any_command_are_one_line(tmp_path):
     """An OSError no command handled (here: demod's --out under a file) is one line, exit 2."""
     blocker = tmp_path / "afile"

@@ -1,4 +1,5 @@
-"""What a batch did, for every batch command: :class:`BatchSummary` and :func:`peak_rss_mb`.
+"""What a batch did, for every batch command: :class:`BatchSummary`, :func:`peak_rss_mb`
+and :func:`reset_peak_rss`.
 
 The counts, the throughput and the one-line end-of-run summary of a batch of
 :func:`accal.batch_runner.run_batch` (``accal grace-bias``, ``accal demod``), and
@@ -15,7 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
 
-__all__ = ["BatchSummary", "peak_rss_mb"]
+__all__ = ["BatchSummary", "peak_rss_mb", "reset_peak_rss"]
 
 
 @dataclass(frozen=True)
@@ -117,14 +118,48 @@ class BatchSummary:
         )
 
 
+def reset_peak_rss() -> bool:
+    """Start this process's peak resident memory afresh, where the system allows it.
+
+    A worker runs many inputs, and a Dask worker lives beyond the batch (other
+    clients' tasks, its own start-up): the process's lifetime peak
+    (``ru_maxrss``) is then no measure of the input at hand.  On Linux (≥ 4.0)
+    writing ``5`` to ``/proc/self/clear_refs`` sets the peak (``VmHWM``) to the
+    current resident size (proc(5), "/proc/pid/clear_refs"); each input's task
+    calls this first, so :func:`peak_rss_mb` then gives the peak of the process
+    while that input ran.
+
+    Returns
+    -------
+    bool
+        Whether the peak was reset (False elsewhere, or where the file is not
+        writable: :func:`peak_rss_mb` is then the process's lifetime peak).
+    """
+    try:
+        with open("/proc/self/clear_refs", "w") as fh:
+            fh.write("5")
+    except OSError:
+        return False
+    return True
+
+
 def peak_rss_mb() -> float:
-    """Peak resident memory of this process [MB] (0 where ``resource`` is missing).
+    """Peak resident memory of this process [MB] since :func:`reset_peak_rss` (else its
+    lifetime peak; 0 where neither ``/proc`` nor ``resource`` tells it).
 
     Returns
     -------
     float
-        ``ru_maxrss`` in MB (kB on Linux, bytes on macOS).
+        ``VmHWM`` of ``/proc/self/status`` (Linux), else ``ru_maxrss`` in MB (kB on
+        Linux, bytes on macOS).
     """
+    try:
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith("VmHWM:"):
+                    return float(line.split()[1]) / 1024.0  # kB
+    except (OSError, ValueError, IndexError):
+        pass
     try:
         import resource
     except ImportError:  # pragma: no cover - not POSIX

@@ -28,7 +28,7 @@ from accal.batch import (
     file_signature,
     write_error_message,
 )
-from accal.batch_summary import peak_rss_mb
+from accal.batch_summary import peak_rss_mb, reset_peak_rss
 from accal.degraded import classify_day, load_periods
 from accal.errors import AccalError, ValidationError
 from accal.gracejob.fit import row_source, signal_share
@@ -284,6 +284,7 @@ def fit_arc_task(
     work).  ``run_token``: the lock token of the submitting run
     (:func:`accal.io.writers.run_guard`, as :func:`accal.gracejob.process.process_one`).
     """
+    reset_peak_rss()  # the arc's peak, not the worker's lifetime one (a Dask worker's)
     with run_guard(Path(out_dir) / LOCK if run_token else None, run_token):
         return _fit_arc_inputs(arc, Path(out_dir), opts)
 

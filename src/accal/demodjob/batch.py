@@ -55,7 +55,7 @@ from accal.batch import (
     write_error_message,
 )
 from accal.batch_runner import BatchJob, run_batch, scheduler_name
-from accal.batch_summary import peak_rss_mb
+from accal.batch_summary import peak_rss_mb, reset_peak_rss
 from accal.demodjob.closure import close_run
 from accal.demodjob.closure_outputs import apply_closure, write_demod_closure
 from accal.demodjob.options import DemodOptions, DemodResult, DemodRunSummary, RunOutcome
@@ -206,6 +206,7 @@ def demod_task(
     (:func:`accal.io.writers.run_guard`).
     """
     path = Path(path)
+    reset_peak_rss()  # the run's peak, not the worker's lifetime one (a Dask worker's)
     with run_guard(Path(out_dir) / LOCK if run_token else None, run_token):
         try:
             check_input(path)

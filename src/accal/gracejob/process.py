@@ -15,6 +15,7 @@ import numpy as np
 
 from accal import __version__
 from accal.batch import LOCK, check_input, failure_message, file_signature, write_error_message
+from accal.batch_summary import reset_peak_rss
 from accal.errors import AccalError, ValidationError
 from accal.gracejob.fit import fit_input
 from accal.gracejob.options import GraceBiasOptions
@@ -162,7 +163,9 @@ def process_one(
 
 def _process_one(path: Path, out_dir: Path, opts: GraceBiasOptions) -> FileOutcome:
     # the peak memory of a failed input counts too: a hostile file that fails late is
-    # exactly the one whose memory the summary must show (issue 23, finding 9)
+    # exactly the one whose memory the summary must show (issue 23, finding 9); the
+    # peak is this input's, not the worker's lifetime one (a Dask worker's)
+    reset_peak_rss()
     outcome = _try_one(path, out_dir, opts)
     return dataclasses.replace(outcome, peak_rss=peak_rss_mb())
 
