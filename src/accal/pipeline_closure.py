@@ -23,13 +23,22 @@ from typing import Any
 import numpy as np
 
 from accal import __version__
-from accal.batch import failure_message, write_error_message
+from accal.batch import Manifest, failure_message, write_error_message
+from accal.calibration import parse_scale
+from accal.closure import DEFAULT_CANDIDATES, close_loop, effect_label, kind_of
+from accal.closure.nuisance import estimate_period
+from accal.closure.report import plot_closure, to_markdown
 from accal.errors import AccalError, ValidationError
 from accal.gracejob.options import GraceBiasOptions
 from accal.gracejob.outcome import FileOutcome, internal_error
 from accal.gracejob.outputs import output_stem, write_json
 from accal.gracejob.reading import read_input, subtract_reference
+from accal.io.housekeeping import read_housekeeping
+from accal.io.tables import read_table_series
+from accal.io.units import si_factor
+from accal.io.writers import atomic_path, read_table_metadata
 from accal.series import AccSeries
+from accal.timescale import gps_to_date
 
 #: Effects removed from the calibrated series (instrument effects).  Periodic
 #: terms and unexplained structure are reported but kept: at orbit frequencies
@@ -63,8 +72,6 @@ def load_aux_channels(
     Housekeeping of another satellite than ``satellite`` (the data's) is used, with
     a note (QA: GRACE-A temperatures were applied to GRACE-B data without a word).
     """
-    from accal.io.housekeeping import read_housekeeping
-
     hk = read_housekeeping(path)
     notes = []
     if hk.satellite and satellite and hk.satellite != satellite:
@@ -91,8 +98,6 @@ def load_aux_channels(
             continue
         out[k] = v
     if coverage == 0.0:
-        from accal.timescale import gps_to_date
-
         raise ValidationError(
             f"{path}: --aux covers none of the data "
             f"({gps_to_date(float(t[0]))} ... {gps_to_date(float(t[-1]))}, GPS days); "
@@ -171,8 +176,6 @@ def closure_candidates(
     model, and a step cannot be told from the signal's own jumps (radiation
     pressure switching at eclipse entry and exit): steps are left out too.
     """
-    from accal.closure import DEFAULT_CANDIDATES, kind_of
-
     if opts.reference is not None:
         return tuple(DEFAULT_CANDIDATES), ""
     drop = {c for c in DEFAULT_CANDIDATES if kind_of(c).needs_reference}
@@ -216,8 +219,6 @@ def candidate_channels(
 
     Returns ``(channels, units, report, warnings)``.
     """
-    from accal.io.units import si_factor
-
     aux: dict[str, np.ndarray] = {}
     units: dict[str, str] = {}
     report: list[dict[str, Any]] = []
@@ -297,10 +298,6 @@ def close_the_loop(
         What the user should know (e.g. ``--aux`` not covering every used sample:
         the closure then uses the samples it covers).
     """
-    from accal.closure import close_loop, effect_label
-    from accal.closure.nuisance import estimate_period
-    from accal.closure.report import to_markdown
-
     aux, units, left_out, warnings = candidate_channels(series, opts)
     # a coupling is only known where its channel is: the closure uses those samples
     covered = np.ones(len(series), bool)
@@ -406,8 +403,6 @@ def _plot_closure(res: Any, prefix: Path, ax: str, title: str | None = None) -> 
         import matplotlib  # noqa: F401
     except ImportError:
         return []
-    from accal.closure.report import plot_closure
-    from accal.io.writers import atomic_path
 
     names = [
         prefix.with_name(f"{prefix.name}.closure{k}.{ax}.png") for k in ("", "-psd", "-effects")
@@ -605,7 +600,6 @@ def write_closure_reports(
                 continue
             removed = entry.get("removed_from_calibrated") or []
             lines += ["", f"Removed from calibrated: {', '.join(removed) or 'nothing'}.", ""]
-    from accal.io.writers import atomic_path
 
     with atomic_path(mpath) as tmp:
         tmp.write_text("\n".join(lines) + "\n")
@@ -683,8 +677,6 @@ def _diagnosis_input(
     reference`` (the reference named in the manifest, read again).  Returns the
     series, the reference path (None without one) and warnings.
     """
-    from accal.calibration import parse_scale
-
     scale = parse_scale(run.get("scale"), series.satellite)
     raw = series
     if scale is not None:
@@ -726,10 +718,6 @@ def diagnose_dir(
     ``out_dir``; the caller writes ``closure.json``/``closure.md``
     (:func:`write_closure_reports`).
     """
-    from accal.batch import Manifest
-    from accal.io.tables import read_table_series
-    from accal.io.writers import read_table_metadata
-
     directory, out_dir = Path(directory), Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     files = sorted(

@@ -34,7 +34,19 @@ from typing import Any
 import numpy as np
 
 from accal import __version__
+from accal.closure import close_loop, effect_label
+from accal.closure.basis import BlockBase
+from accal.closure.report import to_markdown
+from accal.closure.select import MIN_SAMPLES
 from accal.gracejob.options import GraceBiasOptions
+from accal.pipeline_closure import (
+    candidate_channels,
+    change_entry,
+    closure_candidates,
+    load_truth,
+    write_closure_plots,
+)
+from accal.pipeline_reference import fit_day, row_fields
 from accal.series import AccSeries
 
 __all__ = ["ReferenceClosure", "close_reference_loop", "null_design"]
@@ -109,8 +121,6 @@ def null_design(
         coupling channels).  Its coefficient is ``1 − s/s₀`` for a raw gain ``1/s``
         and a fixed scale ``s₀`` (``s₀/s − 1`` to first order).
     """
-    from accal.closure.basis import BlockBase
-
     ref = np.nan_to_num(np.asarray(reference, dtype=np.float64))
     phi, first = fit.basis.design(time)
     keep = ~fit.unsupported[first : first + phi.shape[1]] if fit.unsupported.size else None
@@ -145,8 +155,6 @@ def _resolution(raw: np.ndarray, y: np.ndarray) -> float:
 
 def _row_estimates(day: Any, axis: str, time: np.ndarray, scale_given: str | None) -> dict:
     """Bias and drift at the first used sample and the diagonal scale, with their σ."""
-    from accal.pipeline_reference import row_fields
-
     r = row_fields(day, axis, time, scale_given or "")
     return {
         "t0": r["t0"],
@@ -175,8 +183,6 @@ def before_after(
     when the truth has the reference's ``S`` (``accal simulate grace --reference-out``),
     of the scale; a truth without it leaves the scale out (every row of the report's
     table then has its true errors)."""
-    from accal.pipeline_closure import change_entry  # imported lazily, as the others here
-
     b = _row_estimates(before, axis, time, opts.scale)
     a = _row_estimates(after, axis, time, opts.scale)
     true_s = _truth_scale(opts.truth) if truth is not None and opts.truth else None
@@ -237,10 +243,6 @@ def _close_axes(
     Returns ``({axis: {"summary", "instrument", "model", "coupled"}}, plots, warnings,
     covered)``; ``covered``: the samples every candidate channel covers.
     """
-    from accal.closure import close_loop, effect_label
-    from accal.closure.report import to_markdown
-    from accal.pipeline_closure import candidate_channels, closure_candidates, write_closure_plots
-
     aux, units, left_out, warnings = candidate_channels(series, opts)
     covered = np.ones(len(series), bool)
     for v in aux.values():
@@ -330,10 +332,6 @@ def close_reference_loop(
         None when the day is too short for the residual analysis (said in the warnings).
     warnings : list of str
     """
-    from accal.closure.select import MIN_SAMPLES
-    from accal.pipeline_closure import load_truth
-    from accal.pipeline_reference import fit_day
-
     n_use = int(np.count_nonzero(day.use))
     if n_use < MIN_SAMPLES:  # the reference fit stands; say why there is no closure
         return (
