@@ -43,6 +43,8 @@ from accal.closure.platform import PlatformInfo
 from accal.closure.results import ClosureResult
 from accal.closure.select import close_loop
 from accal.errors import ValidationError, check_option
+from accal.estimators.demod import regular_step, theta_in_range
+from accal.estimators.design import rest_mask
 
 __all__ = ["DEMOD_CANDIDATES", "DemodClosure", "DemodPeriods", "close_loop_demod"]
 
@@ -313,7 +315,6 @@ def close_loop_demod(
     t, my, mz, th, v, fs, q = _check_record(time, m, theta, valid, tau)
     n = t.size
     n_per = n // q
-    from accal.estimators.design import rest_mask
 
     finite = np.isfinite(my) & np.isfinite(mz) & np.isfinite(th)
     rest = rest_mask(np.nan_to_num(th), tol=rest_tol, settle=int(round(settle * fs)))
@@ -383,7 +384,6 @@ def _check_record(time, m, theta, valid, tau: float):
         )
     if n < 3:
         raise ValidationError(f"need at least 3 samples, got {n}")
-    from accal.estimators.demod import regular_step, theta_in_range
 
     dt, dt_rtol = regular_step(t)
     fs = 1.0 / dt

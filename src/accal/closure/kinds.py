@@ -61,6 +61,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from accal.timescale import gps_to_gps_calendar
+
 if TYPE_CHECKING:
     from accal.closure.candidates import Context, Proposal
 
@@ -310,8 +312,6 @@ def unit_of(prop: Proposal | Any, channel_units: dict[str, str]) -> str:
 
 def effect_label(e: Any) -> str:
     """A short label of an effect for a model string (``bias_step@<GPS calendar>GPS``, ...)."""
-    from accal.timescale import gps_to_gps_calendar
-
     if e.name == "bias_step" and e.epoch is not None:
         # the GPS calendar, like the table's `date` (GRACE days are GPS days)
         gps = np.datetime_as_string(gps_to_gps_calendar(e.epoch).astype("datetime64[s]"))

@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from accal.closure.candidates import Context, Proposal
+from accal.closure.residual import estimate_psd
 
 __all__ = ["MAX_LINES", "ORBIT_HARMONICS", "periodic"]
 
@@ -352,8 +353,6 @@ def periodic(ctx: Context) -> list[Proposal]:
     With several data channels the search uses their summed periodograms and the
     amplitudes are per channel.
     """
-    from accal.closure.residual import estimate_psd
-
     tau_all = ctx.t_all - ctx.t0
     tau = ctx.t - ctx.t0
     masks = ctx.channel_masks()

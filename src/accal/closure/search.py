@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 from scipy import special
 
 from accal.closure.basis import Basis, FitResult
-from accal.closure.candidates import Context, Proposal
+from accal.closure.candidates import EXP_LONG_FRACTION, Context, Proposal, exponential_drift
 from accal.closure.final import with_jacobian
 from accal.closure.kinds import kind_of
 from accal.closure.residual import Grid
@@ -323,8 +323,6 @@ def swap_smooth(s: Search) -> None:
     to the whole span, given the other effects, and replaces the polynomial terms
     when its score beats theirs by :data:`SWAP_MIN_GAIN`.
     """
-    from accal.closure.candidates import EXP_LONG_FRACTION, exponential_drift
-
     enabled = s.options.get("enabled", ())
     polys = [i for i, f in enumerate(s.found) if f.prop.name in ("quadratic_drift", "cubic_drift")]
     if not polys or "exponential_drift" not in enabled:
