@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from accal.calibration import tn02_scale
+from accal.calibration import parse_scale, tn02_scale
 from accal.errors import ValidationError
 from accal.estimators.refbasis import parse_bias_basis
 from accal.estimators.reference import ReferenceFit, fit_reference
@@ -24,6 +24,7 @@ from accal.io.attitude import find_attitude_file, read_attitude, rotate_to_srf
 from accal.io.thrusters import find_thruster_file, firing_mask, read_thrusters
 from accal.io.writers import atomic_path
 from accal.series import AccSeries
+from accal.timescale import gps_to_date
 
 __all__ = [
     "PARAMETER_UNITS",
@@ -72,8 +73,6 @@ def apriori_scale(scale: str | None, satellite: str) -> tuple[float, float, floa
     ``--scale`` numbers (or ``tn02``) as given; no ``--scale``: 1; ``fit``/``fit-matrix``
     (the a-priori of a scale that is not identifiable): TN-02 for GRACE A/B, else 1.
     """
-    from accal.calibration import parse_scale
-
     if scale not in ("fit", "fit-matrix"):
         return parse_scale(scale, satellite) or (1.0, 1.0, 1.0)
     try:
@@ -338,8 +337,6 @@ def group_arcs(
     notes : list of str
         Where an arc was cut short by a missing day.
     """
-    from accal.timescale import gps_to_date
-
     kind, n_days = parse_arc(spec)
     order = sorted(range(len(inputs)), key=lambda i: (inputs[i][0], inputs[i][1]))
     arcs: list[list[int]] = []

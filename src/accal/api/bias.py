@@ -26,6 +26,15 @@ from accal.api.common import (
     utc_instants,
 )
 from accal.errors import ValidationError
+from accal.pipeline import (
+    BIAS_DRIFT_UNITS,
+    CALIBRATED_UNITS,
+    GraceBiasOptions,
+    calibrated_frame,
+    fit_input,
+    read_input,
+    subtract_reference,
+)
 from accal.series import AccSeries
 
 if TYPE_CHECKING:  # pragma: no cover (imported lazily: start-up time)
@@ -125,8 +134,6 @@ class BiasFit:
         """
         import pandas as pd
 
-        from accal.pipeline import BIAS_DRIFT_UNITS
-
         df = pd.DataFrame(list(self.rows))
         df.attrs["units"] = {c: BIAS_DRIFT_UNITS.get(c, "") for c in df.columns}
         return df
@@ -151,8 +158,6 @@ class BiasFit:
         'm/s^2'
         """
         import pandas as pd
-
-        from accal.pipeline import CALIBRATED_UNITS, calibrated_frame
 
         data = calibrated_frame(self.calibrated, self.used)
         df = pd.DataFrame(data, index=gps_to_utc_index(self.calibrated.time))
@@ -186,8 +191,6 @@ class BiasFit:
         >>> float(ds["bias"].sel(estimator="wavelet", axis="x")) == fit.bias()["x"]
         True
         """
-        from accal.pipeline import CALIBRATED_UNITS
-
         cal = self.calibrated
         utc_attrs = {"standard_name": "time", "long_name": "time (UTC, to the microsecond)"}
         gps_attrs = {"units": "s", "long_name": CALIBRATED_LONG_NAMES["gps_time"]}
@@ -323,7 +326,6 @@ def fit_bias(
     True
     """
     arguments = {k: v for k, v in locals().items() if k != "series"}  # for close_loop(fit)
-    from accal.pipeline import GraceBiasOptions, fit_input, read_input, subtract_reference
 
     if not isinstance(series, AccSeries):
         raise ValidationError(f"series must be an AccSeries (accal.read), got {type(series)}")
@@ -391,8 +393,6 @@ def _grace_bias_options(
     degraded_days,
 ):
     """``(methods, reference path, GraceBiasOptions)`` of :func:`fit_bias`'s arguments."""
-    from accal.pipeline import GraceBiasOptions
-
     if isinstance(method, str):
         methods = ("wavelet", "lsq") if method == "both" else (method,)
     else:

@@ -15,7 +15,10 @@ from numpy.typing import NDArray
 
 from accal import __version__
 from accal.errors import ValidationError
+from accal.pipeline import GraceBiasOptions, name_mismatch, read_input
+from accal.plausibility import flag_wild_samples
 from accal.series import AccSeries
+from accal.timescale import gps_to_utc
 
 if TYPE_CHECKING:  # pragma: no cover (imported lazily: start-up time)
     import pandas as pd
@@ -103,9 +106,6 @@ def read(
     >>> swarm.satellite, swarm.axes, len(swarm), swarm.units["acc"]
     ('Swarm-A', ('x',), 86400, 'm/s^2')
     """
-    from accal.pipeline import GraceBiasOptions, name_mismatch, read_input
-    from accal.plausibility import flag_wild_samples
-
     path = Path(path)
     opts = GraceBiasOptions(columns=dict(columns or {}), input_format=format)
     series = read_input(path, opts)
@@ -132,8 +132,6 @@ def utc_instants(gps: NDArray[np.float64]) -> NDArray[np.datetime64]:
     00:00:00.796000004``); the instants are rounded to the microsecond, the
     resolution of the L1B time stamps.  The exact value stays in ``gps_time``.
     """
-    from accal.timescale import gps_to_utc
-
     ns = gps_to_utc(gps).astype(np.int64)
     return ((ns + 500) // 1000 * 1000).astype("datetime64[ns]")
 

@@ -16,6 +16,8 @@ from numpy.typing import NDArray
 from accal import __version__
 from accal.api.closure_result import Closure
 from accal.api.common import CF_UNITS, cf_dataset
+from accal.demodjob.summary import summary_of_extended
+from accal.pipeline_demod import summary_warnings
 
 if TYPE_CHECKING:  # pragma: no cover (imported lazily: start-up time)
     import pandas as pd
@@ -92,8 +94,6 @@ class Demodulation:
     @property
     def warnings(self) -> tuple[str, ...]:
         """What the CLI prints as warning lines for this run."""
-        from accal.pipeline_demod import summary_warnings
-
         return tuple(summary_warnings(self.summary))
 
     def to_dataframe(self) -> pd.DataFrame:
@@ -280,7 +280,6 @@ def demodulate(
     (14, 'ls', 'auto')
     """
     arguments = {k: v for k, v in locals().items() if k not in ("run", "close_loop")}
-    from accal.demodjob.summary import summary_of_extended
     from accal.pipeline_demod import (
         CHUNK_ROWS,
         DemodOptions,

@@ -7,6 +7,8 @@ from typing import Any
 
 import numpy as np
 
+from accal.io.tables import read_table_arrow
+from accal.io.writers import read_table_metadata, write_table
 from accal.products.utc import utc_units, with_utc_columns
 
 #: The period time columns, which the periods file carries in UTC too (``t_start_utc``,
@@ -91,9 +93,6 @@ def add_utc_columns(written: Path, path: Path, fmt: str) -> None:
     fmt : {"parquet", "csv"}
         Its format.
     """
-    from accal.io.tables import read_table_arrow
-    from accal.io.writers import read_table_metadata, write_table
-
     table, units, meta, _ = read_table_arrow(written)
     if fmt == "csv":  # the merge wrote the sidecar under the final name
         units, meta = read_table_metadata(path)

@@ -16,8 +16,10 @@ import numpy as np
 import pandas as pd
 
 from accal import __version__
+from accal.api import cf_dataset, table_variables
 from accal.batch import MANIFEST
 from accal.errors import ValidationError
+from accal.io.tables import read_table_arrow
 from accal.io.writers import atomic_path, write_table
 from accal.pipeline import BIAS_DRIFT_UNITS, find_bias_drift, read_bias_drift
 from accal.products.utc import instants_arrow, utc_units, with_utc_columns
@@ -92,8 +94,6 @@ def read_periods(path: Path) -> pd.DataFrame:
     accal.errors.FormatError
         The table cannot be read.
     """
-    from accal.io.tables import read_table_arrow
-
     arrow, units, _, _ = read_table_arrow(path)
     columns = {c: arrow.column(c).to_pandas() for c in arrow.column_names}
     instants = with_utc_columns(columns, PERIOD_TIME_COLUMNS, "parquet")
@@ -337,8 +337,6 @@ def write_netcdf(table: pd.DataFrame, export: Path, units: dict[str, str], sourc
     source : Path
         The table the rows come from.
     """
-    from accal.api import cf_dataset, table_variables
-
     coords: dict[str, object] = {"row": ("row", np.arange(len(table), dtype=np.int32))}
     columns = {c: table[c] for c in table.columns}
     data_vars = table_variables(columns, units, "row", coords=coords)
