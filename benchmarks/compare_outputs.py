@@ -121,6 +121,8 @@ VOLATILE_TEXT = [
     # ISO timestamps of log lines and reports, and process ids after them
     (re.compile(r"\d{4}-\d{2}-\d{2}[T ]\d{2}:\d{2}:\d{2}(\.\d+)?Z?( \[\d+\])?"), "<WHEN>"),
     (re.compile(r"\b(accal|version)\s+v?\d+\.\d+[\w.+-]*", re.IGNORECASE), r"\1 <VERSION>"),
+    # file times inside JSON written into a text line (the manifest entries a log quotes)
+    (re.compile(r'"(\w*(?:mtime|ctime|atime)\w*)":\s*[\d.]+'), r'"\1": <FILETIME>'),
 ]
 #: Files that only a run's bookkeeping writes (a lock holding the process id).
 SKIP_FILES = {".accal.lock"}

@@ -61,6 +61,12 @@ def test_text_and_bytes(tmp_path):
     (oa / "s.md").write_text(f"# report\nbias 1e-7\nwall time 3.2 s\nfile {oa}/d.asc\n")
     (ob / "s.md").write_text(f"# report\nbias 1e-7\nwall time 9.9 s\nfile {ob}/d.asc\n")
     assert co.compare_file(oa / "s.md", ob / "s.md", roots) is None
+    log = 'entry {"aux": {"mtime_ns": %d, "path": "x"}, "bias": %s}\n'
+    (oa / "accal.log").write_text(log % (1795843727511070189, "1e-7"))
+    (ob / "accal.log").write_text(log % (1795843804487717405, "1e-7"))
+    assert co.compare_file(oa / "accal.log", ob / "accal.log", roots) is None
+    (ob / "accal.log").write_text(log % (1795843804487717405, "2e-7"))
+    assert co.compare_file(oa / "accal.log", ob / "accal.log", roots).startswith("line 1")
     (ob / "s.md").write_text("# report\nbias 2e-7\n")
     assert co.compare_file(oa / "s.md", ob / "s.md", roots).startswith("line 2")
     (oa / "p.png").write_bytes(b"\x89PNG1")
