@@ -84,6 +84,8 @@ QUICK_INJECT = [
     ("twopole", False, 1e-8, "y"),
     ("pf_inperiod_quadratic", False, 2.28e-13, "both"),
 ]
+#: Most days per injected size (:func:`inject_cases`: the seeds of two sizes are 100 apart).
+MAX_INJECT_DAYS = 99
 NOISES = ("randomwalk", "ar1", "bandlimited-1rev", "white")
 INSTRUMENT = ("bias_step", "auxiliary", "quadratic_drift", "cubic_drift", "exponential_drift",
               "scale", "angle_offset", "intra_period_shape")  # fmt: skip
@@ -113,9 +115,11 @@ def clean_cases(quick: bool) -> list[Case]:
     return out
 
 
-def inject_cases(quick: bool) -> list[Case]:
-    """Injected effects: every size of :data:`SIZES`, 6 days each (axes x, y, z
-    twice; scale on x only), platform 4 runs each; ``--quick``: :data:`QUICK_INJECT`."""
+def inject_cases(quick: bool, days: int = 6) -> list[Case]:
+    """Injected effects: every size of :data:`SIZES`, ``days`` days each (axes x, y, z
+    in turn; scale on x only), platform 4 runs each (``days`` when more than 6; at most
+    :data:`MAX_INJECT_DAYS`, the seeds of a size being 100 apart); ``--quick``:
+    :data:`QUICK_INJECT`."""
     out = []
     if quick:
         for kind, ref, size, ax in QUICK_INJECT:
@@ -126,7 +130,7 @@ def inject_cases(quick: bool) -> list[Case]:
     for (kind, ref), sizes in SIZES.items():
         pf = kind.startswith("pf_")
         for j, size in enumerate(sizes):
-            for k in range(4 if pf else 6):
+            for k in range((4 if days <= 6 else days) if pf else days):
                 seed = 7000 + 100 * j + k
                 ax = "both" if pf else ("x" if kind == "scale" else "xyz"[k % 3])
                 out.append(Case("inject", "platform" if pf else "indep", seed, "ABCD"[k % 4],
@@ -175,9 +179,9 @@ def other_cases(quick: bool) -> list[Case]:
     return out
 
 
-def cases(quick: bool) -> list[Case]:
-    """All cases of a run."""
-    return clean_cases(quick) + inject_cases(quick) + other_cases(quick)
+def cases(quick: bool, inject_days: int = 6) -> list[Case]:
+    """All cases of a run (``inject_days``: days per injected size, :func:`inject_cases`)."""
+    return clean_cases(quick) + inject_cases(quick, inject_days) + other_cases(quick)
 
 
 def run_all(cases: list[Case], workers: int = 2, progress: bool = True) -> list[dict]:
@@ -751,6 +755,9 @@ def main(argv: list[str] | None = None) -> int:
                     "platform accsim inject cli swarm)")  # fmt: skip
     ap.add_argument("--kinds", nargs="*", help="injected kinds to run (e.g. coupling "
                     "pf_coupling; 'none' for the cases without one)")  # fmt: skip
+    ap.add_argument("--inject-days", type=int, default=6, metavar="N",
+                    help="days per injected kind and size (default 6, at most "
+                    f"{MAX_INJECT_DAYS}): a Monte-Carlo of detection and z-scores")  # fmt: skip
     ap.add_argument("--no-figures", action="store_true")
     ap.add_argument("--report-only", type=Path, metavar="RESULTS_JSON",
                     help="no runs: the tables and figures of an earlier results.json")  # fmt: skip
@@ -760,7 +767,9 @@ def main(argv: list[str] | None = None) -> int:
         rescore(doc["results"])
         return _write(doc["results"], doc["meta"], args)
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))  # the pool's workers end too
-    todo = [c for c in cases(args.quick) if not args.only or c.group in args.only]
+    if not 1 <= args.inject_days <= MAX_INJECT_DAYS:
+        ap.error(f"--inject-days must be 1..{MAX_INJECT_DAYS}")
+    todo = [c for c in cases(args.quick, args.inject_days) if not args.only or c.group in args.only]
     if args.kinds:
         todo = [c for c in todo if (c.kind or "none") in args.kinds]
     args.out.mkdir(parents=True, exist_ok=True)
