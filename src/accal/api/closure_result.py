@@ -11,6 +11,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from accal.timescale import gps_to_utc
+
 if TYPE_CHECKING:  # pragma: no cover (imported lazily: start-up time)
     import pandas as pd
 
@@ -100,8 +102,6 @@ class Closure:
         utc = np.full(epochs.size, np.datetime64("NaT"), dtype="datetime64[ns]")
         known = np.isfinite(epochs) & (epochs > 0) & self.gps_time
         if known.any():
-            from accal.timescale import gps_to_utc
-
             utc[known] = gps_to_utc(epochs[known])
         df.insert(
             df.columns.get_loc("epoch") + 1, "epoch_utc", pd.Series(utc).dt.tz_localize("UTC")

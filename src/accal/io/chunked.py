@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from accal.errors import check_option
+from accal.io.merge import as_arrow_table
 from accal.io.writers import FORMATS, _json_default, atomic_path, write_csv_metadata
 
 __all__ = ["ChunkedTableWriter", "chunked_table_writer"]
@@ -43,8 +44,6 @@ class ChunkedTableWriter:
     def write(self, chunk: Mapping[str, Any]) -> None:
         """Append one chunk."""
         import pyarrow as pa
-
-        from accal.io.merge import as_arrow_table
 
         table = as_arrow_table(chunk)
         if self._writer is None:

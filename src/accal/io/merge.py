@@ -22,6 +22,7 @@ import numpy as np
 
 from accal.errors import ValidationError
 from accal.io.common import arrow_to_numpy
+from accal.io.tables import read_table_arrow
 from accal.io.writers import arrow_column, write_table
 
 __all__ = ["as_arrow_table", "merge_table", "sort_rows"]
@@ -118,8 +119,6 @@ def merge_table(
         The existing table cannot be read.
     """
     import pyarrow as pa
-
-    from accal.io.tables import read_table_arrow
 
     path = Path(path)
     table = as_arrow_table(new)

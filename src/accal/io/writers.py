@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from accal._runtime import libc
 from accal.errors import AccalError, check_option
 
 FORMATS = ("parquet", "csv")
@@ -159,8 +160,6 @@ def sync_files(paths: Iterable[str | Path]) -> None:
 
 def _libc_syncfs() -> Any:
     """``syncfs(2)`` from the C library, or None where it is not available."""
-    from accal._runtime import libc
-
     fn = getattr(libc(), "syncfs", None)
     if fn is not None:
         fn.argtypes = (ctypes.c_int,)

@@ -22,6 +22,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from accal.io.common import arrow_to_numpy
+from accal.timescale import GPS_TABLE_START, LeapSecondTableWarning, gps_to_utc
+
 #: Suffix of a UTC column: ``<gps column>_utc`` (``gps_time`` → ``time_utc``).
 UTC_SUFFIX = "_utc"
 
@@ -69,8 +72,6 @@ def utc_instants(gps: ArrayLike) -> NDArray[np.datetime64]:
     ndarray of datetime64[ns]
         UTC, NaT where the time cannot be converted.
     """
-    from accal.timescale import GPS_TABLE_START, LeapSecondTableWarning, gps_to_utc
-
     g = np.asarray(gps, dtype=np.float64)
     ok = np.isfinite(g) & (g >= GPS_TABLE_START)
     every = bool(ok.all())
@@ -240,7 +241,5 @@ def _float_values(values: Any) -> NDArray[np.float64]:
     import pyarrow as pa
 
     if isinstance(values, pa.ChunkedArray | pa.Array):
-        from accal.io.common import arrow_to_numpy
-
         return np.asarray(arrow_to_numpy(values.cast(pa.float64())), dtype=np.float64)
     return np.asarray(values, dtype=np.float64)

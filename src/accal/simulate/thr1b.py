@@ -17,6 +17,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from accal.io.grace_l1b import GRACE_KEY_WIDTH, calendar_text, yaml_header_lines
+from accal.io.writers import atomic_path
+
 __all__ = ["THRUSTER_PAIRS", "thr1b_records", "thruster_path", "write_simulated_thr1b"]
 
 _L1B_NAME = re.compile(
@@ -124,7 +127,6 @@ def thr1b_records(
 
 
 def _thr1b_header(rec: dict[str, NDArray], satellite: str) -> list[str]:
-    from accal.io.grace_l1b import GRACE_KEY_WIDTH, calendar_text, yaml_header_lines
     from accal.io.thrusters import GRACEFO_COLUMNS
 
     n = rec["time"].size
@@ -209,8 +211,6 @@ def write_simulated_thr1b(
     Path
     """
     import gzip
-
-    from accal.io.writers import atomic_path
 
     rec = thr1b_records(pulses, satellite, t0, rng)
     header = _thr1b_header(rec, satellite)
