@@ -14,6 +14,7 @@ import click
 
 from accal._cliutil import CONTEXT_SETTINGS, check_number, config_option, fs_option, usage_fail
 from accal.cli.limits import check_budget_size
+from accal.errors import AccalError
 
 PSD_HELP = "Noise PSD: 'microstar' (eq. 1 of Lenoir et al. 2013) or a CSV/Parquet table with columns f [Hz], S [m^2 s^-4 Hz^-1] (two-sided)."
 
@@ -56,7 +57,6 @@ def budget(
     plot: Path | None,
 ) -> None:
     """Uncertainty budget: Rd[k] and σ over T for τ, or the optimal τ (Fig. 6)."""
-    from accal.errors import AccalError
     from accal.pipeline_demod import budget_report, load_psd, plot_budget
 
     check_number("--mask", mask, low=0, low_open=True, unit=" s", what="masking time TM")

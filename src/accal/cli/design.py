@@ -19,6 +19,7 @@ from accal._cliutil import (
     usage_fail,
 )
 from accal.cli.limits import check_design_size, check_period_samples
+from accal.errors import AccalError
 
 
 @click.command(
@@ -60,7 +61,6 @@ def design(
     discrete rest mask (what demod uses) and for the nominal one.  The sin
     conditions vanish identically: at rest θ is 0 or π.
     """
-    from accal.errors import AccalError
     from accal.pipeline_demod import write_design
 
     check_number("--tau", tau, low=0, low_open=True, unit=" s", what="modulation period")

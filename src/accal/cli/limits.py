@@ -7,6 +7,7 @@ MemoryError or a run that never ends.
 from __future__ import annotations
 
 from accal._cliutil import fmt_number, usage_fail
+from accal.errors import AccalError
 
 #: Samples per modulation period (τ·fs) for design, budget and simulate gap:
 #: designing a pattern costs ~(τ·fs)² (24,000 samples: ~10 s; 60,000: ~25 s).
@@ -92,7 +93,6 @@ def check_budget_size(
     """
     import numpy as np  # ~0.2 s: not for `accal --help`
 
-    from accal.errors import AccalError
     from accal.pipeline_demod import parse_taus
 
     g = fmt_number

@@ -16,6 +16,7 @@ import click
 
 from accal._cliutil import OutPath, err, usage_fail
 from accal.cli.table import ROW_OPTIONS, periods_filter_message, selected_rows
+from accal.errors import AccalError
 
 
 @click.command(
@@ -43,7 +44,6 @@ def plot_cmd(
     In an ``accal demod`` output directory: a_Y and a_Z of every period against its
     mid-time (UTC), ± 1σ, one series per run.
     """
-    from accal.errors import AccalError
     from accal.products import table_view
     from accal.products.archive_plot import plot_bias_drift, plot_periods
 

@@ -20,6 +20,7 @@ from accal._cliutil import (
     fs_option,
 )
 from accal.cli.limits import check_period_samples, check_run_size
+from accal.errors import AccalError, ValidationError
 
 
 @click.command(
@@ -74,7 +75,6 @@ def simulate_gap(
     with_x: bool,
 ) -> None:
     """Write a synthetic rotating-platform run (MicroSTAR noise) and its truth table."""
-    from accal.errors import AccalError, ValidationError
     from accal.pipeline_demod import write_simulated_gap
 
     check_seed("--seed", seed)

@@ -14,6 +14,7 @@ import click
 
 from accal._cliutil import check_number, check_seed, err, fmt_number, is_date, usage_fail
 from accal.cli.simulate_grace_options import simulate_grace_options
+from accal.errors import AccalError
 
 
 @click.command(
@@ -62,7 +63,6 @@ def simulate_grace(
     "reference": "scale" (the 3x3 S that grace-bias --scale fit-matrix should find;
     row i = scale_x, scale_y, scale_z of axis i) and "noise" (model and level).
     """
-    from accal.errors import AccalError
     from accal.simulate.effects import parse_effect
     from accal.simulate.grace import MAX_SAMPLES, arc_files, write_simulated_arc
 

@@ -14,6 +14,7 @@ from typing import Any
 import click
 
 from accal._cliutil import err, is_date, option_stack, usage_fail
+from accal.errors import AccalError
 
 #: The row selection of ``accal table`` and ``accal plot``.
 ROW_OPTIONS = option_stack(
@@ -108,7 +109,6 @@ def table_cmd(
 
     In an ``accal demod`` output directory: its periods table, whole.
     """
-    from accal.errors import AccalError
     from accal.products import table_view
 
     try:
