@@ -372,7 +372,12 @@ def indep_day(case: Case) -> tuple[Any, dict[str, Any] | None, np.ndarray | None
 def l1b_channels(day: Any) -> tuple[dict, dict, list]:
     """The closure's channels of an L1B day with ``--aux`` temperatures: the angular
     accelerations (rad/s²; all-zero GRACE-FO columns are left out as flags, as
-    ``candidate_channels`` does), the temperatures (K); the residual columns left out."""
+    ``candidate_channels`` does), the temperatures (K), low-passed like the L1B data as
+    ``candidate_channels`` does with ``--aux`` channels (:func:`accal.crn.smooth_channel`);
+    the residual columns left out."""
+    from accal.crn import smooth_channel
+    from accal.pipeline_closure import LOWPASSED
+
     aux, units, screened = {}, {}, []
     for i, ax in enumerate("xyz"):
         screened.append(
@@ -384,7 +389,8 @@ def l1b_channels(day: Any) -> tuple[dict, dict, list]:
             continue
         aux[f"ang_accl_{ax}"], units[f"ang_accl_{ax}"] = v, "rad/s^2"
     for k, v in day.channels.items():
-        aux[k], units[k] = v, "K"
+        aux[k], units[k] = smooth_channel(day.time, v), "K"
+        screened.append({"channel": k, "status": "considered", "reason": LOWPASSED})
     return aux, units, screened
 
 

@@ -10,8 +10,8 @@ import pytest
 from click.testing import CliRunner
 
 from accal.cli import main
+from accal.crn import crn_smooth
 from accal.io.grace_l1b import read_grace_acc1b
-from accal.simulate.grace_noise import crn_smooth
 
 
 def invoke(*args):

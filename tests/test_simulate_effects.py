@@ -14,10 +14,10 @@ import math
 import numpy as np
 import pytest
 
+from accal.crn import crn_smooth
 from accal.errors import ValidationError
 from accal.simulate.effects import CHANNEL_PREROLL, lowpass, parse_effect
 from accal.simulate.grace import simulate_grace_day
-from accal.simulate.grace_noise import crn_smooth
 
 DURATION = 20000.0  # [s]
 KW = {"date": "2005-01-01", "satellite": "A", "seed": 7, "duration": DURATION, "n_gaps": 2}

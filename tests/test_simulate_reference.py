@@ -19,6 +19,7 @@ from click.testing import CliRunner
 from scipy import signal
 
 from accal.cli import main
+from accal.crn import crn_smooth
 from accal.io.grace_l1b import read_grace_acc1b
 from accal.io.thrusters import THRUSTERS, find_thruster_file, read_thrusters
 from accal.pipeline import read_bias_drift
@@ -30,7 +31,6 @@ from accal.simulate.grace import (
     simulate_grace_day,
     stream,
 )
-from accal.simulate.grace_noise import crn_smooth
 from accal.simulate.thr1b import thruster_path
 
 

@@ -28,6 +28,7 @@ from accal.calibration import parse_scale
 from accal.closure import DEFAULT_CANDIDATES, close_loop, effect_label, kind_of
 from accal.closure.nuisance import estimate_period
 from accal.closure.report import plot_closure, to_markdown
+from accal.crn import is_level1b, smooth_channel
 from accal.errors import AccalError, ValidationError
 from accal.gracejob.options import GraceBiasOptions
 from accal.gracejob.outcome import FileOutcome, internal_error
@@ -39,6 +40,9 @@ from accal.io.units import si_factor
 from accal.io.writers import atomic_path, read_table_metadata
 from accal.series import AccSeries
 from accal.timescale import gps_to_date
+
+#: How the closure report describes an ``--aux`` channel of Level-1B data.
+LOWPASSED = "low-passed like the Level-1B data (CRN-like, zero phase)"
 
 #: Effects removed from the calibrated series (instrument effects).  Periodic
 #: terms and unexplained structure are reported but kept: at orbit frequencies
@@ -259,9 +263,14 @@ def candidate_channels(
     warnings: list[str] = []
     if opts.aux is not None:
         channels, hk_units, warnings = load_aux_channels(opts.aux, series.time, series.satellite)
+        # Level-1B accelerations went through the processing's CRN filter, housekeeping
+        # did not: an effect of a temperature is seen through the filter (accal.crn)
+        crn = is_level1b(series.meta)
         for k, v in channels.items():
-            aux[k] = v
+            aux[k] = smooth_channel(series.time, v) if crn else v
             units[k] = hk_units.get(k, "")
+            if crn:
+                report.append({"channel": k, "status": "considered", "reason": LOWPASSED})
     return aux, units, report, warnings
 
 

@@ -62,10 +62,12 @@ def test_crossing_and_side_find_the_ends_of_an_interval():
 
 @pytest.mark.parametrize("seed", range(6))
 def test_pure_lag_has_a_sigma_that_matches_white_noise_theory(seed):
-    """White noise: the lag's σ is ``σ_n / (|c|·‖ẋ⊥‖)`` (the Gauss-Newton σ of a shift).
-    The sandwich σ is within 15 % of it; the reported σ is the larger of it and the
-    profile's, which below a sample step is widened by the channel's linear interpolation
-    between samples (at most half a step here); the true lag is within 4σ."""
+    """White noise: with τ held the lag's σ is ``σ_n / (|c|·‖ẋ⊥‖)`` (the Gauss-Newton σ
+    of a shift), and the sandwich σ is within 15 % of it.  The reported σ is the larger
+    of it and the profile's, whose contiguous part is that of the profile with the
+    low-pass τ re-fitted at each lag: at τ = 0 a delay by τ and a shift of the lag are
+    the same to first order (∂/∂τ = ∂/∂L), so with τ a free parameter of the model the
+    lag alone is known to ~1 s here, not 0.16 s; the true lag is within 4σ."""
     lag = 300.0 + 97.0 * seed
     t, y, temp, lagged, ext, temp_ext = _day(seed, lag)
     res = close_loop(
@@ -80,7 +82,12 @@ def test_pure_lag_has_a_sigma_that_matches_white_noise_theory(seed):
     theory = SIGMA / (COEF * np.sqrt(deriv @ deriv))
     assert 0.85 * theory < d["lag_sigma_sandwich"] < 1.15 * theory, (d, theory)
     assert d["lag_sigma"] >= d["lag_sigma_sandwich"]
-    assert d["lag_sigma"] <= max(3.0 * theory, 0.5), (d, theory)
+    assert (
+        d["lag_sigma"]
+        >= d["lag_sigma_68"]
+        >= 0.5 * (d["lag_interval"][1] - d["lag_interval"][0]) - 1e-9
+    )
+    assert d["lag_sigma"] < 5.0, d  # the ridge is bounded by the channel's own curvature
     assert abs(e.lag - lag) < 4.0 * d["lag_sigma"], (e.lag, d)
     lo, hi = d["lag_interval"]
     assert lo <= e.lag <= hi

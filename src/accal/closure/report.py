@@ -279,7 +279,11 @@ def to_markdown(
                 else ""
             )
         )
-    considered = [c["channel"] for c in result.considered if c["status"] == "considered"]
+    considered = [
+        c["channel"] + (f" ({c['reason']})" if c.get("reason") else "")
+        for c in result.considered
+        if c["status"] == "considered"
+    ]
     left = [
         f"{c['channel']} ({c['reason']})" for c in result.considered if c["status"] != "considered"
     ]

@@ -254,7 +254,9 @@ def close_loop(
         Unit of each ``aux`` channel (plausibility bounds, reported units).
     screened : sequence of dict, optional
         Channels the caller left out before (``{"channel", "status", "reason"}``),
-        reported with this screening's in ``result.considered``.
+        reported with this screening's in ``result.considered``; an entry with status
+        ``"considered"`` is the caller's note on a channel it offers (e.g. how it was
+        filtered), kept as the reason of that channel's own entry.
     signal_proxies : dict of str to array_like, shape (N,), optional
         Series carrying the same signal but not this channel's instrument: the other
         axes of the same accelerometer [m/s²].  Never candidates.  With the
@@ -282,7 +284,15 @@ def close_loop(
     )
     proxies_all = check_proxies(signal_proxies, t_all)
     aux_all, considered = screen_channels(aux_all, y_all, use, ref_all)
-    considered = [*screened, *considered]
+    # a caller's note on a channel it offers ("considered" with a reason) goes with the
+    # screen's verdict on it
+    said = {d["channel"]: d["reason"] for d in screened if d.get("status") == "considered"}
+    considered = [d for d in screened if d.get("status") != "considered"] + [
+        {**d, "reason": said[d["channel"]]}
+        if d["status"] == "considered" and said.get(d["channel"])
+        else d
+        for d in considered
+    ]
     if signal_model == "auto":
         signal_model = "orbit" if ref_all is None and orbit_period else "none"
     builders = _resolve(candidates)

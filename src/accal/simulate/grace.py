@@ -21,6 +21,7 @@ gathers the simulator's public names; the code, with its sources, is in
 
 from __future__ import annotations
 
+from accal.crn import crn_smooth
 from accal.simulate.grace_columns import (
     ANGULAR_NOISE,
     ANGULAR_OFFSETS,
@@ -48,7 +49,6 @@ from accal.simulate.grace_noise import (
     REFERENCE_NOISE,
     coloured_noise,
     crn_lowpass,
-    crn_smooth,
     instrument_noise,
     reference_noise,
     reference_noise_psd,

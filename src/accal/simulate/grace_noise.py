@@ -36,16 +36,13 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import fft as sfft
 
+from accal.crn import CRN_BOXCAR, CRN_ORDER
 from accal.simulate.noise import coloured_noise as shaped
 
 #: Noise shape: 1/f corner [Hz], f⁴ rise of the PSD above [Hz].
 NOISE_CORNER, NOISE_RISE = 1e-3, 0.02
 
-#: CRN-like low-pass of the noise: ``CRN_ORDER`` cascaded boxcars of ``CRN_BOXCAR``
-#: seconds (−3 dB at 35 mHz, first zero at 0.2 Hz).
-CRN_BOXCAR, CRN_ORDER = 5.0, 7
 #: Reference noise (``--reference-noise``): default level [m/s²], the RMS of the
 #: noise at orbit scales, i.e. below :data:`REFERENCE_BAND` [Hz].
 REFERENCE_NOISE, REFERENCE_BAND = 1e-9, 1e-3
@@ -106,35 +103,6 @@ def crn_lowpass(x: NDArray[np.float64], dt: float) -> NDArray[np.float64]:
     for _ in range(CRN_ORDER):
         x = np.apply_along_axis(np.convolve, -1, x, kernel, mode="valid")
     return x
-
-
-def crn_smooth(x: NDArray[np.float64], dt: float) -> NDArray[np.float64]:
-    """The CRN-like low-pass of :func:`crn_lowpass` along axis 0, zero phase, same length.
-
-    The Level-1B processing filters all that the instrument measured (the signal with its
-    thruster pulses and eclipse edges, and any instrument effect: a bias step in ACC1B is
-    a ramp over the filter's window), not only its noise [2]_.  The cascade's frequency
-    response ``(sin(πfLΔ) / (L sin(πfΔ)))^CRN_ORDER`` (``L`` boxcar samples, ``Δ = dt``)
-    is applied by FFT to the record extended at both ends by its odd reflection about
-    the end samples (``2 x[0] − x[k]``: constants and linear trends pass unchanged).
-    With ``L < 2`` ``x`` is returned unchanged.
-    """
-    x = np.asarray(x, dtype=np.float64)
-    length = int(round(CRN_BOXCAR / dt))
-    n = x.shape[0]
-    if length < 2 or n < 3:
-        return x
-    m = min(n - 1, 2 * CRN_ORDER * length)
-    xp = np.concatenate([2 * x[:1] - x[m:0:-1], x, 2 * x[-1:] - x[-2 : -m - 2 : -1]], axis=0)
-    size = sfft.next_fast_len(xp.shape[0], real=True)
-    f = sfft.rfftfreq(size)  # cycles per sample
-    h = np.ones_like(f)
-    nz = f > 0
-    h[nz] = np.sin(np.pi * f[nz] * length) / (length * np.sin(np.pi * f[nz]))
-    h = h**CRN_ORDER
-    y = sfft.irfft(sfft.rfft(xp, n=size, axis=0) * h.reshape((-1,) + (1,) * (x.ndim - 1)),
-                   n=size, axis=0)  # fmt: skip
-    return y[m : m + n]
 
 
 def instrument_noise(n: int, dt: float, level: float, rng: np.random.Generator) -> NDArray:

@@ -4,7 +4,7 @@ The simulated raw reading follows the wavelet paper's eq. (9) plus injected
 instrument effects, ``a_raw = s·a_true + b + d·(t − t0) + noise + Σ effects``
 (:func:`simulate_grace_day`).  The Level-1B processing low-passes all that the
 instrument measured with its CRN filter, so ``a_true`` and the effects are the
-band-limited ones (:func:`accal.simulate.grace_noise.crn_smooth`: a thruster pulse or a
+band-limited ones (:func:`accal.crn.crn_smooth`: a thruster pulse or a
 bias step is spread over the filter's ~35 s; orbit-scale terms pass unchanged) and the
 noise is drawn through the same filter:
 
@@ -39,6 +39,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from accal.calibration import tn02_bias, tn02_scale
+from accal.crn import crn_smooth
 from accal.errors import ValidationError
 from accal.estimators.trend import fit_trend
 from accal.simulate.effects import EXTRA_PARAMETER_UNITS, PARAMETER_UNITS, Effect, parse_effect
@@ -55,7 +56,6 @@ from accal.simulate.grace_noise import (
     CRN_ORDER,
     NOISE_CORNER,
     NOISE_RISE,
-    crn_smooth,
     instrument_noise,
 )
 from accal.simulate.grace_seeds import default_seed, stream
@@ -86,7 +86,7 @@ class SimulatedDay:
         Raw readings ``lin_accl_x/y/z`` [m/s²].
     true : ndarray, shape (n, 3)
         True non-gravitational acceleration [m/s²] (thruster pulses included), as the
-        Level-1B CRN filter band-limits it (:func:`~accal.simulate.grace_noise.crn_smooth`).
+        Level-1B CRN filter band-limits it (:func:`~accal.crn.crn_smooth`).
     valid : ndarray of bool, shape (n,)
         False for flagged samples.
     truth : dict
