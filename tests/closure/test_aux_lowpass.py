@@ -115,3 +115,24 @@ def test_crn_smooth_is_the_boxcar_cascade_inside_the_record():
     for _ in range(7):
         ref = np.convolve(ref, np.ones(5) / 5, "same")
     np.testing.assert_allclose(y[200:-200], ref[200:-200], rtol=0, atol=1e-9 * np.ptp(x))
+
+
+def test_a_callers_note_goes_with_the_screens_verdict():
+    from accal.closure.inputs import with_caller_notes
+
+    screened = [
+        {"channel": "flag", "status": "left out", "reason": "a flag"},
+        {"channel": "temp", "status": "considered", "reason": "low-passed"},
+        {"channel": "gone", "status": "considered", "reason": "low-passed"},
+    ]
+    considered = [
+        {"channel": "temp", "status": "considered", "reason": ""},
+        {"channel": "gone", "status": "left out", "reason": "constant"},
+        {"channel": "other", "status": "considered", "reason": ""},
+    ]
+    assert with_caller_notes(screened, considered) == [
+        {"channel": "flag", "status": "left out", "reason": "a flag"},
+        {"channel": "temp", "status": "considered", "reason": "low-passed"},
+        {"channel": "gone", "status": "left out", "reason": "constant"},
+        {"channel": "other", "status": "considered", "reason": ""},
+    ]

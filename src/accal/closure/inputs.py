@@ -8,6 +8,7 @@ axes offered as signal proxies (:func:`check_proxies`, :func:`usable_proxies`).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -27,6 +28,7 @@ __all__ = [
     "check_proxies",
     "screen_channels",
     "usable_proxies",
+    "with_caller_notes",
 ]
 
 #: Fewest usable samples :func:`accal.closure.close_loop` analyses.
@@ -207,3 +209,22 @@ def usable_proxies(proxies, use, notes) -> SignalProxies | None:
     if not cols:
         return None
     return SignalProxies(np.column_stack(cols), tuple(names))
+
+
+def with_caller_notes(
+    screened: Sequence[dict[str, Any]], considered: list[dict[str, Any]]
+) -> list[dict[str, Any]]:
+    """The caller's verdicts (``screened``) followed by :func:`screen_channels`'s.
+
+    An entry of ``screened`` with status ``"considered"`` is the caller's note on a
+    channel it offers (e.g. how it was filtered): it becomes the reason of that
+    channel's own entry when the screen kept the channel, and is not listed twice.
+    """
+    said = {d["channel"]: d["reason"] for d in screened if d.get("status") == "considered"}
+    own = [d for d in screened if d.get("status") != "considered"]
+    return own + [
+        {**d, "reason": said[d["channel"]]}
+        if d["status"] == "considered" and said.get(d["channel"])
+        else d
+        for d in considered
+    ]

@@ -43,6 +43,7 @@ from accal.closure.inputs import (
     check_proxies,
     screen_channels,
     usable_proxies,
+    with_caller_notes,
 )
 from accal.closure.jumps import add_jump_covariance, jump_columns, jump_effects, jumps_first
 from accal.closure.kinds import EFFECT_NAMES, kind_of, unit_of
@@ -284,15 +285,7 @@ def close_loop(
     )
     proxies_all = check_proxies(signal_proxies, t_all)
     aux_all, considered = screen_channels(aux_all, y_all, use, ref_all)
-    # a caller's note on a channel it offers ("considered" with a reason) goes with the
-    # screen's verdict on it
-    said = {d["channel"]: d["reason"] for d in screened if d.get("status") == "considered"}
-    considered = [d for d in screened if d.get("status") != "considered"] + [
-        {**d, "reason": said[d["channel"]]}
-        if d["status"] == "considered" and said.get(d["channel"])
-        else d
-        for d in considered
-    ]
+    considered = with_caller_notes(screened, considered)
     if signal_model == "auto":
         signal_model = "orbit" if ref_all is None and orbit_period else "none"
     builders = _resolve(candidates)
