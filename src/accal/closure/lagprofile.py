@@ -63,7 +63,7 @@ from scipy.optimize import minimize_scalar
 
 from accal.closure.candidates import Context
 from accal.closure.couplings import ANGULAR_MAX_LAG, SQUARED, _column, _power_at, max_lag
-from accal.closure.kinds import unit_class
+from accal.closure.kinds import channel_class
 from accal.closure.results import Effect
 from accal.closure.wald import sandwich_cov
 
@@ -221,7 +221,6 @@ def profile_intervals(
         (eq. 1 of the module docstring's profile: ``ΔW = 1`` and ``ΔW = 4`` are 1σ and
         2σ on a parabola).
     """
-    tol = 0.1 * step
     p_hat = power(lag) if free is None else max(power(lag), free(lag))
     if not (p_hat > 0 and np.isfinite(wald)):
         return {}
@@ -245,12 +244,9 @@ def profile_intervals(
     def inside_free(lg: float, level: float = 1.0) -> float:
         return level - delta_w(free(lg)) if free is not None else inside(lg, level)
 
-    lo = _side(inside, lag, 0.0, step, tol) if lag > 0 else 0.0
-    hi = _side(inside, lag, top, step, tol) if lag < top else top
-    if free is not None:  # each point a τ fit: ends to a tenth of the held set's width
-        tol_free = max(tol, 0.1 * (hi - lo))
-        lo = min(lo, _side(inside_free, lag, 0.0, step, tol_free) if lag > 0 else 0.0)
-        hi = max(hi, _side(inside_free, lag, top, step, tol_free) if lag < top else top)
+    lo, hi = _contiguous(inside, lag, top, step)
+    if free is not None:
+        lo, hi = _widened(inside_free, lag, top, step, lo, hi)
     alts = _alternatives(power, delta_w, (lag, p_hat, period), lo, hi, top, step)
     alike = [a["lag"] for a in alts if a["delta_w"] <= 1.0 or a.get("alias")]
     ambiguous = bool(alike)
@@ -277,23 +273,36 @@ def profile_intervals(
     }
 
 
+def _contiguous(inside, lag: float, top: float, step: float, tol: float | None = None):
+    """``[lo, hi]``, the contiguous part of ``{inside ≥ 0}`` around ``lag`` within
+    ``[0, top]`` (:func:`_side`, ends to ``tol``, default a tenth of ``step``)."""
+    tol = 0.1 * step if tol is None else tol
+    lo = _side(inside, lag, 0.0, step, tol) if lag > 0 else 0.0
+    hi = _side(inside, lag, top, step, tol) if lag < top else top
+    return lo, hi
+
+
+def _widened(free, lag: float, top: float, step: float, lo: float, hi: float):
+    """``[lo, hi]`` widened to the contiguous part of ``{free ≥ 0}`` (each point a fit of
+    the other nonlinear parameters: its ends only to a tenth of ``hi − lo``)."""
+    f_lo, f_hi = _contiguous(free, lag, top, step, max(0.1 * step, 0.1 * (hi - lo)))
+    return min(lo, f_lo), max(hi, f_hi)
+
+
 def _two_sigma_set(
     inside, lag: float, top: float, step: float, contiguous=None
 ) -> tuple[float, float]:
     """Hull ``[lo, hi]`` of the 95 % set ``{inside ≥ 0}`` near ``lag``: its contiguous
     part by doubling and bisection (:func:`_side`; widened to that of ``{contiguous ≥
-    0}`` when given, to a tenth of the first's width), then islands of ``inside`` in a window on each
+    0}`` when given, :func:`_widened`), then islands of ``inside`` in a window on each
     side as wide as its own contiguous part (at least 10 steps), scanned at a quarter
     step or, for a wide window, at :data:`ISLAND_POINTS` lags; the outermost island's
     outer edge is bisected."""
     tol = 0.1 * step
-    lo = _side(inside, lag, 0.0, step, tol) if lag > 0 else 0.0
-    hi = _side(inside, lag, top, step, tol) if lag < top else top
+    lo, hi = _contiguous(inside, lag, top, step)
     ext = max(hi - lo, 10.0 * step)
     if contiguous is not None:  # islands are looked for beside the held set (cost)
-        tol_free = max(tol, 0.1 * (hi - lo))
-        lo = min(lo, _side(contiguous, lag, 0.0, step, tol_free) if lag > 0 else 0.0)
-        hi = max(hi, _side(contiguous, lag, top, step, tol_free) if lag < top else top)
+        lo, hi = _widened(contiguous, lag, top, step, lo, hi)
     for a, b in ((max(lo - ext, 0.0), lo), (hi, min(hi + ext, top))):
         if b - a <= tol:
             continue
@@ -441,8 +450,8 @@ def add_lag_uncertainties(search: Search, final: Sequence[Found], effects: list[
         basis, fit, lev = search.state(others)
         ctx = search.context(others, basis, fit, lev)
         top = max_lag(search.options, search.span)
-        angular = unit_class(dict(search.options.get("channel_units", {})).get(name, ""))
-        angular = angular == "angular"  # τ = 0 and short lags: no low-pass to re-fit
+        # an angular acceleration: τ = 0 and short lags, no low-pass to re-fit
+        angular = channel_class(search.options, name) == "angular"
         if angular:
             top = min(top, ANGULAR_MAX_LAG)
         tau = float(f.prop.params.get("tau") or 0.0)

@@ -226,13 +226,13 @@ def _angular(prop: Proposal, ctx: Context) -> bool:
     return channel_class(ctx.options, str(prop.channel or "")) == "angular"
 
 
-def _bursts(x: NDArray[np.float64], step: float) -> NDArray[np.bool_]:
-    """Samples of ``x`` :data:`BURST_SIGMAS` robust σ off the centred running median of
-    :data:`BURST_WINDOW` samples (σ: 1.4826 × the median absolute deviation from it),
-    grown by :data:`BURST_MARGIN` s."""
+def _bursts(x: NDArray[np.float64], median: NDArray[np.float64], step: float) -> NDArray[np.bool_]:
+    """Samples of ``x`` :data:`BURST_SIGMAS` robust σ off ``median``, its centred running
+    median of :data:`BURST_WINDOW` samples (σ: 1.4826 × the median absolute deviation
+    from it), grown by :data:`BURST_MARGIN` s."""
     if x.size < 2 * BURST_WINDOW:
         return np.zeros(x.size, dtype=bool)
-    dev = np.abs(x - median_filter(x, size=BURST_WINDOW, mode="nearest"))
+    dev = np.abs(x - median)
     sig = 1.4826 * float(np.median(dev))
     if not sig > 0:
         return np.zeros(x.size, dtype=bool)
@@ -260,17 +260,16 @@ def firing_test(prop: Proposal, ctx: Context, wald: WaldResult, factor: float) -
     ``factor``.  Not made (``applicable`` False) without bursts or when they cover
     over :data:`BURST_MAX_SHARE` of the samples.
     """
-    z = prop.columns[ctx.use]
-    ev = _bursts(np.asarray(z[:, 0], dtype=np.float64), ctx.grid.step)
+    z = np.asarray(prop.columns[ctx.use], dtype=np.float64)
+    # the channel's running median: the burst threshold's centre, and what replaces them
+    smooth = median_filter(z, size=(BURST_WINDOW, 1), mode="nearest")
+    ev = _bursts(z[:, 0], smooth[:, 0], ctx.grid.step)
     n_ev = int(ev.sum())
     out: dict[str, Any] = {"samples": n_ev, "applicable": False}
     if n_ev == 0 or n_ev > BURST_MAX_SHARE * ev.size or wald.psd is None:
         return out
-    # the bursts replaced by the channel's running median: its slow part stays whole (a
+    # the bursts replaced by the running median: the column's slow part stays whole (a
     # column with holes in its orbital cycle would be tested on the holes' pattern)
-    smooth = np.column_stack(
-        [median_filter(z[:, j], size=BURST_WINDOW, mode="nearest") for j in range(z.shape[1])]
-    )
     u, sv, _ = np.linalg.svd(ctx.basis.complement(np.where(ev[:, None], smooth, z)), False)
     keep = sv > 1e-8 * max(float(sv[0]) if sv.size else 0.0, 1e-300)
     if not keep.any():
