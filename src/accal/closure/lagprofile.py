@@ -54,6 +54,7 @@ interpolation between samples, which no σ from a smooth model sees).
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -62,7 +63,14 @@ from numpy.typing import NDArray
 from scipy.optimize import minimize_scalar
 
 from accal.closure.candidates import Context
-from accal.closure.couplings import ANGULAR_MAX_LAG, SQUARED, _column, _power_at, max_lag
+from accal.closure.couplings import (
+    ANGULAR_MAX_LAG,
+    SQUARED,
+    _column,
+    _power_at,
+    _response,
+    max_lag,
+)
 from accal.closure.kinds import channel_class
 from accal.closure.results import Effect
 from accal.closure.wald import sandwich_cov
@@ -73,6 +81,7 @@ if TYPE_CHECKING:  # annotations only: the search imports the candidates
 __all__ = [
     "ALT_DELTA_W",
     "add_lag_uncertainties",
+    "coefficient_interval",
     "lag_sandwich_sigma",
     "lag_uncertainty",
     "profile_intervals",
@@ -91,6 +100,9 @@ MAX_ALTERNATIVES = 6
 TWO_SIGMA_DELTA_W = 4.0
 #: Lags scanned at most on each side for islands of the 95 % set beside its contiguous part.
 ISLAND_POINTS = 200
+#: Lags and time constants of the grid of the coefficient's profile (:func:`coefficient_interval`).
+COEF_PROFILE_LAGS = 15
+COEF_PROFILE_TAUS = 11
 #: Share of the explained power at which a lag a whole period away is an alias
 #: (the coupling search's rule, :func:`accal.closure.couplings._shortest_lag`).
 ALIAS_SHARE = 0.98
@@ -420,6 +432,68 @@ def lag_sandwich_sigma(
     return float(1.0 / np.sqrt(info)) if info > 0 else float("nan")
 
 
+def coefficient_interval(
+    ctx: Context,
+    name: str,
+    x: NDArray[np.float64],
+    tau: float,
+    lag: float,
+    wald: float,
+    coef: float,
+    sigma: float,
+    lags: Sequence[float],
+) -> dict[str, Any]:
+    """The coupling coefficient's 68 % profile interval with the lag and τ free.
+
+    The coefficient is linear given ``(L, τ)``: ``ĉ(L, τ) = z̃ᵀr / z̃ᵀz̃`` and, with the
+    profile's approximation of the module notes, ``W(L, τ) = W(L̂, τ̂)·P(L, τ)/P̂``, so
+    ``χ²(c, L, τ) − χ²_min = ΔW(L, τ) + W(L, τ)·(c/ĉ(L, τ) − 1)²`` and the interval
+    ``{c : min over (L, τ) ≤ 1}`` (Venzon & Moolgavkar 1988) is the hull over the
+    grid points with ``ΔW ≤ 1`` of ``ĉ ± σ(L, τ)·√(1 − ΔW)``, ``σ = |ĉ|/√W(L, τ)``,
+    and of ``coef ± sigma`` (the final fit's).  Grid: :data:`COEF_PROFILE_LAGS` lags
+    over ``lags`` (the lag's 95 % set, whose projection holds every lag of the joint
+    68 % set) by :data:`COEF_PROFILE_TAUS` time constants in ``[0, max(2τ̂, τ̂ +``
+    :data:`TAU_PROFILE_REACH` ``)]``.
+
+    Where little of the channel lies outside the signal model (a temperature that is
+    mostly orbit-periodic, a heater cycle on top) lag, τ and the coefficient trade
+    along a ridge on which the final fit's linearised σ (its Jacobian columns) is too
+    small: a 2e-8 m/s²/K coupling came out 2.198e-8 ± 5.2e-10 (3.8σ) at lag 482 s,
+    τ 127 s, for a pure lag of 600 s (``docs/closure.md``); a channel that is nearly one
+    line gets an interval over both signs (``tests/closure/test_coupling_sigma_ridge.py``).
+
+    Returns ``{"coefficient_interval": [lo, hi], "coefficient_sigma_profile": (hi −
+    lo)/2}`` (channel units), empty for several data channels or nothing explained.
+    """
+    if len(ctx.channel_masks()) != 1 or not (wald > 0 and np.isfinite(wald)):
+        return {}
+    tau_hi = max(2.0 * tau, tau + TAU_PROFILE_REACH)
+    lag_grid = np.linspace(lags[0], lags[1], COEF_PROFILE_LAGS)
+    c_all, p_all = [], []
+    step = ctx.grid.step
+    lead = int(np.ceil(max(float(lags[1]), max_lag(ctx.options, ctx.span)) / step)) + 2
+    tg = ctx.t0 + step * np.arange(-lead, ctx.grid.size)
+    t_used = ctx.t_all[ctx.use]
+    for tc in np.linspace(0.0, tau_hi, COEF_PROFILE_TAUS):
+        h = _response(ctx, name, x, lead, float(tc), cache=False)  # as _column, once per τ
+        z = np.column_stack([np.interp(t_used - lg, tg, h) for lg in lag_grid])
+        z -= z.mean(axis=0)
+        nrm = np.einsum("ij,ij->j", z, z) - ctx.basis.captured(z)
+        zr = z.T @ ctx.residual
+        ok = nrm > 1e-9 * np.einsum("ij,ij->j", z, z)
+        c_all.append(np.where(ok, zr / np.where(ok, nrm, 1.0), np.nan))
+        p_all.append(np.where(ok, zr**2 / np.where(ok, nrm, 1.0), 0.0))
+    c, p = np.concatenate(c_all), np.concatenate(p_all)
+    p_hat = max(float(p.max()), _power_at(ctx, name, x, tau, lag), 1e-300)
+    dw = wald * (1.0 - p / p_hat)
+    inside = (dw <= 1.0) & np.isfinite(c) & (p > 0)
+    sig = np.abs(c[inside]) / np.sqrt(wald * p[inside] / p_hat)
+    half = sig * np.sqrt(np.clip(1.0 - dw[inside], 0.0, 1.0))
+    lo = float(min(np.min(c[inside] - half, initial=np.inf), coef - sigma))
+    hi = float(max(np.max(c[inside] + half, initial=-np.inf), coef + sigma))
+    return {"coefficient_interval": [lo, hi], "coefficient_sigma_profile": 0.5 * (hi - lo)}
+
+
 def _wald(e: Effect) -> float:
     """``W`` of an effect's coefficient: its squared z, summed over data channels."""
     per = e.details.get("axes")
@@ -439,6 +513,11 @@ def add_lag_uncertainties(search: Search, final: Sequence[Found], effects: list[
     their p-values).  A low-pass coupling's linearised σ (its Jacobian) is kept as
     ``lag_sigma_linearised`` and the larger of the two is ``lag_sigma``.  The square
     of a channel shares its channel's lag and gets none of its own.
+
+    The coefficient's profile interval with lag and τ free
+    (:func:`coefficient_interval`, couplings of one data channel but angular ones) goes in the
+    details too, and its half-width replaces the effect's σ when larger (the
+    linearised σ kept as ``coefficient_sigma_linearised``; ``effects`` is updated).
     """
     for i, (f, e) in enumerate(zip(final, effects, strict=True)):
         lag = f.prop.params.get("lag")
@@ -480,4 +559,23 @@ def add_lag_uncertainties(search: Search, final: Sequence[Found], effects: list[
             if lin > info["lag_sigma"]:
                 info["lag_sigma"] = float(lin)
                 info["lag_sigma_method"] = "linearised"
+        if not angular:
+            lags = info.get("lag_interval_95", [lag, lag])
+            info.update(
+                coefficient_interval(
+                    ctx,
+                    name,
+                    np.asarray(x, float),
+                    tau,
+                    float(lag),
+                    _wald(e),
+                    e.coefficient,
+                    e.sigma,
+                    lags,
+                )
+            )
         e.details.update(info)
+        prof = info.get("coefficient_sigma_profile", 0.0)
+        if prof > 1.001 * e.sigma:  # the ridge of lag, τ and coefficient: the profile's σ
+            e.details["coefficient_sigma_linearised"] = e.sigma
+            effects[i] = dataclasses.replace(e, sigma=float(prof))

@@ -1,0 +1,78 @@
+"""A coupling's σ with its lag and low-pass free (closure.final.independent,
+closure.lagprofile.coefficient_interval).
+
+Data drawn here (numpy only): a temperature near 294 K with a heater cycle, a slow
+trend and a random walk, coupled in at a pure lag.  With a strong walk the lag and the
+coefficient are sharp; with a weak one the channel is nearly a single line, whose
+amplitude and phase cannot tell the coefficient from the low-pass's attenuation, nor a
+lag from one half a cycle away with the opposite sign: the coefficient's interval then
+spans both signs instead of the linearised ±14 %.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from accal.closure import close_loop
+from accal.closure.basis import Basis
+from accal.closure.candidates import Proposal
+from accal.closure.final import independent
+
+N = 86_400
+LAG, COEF = 600.0, 2e-8  # s, m/s² per K
+
+
+def _coupling(seed: int, walk: float):
+    rng = np.random.default_rng(seed)
+    pre = 4000  # the channel before the record, for the lag
+    tt = np.arange(-pre, N, dtype=float)
+    temp = 294.0 + 0.005 * np.sin(2 * np.pi * tt / 1700.0) + 0.1 * tt / N
+    temp += walk * np.cumsum(rng.standard_normal(tt.size))
+    t = tt[pre:]
+    y = 1e-7 + COEF * np.interp(t - LAG, tt, temp) + rng.normal(0.0, 2e-10, N)
+    res = close_loop(
+        t,
+        y,
+        aux={"temperature": np.interp(t, tt, temp)},
+        candidates=("auxiliary",),
+        signal_model="none",
+    )
+    (e,) = [e for e in res.effects if e.name == "auxiliary"]
+    return e
+
+
+def test_a_sharp_coupling_keeps_its_sigma():
+    e = _coupling(1, 3e-5)
+    lo, hi = e.details["coefficient_interval"]
+    assert lo < COEF < hi
+    assert abs(e.coefficient - COEF) < 3 * e.sigma
+    assert e.sigma == pytest.approx(0.5 * (hi - lo), rel=0.2)
+    assert abs(e.lag - LAG) < 3 * e.details["lag_sigma"]
+
+
+def test_a_coupling_through_one_line_is_not_determined():
+    e = _coupling(1, 1e-6)
+    lo, hi = e.details["coefficient_interval"]
+    assert lo < 0.0 < COEF < hi  # a half-cycle lag with the opposite sign fits as well
+    assert e.sigma == pytest.approx(0.5 * (hi - lo))
+    assert e.sigma > 3 * e.details["coefficient_sigma_linearised"]
+
+
+def test_independent_measures_each_column_against_its_own_norm():
+    """A regressor near 294 K and its lag derivative (~1e-9 of its norm) are both kept;
+    a column that is a multiple of another is dropped."""
+    n = 5000
+    t = np.arange(n, dtype=float)
+    base = np.column_stack([np.ones(n), t / n])
+    basis = Basis(np.zeros(n, np.int64), base)
+    x = 294.0 + 1e-4 * np.sin(2 * np.pi * t / 1700.0)
+    dx = 1e-4 * 2 * np.pi / 1700.0 * np.cos(2 * np.pi * t / 1700.0)
+    cols = np.column_stack([x, dx, np.sin(2 * np.pi * t / 800.0) * 1e-3])
+    prop = Proposal("auxiliary", "temperature", cols, ("a", "b", "c"), 1.0, {})
+    use = np.ones(n, dtype=bool)
+    assert independent(basis, prop, use).columns.shape[1] == 3
+    dup = Proposal(
+        "auxiliary", "temperature", np.column_stack([cols, 2 * dx]), tuple("abcd"), 1.0, {}
+    )
+    assert independent(basis, dup, use).columns.shape[1] == 3
