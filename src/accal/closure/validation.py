@@ -621,8 +621,8 @@ def validate(
 
     if ident < ident_min:
         return verdict(
-            f"not identifiable: only {ident:.1%} of it lies outside the signal model "
-            f"(needs {ident_min:.1%}): it cannot be told from the signal"
+            f"not identifiable: only {100 * ident:.2g} % of it lies outside the signal model "
+            f"(needs {100 * ident_min:.2g} %): it cannot be told from the signal"
         )
     if proxies is not None and wald is not None and kind is not None and kind.instrument:
         proxy = signal_proxy_test(prop, ctx, proxies, wald, factor)
