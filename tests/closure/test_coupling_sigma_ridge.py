@@ -39,11 +39,11 @@ def _coupling(seed: int, walk: float):
         signal_model="none",
     )
     (e,) = [e for e in res.effects if e.name == "auxiliary"]
-    return e
+    return e, res
 
 
 def test_a_sharp_coupling_keeps_its_sigma():
-    e = _coupling(1, 3e-5)
+    e, _ = _coupling(1, 3e-5)
     lo, hi = e.details["coefficient_interval"]
     assert lo < COEF < hi
     assert abs(e.coefficient - COEF) < 3 * e.sigma
@@ -52,11 +52,15 @@ def test_a_sharp_coupling_keeps_its_sigma():
 
 
 def test_a_coupling_through_one_line_is_not_determined():
-    e = _coupling(1, 1e-6)
+    e, res = _coupling(1, 1e-6)
     lo, hi = e.details["coefficient_interval"]
     assert lo < 0.0 < COEF < hi  # a half-cycle lag with the opposite sign fits as well
     assert e.sigma == pytest.approx(0.5 * (hi - lo))
     assert e.sigma > 3 * e.details["coefficient_sigma_linearised"]
+    # the bias is the one at channel value 0: c·T̄ (T̄ ≈ 294 K) carries c's σ into it
+    (bias,) = [b for b in res.base if b.name == "bias"]
+    assert bias.sigma_after == pytest.approx(294.0 * e.sigma, rel=0.1)
+    assert abs(bias.after - 1e-7) < bias.sigma_after
 
 
 def test_independent_measures_each_column_against_its_own_norm():

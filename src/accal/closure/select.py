@@ -622,6 +622,7 @@ def _finish(
         # reported for a 3e-9 decay 5400 s earlier)
         effects = refer_exponentials(effects, setup.t_first)
     add_lag_uncertainties(search, final, effects)
+    _widened_couplings(final, effects, cov, fit, len(jumps))
     add_epoch_uncertainties(search, final, effects)
     unexplained = []
     if not floored:
@@ -712,14 +713,39 @@ def _placebo_step_sigmas(ctx, final: list[Found], found, cov, fit) -> None:
                 found[i][2]["sigma_noise_model"] = [float(x) for x in model]
                 found[i][2]["sigma_placebo"] = [float(x) for x in emp]
         j += q
-    dv = v_ww - v_old
+    _propagate(cov, fit.a_mat, v_ww - v_old)
+
+
+def _widened_couplings(final: list[Found], effects, cov, fit, n_jumps: int) -> None:
+    """A coupling whose σ its profile widened (:func:`~accal.closure.lagprofile.
+    add_lag_uncertainties`): its row and column of the effects' covariance scaled to
+    that σ, and the change carried to the base coefficients as in
+    :func:`_placebo_step_sigmas` (in place; the jumps' ``n_jumps`` columns come first)."""
+    v_ww = cov["v_ww"]
+    v_old = v_ww.copy()
+    j = n_jumps
+    for f, e in zip(final, effects, strict=True):
+        lin = e.details.get("coefficient_sigma_linearised")
+        if f.prop.name == "auxiliary" and lin and e.sigma > lin > 0:
+            g = e.sigma / lin  # its main column (the first; correlations kept)
+            v_ww[j, :] *= g
+            v_ww[:, j] *= g
+        j += f.prop.columns.shape[1]
+    _propagate(cov, fit.a_mat, (v_ww - v_old)[n_jumps:, n_jumps:], n_jumps)
+
+
+def _propagate(cov, a, dv, offset: int = 0) -> None:
+    """A change ``dv`` of the effects' covariance carried to the base coefficients:
+    ``b_after = b_plain − A γ`` gains ``A dv Aᵀ`` (``cov_b``, ``cov_d``) and ``cov(b, γ)``
+    loses ``A dv`` (the effects' columns of ``cov_bg`` from ``offset``)."""
     if not np.any(dv):
         return
-    a = fit.a_mat  # (segments, p, k)
-    add = a @ (dv[None] @ np.transpose(a, (0, 2, 1)))
+    add = a @ (dv[None] @ np.transpose(a, (0, 2, 1)))  # a: (segments, p, k)
     cov["cov_b"] = cov["cov_b"] + add
     cov["cov_d"] = cov["cov_d"] + add
-    cov["cov_bg"] = cov["cov_bg"] - a @ dv[None]
+    bg = cov["cov_bg"].copy()
+    bg[:, :, offset:] = bg[:, :, offset:] - a @ dv[None]
+    cov["cov_bg"] = bg
 
 
 def _base_coefficients(basis, bbase, fit0, fit, cov) -> tuple[BaseCoefficient, ...]:
