@@ -655,7 +655,14 @@ def channel_power(ctx: Context, z: NDArray[np.float64]) -> NDArray[np.float64]:
 
 def row_power(ctx: Context, z: NDArray[np.float64]) -> NDArray[np.float64]:
     """:meth:`Context.power` of the rows of ``z`` (m, n) (used samples)."""
+    zr, nrm, ok = row_fit(ctx, z)
+    return np.where(ok, zr**2 / np.maximum(nrm, 1e-300), 0.0)
+
+
+def row_fit(ctx: Context, z: NDArray[np.float64]):
+    """``z̃ᵀr`` and ``z̃ᵀz̃`` of the rows of ``z`` (m, n) (used samples; ``z̃``: the design
+    projected out, so the OLS coefficient is their ratio) and whether a row has anything
+    outside the design (over 1e-9 of its power)."""
     z2 = np.einsum("ij,ij->i", z, z)
     nrm = z2 - ctx.basis.captured(z.T)
-    num = (z @ ctx.residual) ** 2
-    return np.where(nrm > 1e-9 * np.maximum(z2, 1e-300), num / np.maximum(nrm, 1e-300), 0.0)
+    return z @ ctx.residual, nrm, nrm > 1e-9 * np.maximum(z2, 1e-300)

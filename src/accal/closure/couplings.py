@@ -263,11 +263,16 @@ def _scan_direct(ctx: Context, hp: NDArray[np.float64], lags: NDArray[np.int64])
 
 def _column(ctx: Context, name: str, x, tc: float, lag: float) -> NDArray[np.float64]:
     """The coupling's regressor on *all* samples: ``(h_τ * x)(t − lag)``."""
+    return _columns(ctx, name, x, tc, (lag,))[:, 0]
+
+
+def _columns(ctx: Context, name: str, x, tc: float, lags) -> NDArray[np.float64]:
+    """:func:`_column` at each of ``lags`` (N, len(lags)), the response computed once."""
     step = ctx.grid.step
-    lead = int(np.ceil(max(lag, max_lag(ctx.options, ctx.span)) / step)) + 2
+    lead = int(np.ceil(max(max(lags), max_lag(ctx.options, ctx.span)) / step)) + 2
     h = _response(ctx, name, x, lead, tc, cache=tc in AUX_TAUS)
     tg = ctx.t0 + step * np.arange(-lead, ctx.grid.size)
-    return np.interp(ctx.t_all - lag, tg, h)
+    return np.column_stack([np.interp(ctx.t_all - lag, tg, h) for lag in lags])
 
 
 def _power_at(ctx: Context, name: str, x, tc: float, lag: float) -> float:

@@ -62,13 +62,13 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import minimize_scalar
 
-from accal.closure.candidates import Context
+from accal.closure.candidates import Context, row_fit
 from accal.closure.couplings import (
     ANGULAR_MAX_LAG,
     SQUARED,
     _column,
+    _columns,
     _power_at,
-    _response,
     max_lag,
 )
 from accal.closure.kinds import channel_class
@@ -470,17 +470,9 @@ def coefficient_interval(
     tau_hi = max(2.0 * tau, tau + TAU_PROFILE_REACH)
     lag_grid = np.linspace(lags[0], lags[1], COEF_PROFILE_LAGS)
     c_all, p_all = [], []
-    step = ctx.grid.step
-    lead = int(np.ceil(max(float(lags[1]), max_lag(ctx.options, ctx.span)) / step)) + 2
-    tg = ctx.t0 + step * np.arange(-lead, ctx.grid.size)
-    t_used = ctx.t_all[ctx.use]
     for tc in np.linspace(0.0, tau_hi, COEF_PROFILE_TAUS):
-        h = _response(ctx, name, x, lead, float(tc), cache=False)  # as _column, once per τ
-        z = np.column_stack([np.interp(t_used - lg, tg, h) for lg in lag_grid])
-        z -= z.mean(axis=0)
-        nrm = np.einsum("ij,ij->j", z, z) - ctx.basis.captured(z)
-        zr = z.T @ ctx.residual
-        ok = nrm > 1e-9 * np.einsum("ij,ij->j", z, z)
+        z = _columns(ctx, name, x, float(tc), lag_grid)[ctx.use]
+        zr, nrm, ok = row_fit(ctx, (z - z.mean(axis=0)).T)
         c_all.append(np.where(ok, zr / np.where(ok, nrm, 1.0), np.nan))
         p_all.append(np.where(ok, zr**2 / np.where(ok, nrm, 1.0), 0.0))
     c, p = np.concatenate(c_all), np.concatenate(p_all)
