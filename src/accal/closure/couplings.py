@@ -63,6 +63,10 @@ TAU_BEYOND = 2.0
 #: The grid's best coupling is refined only when its corrected p-value is below this
 #: (:func:`_worth_refining`).
 REFINE_GATE = 0.5
+#: Responses at time constants off the grid kept per channel (:func:`_response`).
+OFF_GRID_RESPONSES = 4
+#: Columns evaluated together by :func:`_powers_at` (memory: 8·N bytes each).
+POWER_BATCH = 32
 
 
 def first_order(x: NDArray[np.float64], dt: float, tau: float) -> NDArray[np.float64]:
@@ -146,21 +150,41 @@ def _response(
     filtered from there, so the filter's state at the record's start carries the
     channel's history (a filter started on the record's first value left a decay of
     its time constant, which an exponential drift then "explained").  Returns the
-    response at grid points ``−lead .. N−1``.  Cached per selection (with ``cache``: the
-    grid's time constants; a refinement's trial values are not kept).
+    response at grid points ``−lead .. N−1``.  Cached per selection: with ``cache``
+    the grid's time constants; otherwise the last :data:`OFF_GRID_RESPONSES` other
+    ones (a profile evaluates many lags at one refined τ); the channel on the grid,
+    which does not depend on τ, always.
     """
     key = ("response", name, lead, tc)
-    if key not in ctx.cache or not cache:
+    if key in ctx.cache:
+        return ctx.cache[key]
+    recent = ctx.cache.setdefault(("recent responses", name, lead), {})
+    if tc in recent:
+        return recent[tc]
+    pre, xg = _on_grid(ctx, name, x, lead)
+    h = first_order(xg, ctx.grid.step, tc)[pre - lead :]
+    if cache:
+        ctx.cache[key] = h
+    else:
+        if len(recent) >= OFF_GRID_RESPONSES:
+            del recent[next(iter(recent))]  # the oldest
+        recent[tc] = h
+    return h
+
+
+def _on_grid(ctx: Context, name: str, x: NDArray[np.float64], lead: int):
+    """``(pre, values)``: the channel interpolated on the nominal grid from ``pre ≥ lead``
+    steps before the record's start (from its own first value on), cached per
+    selection."""
+    key = ("on grid", name, lead)
+    if key not in ctx.cache:
         step = ctx.grid.step
         ok = np.isfinite(x) & np.isfinite(ctx.t_all)
         tu, first = np.unique(ctx.t_all[ok], return_index=True)
         xv = x[ok][first]
         pre = max(lead, int(np.ceil((ctx.t0 - tu[0]) / step)))
         tg = ctx.t0 + step * np.arange(-pre, ctx.grid.size)
-        h = first_order(np.interp(tg, tu, xv), step, tc)[pre - lead :]
-        if not cache:
-            return h
-        ctx.cache[key] = h
+        ctx.cache[key] = (pre, np.interp(tg, tu, xv))
     return ctx.cache[key]
 
 
@@ -278,8 +302,19 @@ def _columns(ctx: Context, name: str, x, tc: float, lags) -> NDArray[np.float64]
 def _power_at(ctx: Context, name: str, x, tc: float, lag: float) -> float:
     """Explained power of the coupling at (``lag``, ``τ``), the column's mean taken out
     (the base holds the constant; see :func:`_scan_direct`)."""
-    col = _column(ctx, name, x, tc, lag)[ctx.use]
-    return float(channel_power(ctx, (col - float(np.mean(col)))[None, :])[0])
+    return float(_powers_at(ctx, name, x, tc, (lag,))[0])
+
+
+def _powers_at(ctx: Context, name: str, x, tc: float, lags) -> NDArray[np.float64]:
+    """:func:`_power_at` at each of ``lags`` (one τ), :data:`POWER_BATCH` columns at a
+    time (a profile's grid: one pass over the design per batch, not per lag)."""
+    lags = np.atleast_1d(np.asarray(lags, dtype=np.float64))
+    out = np.empty(lags.size)
+    for k in range(0, lags.size, POWER_BATCH):
+        cols = _columns(ctx, name, x, tc, lags[k : k + POWER_BATCH])[ctx.use]
+        cols -= np.mean(cols, axis=0)
+        out[k : k + POWER_BATCH] = channel_power(ctx, np.ascontiguousarray(cols.T))
+    return out
 
 
 def _refine(ctx: Context, name: str, x, lag: float, tc: float, lag_step: float, top: float):

@@ -69,6 +69,7 @@ from accal.closure.couplings import (
     _column,
     _columns,
     _power_at,
+    _powers_at,
     max_lag,
 )
 from accal.closure.kinds import channel_class
@@ -183,6 +184,9 @@ def lag_uncertainty(
     def power(lg: float) -> float:
         return _power_at(ctx, name, x, tau, float(min(max(lg, 0.0), top)))
 
+    def powers(lgs: NDArray[np.float64]) -> NDArray[np.float64]:
+        return _powers_at(ctx, name, x, tau, np.clip(lgs, 0.0, top))
+
     period = float(ctx.options.get("lag_period") or 0.0)
     free = None
     if low_pass:
@@ -198,11 +202,18 @@ def lag_uncertainty(
             )
             return max(-float(res.fun), power(lg))
 
-    return profile_intervals(power, float(lag), float(wald), top, step, period, free)
+    return profile_intervals(power, float(lag), float(wald), top, step, period, free, powers)
 
 
 def profile_intervals(
-    power, lag: float, wald: float, top: float, step: float, period: float = 0.0, free=None
+    power,
+    lag: float,
+    wald: float,
+    top: float,
+    step: float,
+    period: float = 0.0,
+    free=None,
+    powers=None,
 ) -> dict[str, Any]:
     """The lag's 68 % and 95 % profile sets from the explained power ``power(L)``.
 
@@ -223,6 +234,9 @@ def profile_intervals(
     free : callable, optional
         ``P(L)`` with the other nonlinear parameters re-fitted at each ``L`` (≥
         ``power``): the contiguous parts of both sets come from it.
+    powers : callable, optional
+        ``power`` at an array of lags at once (the scans of a grid); by default
+        ``power`` lag by lag.
 
     Returns
     -------
@@ -247,7 +261,12 @@ def profile_intervals(
             "lag_sigma_method": "profile",
         }
 
-    def delta_w(p: float) -> float:
+    if powers is None:
+
+        def powers(lgs: NDArray[np.float64]) -> NDArray[np.float64]:
+            return np.array([power(g) for g in lgs], dtype=np.float64)
+
+    def delta_w(p):
         return wald * (1.0 - p / p_hat)
 
     def inside(lg: float, level: float = 1.0) -> float:
@@ -259,7 +278,7 @@ def profile_intervals(
     lo, hi = _contiguous(inside, lag, top, step)
     if free is not None:
         lo, hi = _widened(inside_free, lag, top, step, lo, hi)
-    alts = _alternatives(power, delta_w, (lag, p_hat, period), lo, hi, top, step)
+    alts = _alternatives((power, powers), delta_w, (lag, p_hat, period), lo, hi, top, step)
     alike = [a["lag"] for a in alts if a["delta_w"] <= 1.0 or a.get("alias")]
     ambiguous = bool(alike)
     half = 0.5 * (hi - lo)  # each other lag is as uncertain as the chosen one
@@ -271,6 +290,7 @@ def profile_intervals(
         top,
         step,
         None if free is None else lambda lg: inside_free(lg, TWO_SIGMA_DELTA_W),
+        lambda lgs: TWO_SIGMA_DELTA_W - delta_w(powers(lgs)),
     )
     lo95, hi95 = min(lo95, lo_all), max(hi95, hi_all)
     sigma68 = 0.5 * (hi_all - lo_all)
@@ -302,14 +322,14 @@ def _widened(free, lag: float, top: float, step: float, lo: float, hi: float):
 
 
 def _two_sigma_set(
-    inside, lag: float, top: float, step: float, contiguous=None
+    inside, lag: float, top: float, step: float, contiguous=None, inside_many=None
 ) -> tuple[float, float]:
     """Hull ``[lo, hi]`` of the 95 % set ``{inside ≥ 0}`` near ``lag``: its contiguous
     part by doubling and bisection (:func:`_side`; widened to that of ``{contiguous ≥
     0}`` when given, :func:`_widened`), then islands of ``inside`` in a window on each
     side as wide as its own contiguous part (at least 10 steps), scanned at a quarter
-    step or, for a wide window, at :data:`ISLAND_POINTS` lags; the outermost island's
-    outer edge is bisected."""
+    step or, for a wide window, at :data:`ISLAND_POINTS` lags (``inside_many``: ``inside``
+    at an array of lags at once); the outermost island's outer edge is bisected."""
     tol = 0.1 * step
     lo, hi = _contiguous(inside, lag, top, step)
     ext = max(hi - lo, 10.0 * step)
@@ -320,7 +340,8 @@ def _two_sigma_set(
             continue
         n = int(min(np.ceil((b - a) / (0.25 * step)), ISLAND_POINTS)) + 1
         grid = np.linspace(a, b, n)
-        ok = np.flatnonzero([inside(g) >= 0 for g in grid])
+        vals = inside_many(grid) if inside_many is not None else [inside(g) for g in grid]
+        ok = np.flatnonzero(np.asarray(vals) >= 0)
         if not ok.size:
             continue
         first, last = ok[0], ok[-1]  # the hull's new ends, to the bisection's tolerance
@@ -357,7 +378,9 @@ def _is_alias(d_lag: float, p: float, p_hat: float, period: float) -> bool:
 
 def _alternatives(power, delta_w, at, lo, hi, top, step) -> list[dict[str, Any]]:
     """Other local maxima of the profile over ``[0, top]`` with ``ΔW ≤ ALT_DELTA_W``,
-    and aliases a period apart (:func:`_is_alias`); ``at`` is (lag, power, period)."""
+    and aliases a period apart (:func:`_is_alias`); ``power`` is ``(P, P at an array of
+    lags)``, ``at`` is (lag, power, period)."""
+    power, powers = power
     lag, p_hat, period = at
     if top <= 0:
         return []
@@ -366,7 +389,8 @@ def _alternatives(power, delta_w, at, lo, hi, top, step) -> list[dict[str, Any]]
     far = (grid < lo - spacing) | (grid > hi + spacing)
     if not far.any():
         return []
-    prof = np.array([power(g) if f else -np.inf for g, f in zip(grid, far, strict=True)])
+    prof = np.full(grid.size, -np.inf)
+    prof[far] = powers(grid[far])
     left = np.r_[-np.inf, prof[:-1]]
     right = np.r_[prof[1:], -np.inf]
     peaks = np.flatnonzero(far & (prof >= left) & (prof >= right) & np.isfinite(prof))

@@ -46,6 +46,8 @@ PERIOD_BAND = 0.03
 UNRESOLVED_SIGMAS = 3.0
 #: Largest fraction of the bins flagged as unresolved (the steepest).
 UNRESOLVED_MAX_FRACTION = 0.05
+#: Masks whose step norms a template keeps (:meth:`OrbitTemplate.step_norms`).
+CACHED_MASKS = 4
 
 
 def template_order(n_orbits: float) -> int:
@@ -182,6 +184,8 @@ class OrbitTemplate:
         t = np.asarray(t, dtype=np.float64)
         self._t = t
         self.n = t.size
+        self._step_norms: dict[bytes, NDArray[np.float64]] = {}  # per mask
+        self._spectra: dict[tuple[int, float], NDArray[np.float64]] = {}  # per DFT grid
         self.period = float(period)
         self.order = int(order)
         steps = np.diff(t)
@@ -340,9 +344,21 @@ class OrbitTemplate:
         Within a bin, the indicator's projection is the sum of ``q_j`` over the bin's
         members from ``i`` on; the total changes only in the bin of sample ``i`` as
         ``i`` moves back by one, so the norms are a reverse cumulative sum of the
-        per-sample changes (O(n K)).
+        per-sample changes (O(n K)).  The template does not change once built: the
+        norms are kept per mask (a search asks for one mask at every step).
         """
         m = np.ones(self.n) if mask is None else np.asarray(mask, dtype=np.float64)
+        key = m.tobytes()
+        if key not in self._step_norms:
+            if len(self._step_norms) >= CACHED_MASKS:
+                del self._step_norms[next(iter(self._step_norms))]  # the oldest
+            out = self._step_norms_of(m)
+            out.flags.writeable = False
+            self._step_norms[key] = out
+        return self._step_norms[key]
+
+    def _step_norms_of(self, m: NDArray[np.float64]) -> NDArray[np.float64]:
+        """:meth:`step_norms` for the mask ``m`` as floats (computed)."""
         qs = (self.q * m[:, None])[self._order]  # sorted by bin, then time
         # reverse cumulative sums within each bin
         tot = np.cumsum(qs[::-1], axis=0)[::-1]
@@ -393,10 +409,17 @@ class OrbitTemplate:
                 np.maximum.at(share, kk, min(side, 1.0))
         lev[:] = share[None, :] * np.maximum(counts, 1.0)[:, None]
         if self.qs.shape[1]:  # the smooth curve: its few columns exactly (FFT)
+            lev += self._smooth_spectrum(grid_size, step)[None, :]
+        return lev
+
+    def _smooth_spectrum(self, grid_size: int, step: float) -> NDArray[np.float64]:
+        """``Σ_j |DFT q_j|²`` of the dense columns on a grid (kept per grid)."""
+        key = (int(grid_size), float(step))
+        if key not in self._spectra:
             place = np.zeros((self.qs.shape[1], grid_size))
             place[:, self._grid_idx(grid_size, step)] = self.qs.T
-            lev += np.sum(np.abs(np.fft.rfft(place, axis=-1)) ** 2, axis=0)[None, :]
-        return lev
+            self._spectra[key] = np.sum(np.abs(np.fft.rfft(place, axis=-1)) ** 2, axis=0)
+        return self._spectra[key]
 
     def _grid_idx(self, grid_size: int, step: float) -> NDArray[np.int64]:
         idx = np.rint((self._t - self._t[0]) / step).astype(np.int64)
