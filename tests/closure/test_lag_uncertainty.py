@@ -82,20 +82,22 @@ def test_pure_lag_has_a_sigma_that_matches_white_noise_theory(seed):
     theory = SIGMA / (COEF * np.sqrt(deriv @ deriv))
     assert 0.85 * theory < d["lag_sigma_sandwich"] < 1.15 * theory, (d, theory)
     assert d["lag_sigma"] >= d["lag_sigma_sandwich"]
-    assert (
-        d["lag_sigma"]
-        >= d["lag_sigma_68"]
-        >= 0.5 * (d["lag_interval"][1] - d["lag_interval"][0]) - 1e-9
-    )
+    lo_p, hi_p = d["lag_interval_profile"]
+    assert d["lag_sigma"] >= d["lag_sigma_68"] >= 0.5 * (hi_p - lo_p) - 1e-9
     assert d["lag_sigma"] < 5.0, d  # the ridge is bounded by the channel's own curvature
     assert abs(e.lag - lag) < 4.0 * d["lag_sigma"], (e.lag, d)
+    # the reported intervals hold the profile's sets and L̂ ± σ, L̂ ± 2σ
     lo, hi = d["lag_interval"]
-    assert lo <= e.lag <= hi
+    assert lo <= lo_p <= e.lag <= hi_p <= hi
+    assert lo <= e.lag - d["lag_sigma"] + 1e-9 and hi >= e.lag + d["lag_sigma"] - 1e-9
+    lo95, hi95 = d["lag_interval_95"]
+    assert lo95 <= e.lag - 2 * d["lag_sigma"] + 1e-9 and hi95 >= e.lag + 2 * d["lag_sigma"] - 1e-9
+    assert lo95 <= d["lag_interval_95_profile"][0] and hi95 >= d["lag_interval_95_profile"][1]
 
 
 def test_lag_z_scores_over_seeds_are_calibrated():
     """Over 12 draws the lag z-scores have an RMS within [0.4, 1.6] (before: no σ)."""
-    z = []
+    z, inside = [], []
     for seed in range(10, 22):
         lag = 200.0 + 53.0 * seed
         t, y, temp, *_ = _day(seed, lag)
@@ -104,9 +106,14 @@ def test_lag_z_scores_over_seeds_are_calibrated():
         )
         e = _coupling(res)
         z.append((e.lag - lag) / e.details["lag_sigma"])
+        lo, hi = e.details["lag_interval"]
+        inside.append(lo <= lag <= hi)
     rms = float(np.sqrt(np.mean(np.square(z))))
     assert 0.4 < rms < 1.6, z
     assert max(abs(v) for v in z) < 4.0, z
+    # the 68 % interval holds the truth about as often as it says (binomial: ≥ 5 of 12
+    # has probability 0.99 at 68 %)
+    assert sum(inside) >= 5, (inside, z)
 
 
 def test_a_repeating_channel_lists_the_lags_a_cycle_apart():
