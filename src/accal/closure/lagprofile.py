@@ -474,6 +474,8 @@ def coefficient_interval(
     coef: float,
     sigma: float,
     lags: Sequence[float],
+    extra_lags: Sequence[float] = (),
+    per_axis: dict[str, dict[str, Any]] | None = None,
 ) -> dict[str, Any]:
     """The coupling coefficient's 68 % profile interval with the lag and τ free.
 
@@ -484,8 +486,17 @@ def coefficient_interval(
     grid points with ``ΔW ≤ 1`` of ``ĉ ± σ(L, τ)·√(1 − ΔW)``, ``σ = |ĉ|/√W(L, τ)``,
     and of ``coef ± sigma`` (the final fit's).  Grid: :data:`COEF_PROFILE_LAGS` lags
     over ``lags`` (the lag's 95 % set, whose projection holds every lag of the joint
-    68 % set) by :data:`COEF_PROFILE_TAUS` time constants in ``[0, max(2τ̂, τ̂ +``
+    68 % set) and the ``extra_lags`` (other lags that fit as well: narrow peaks a grid
+    misses, e.g. a kicked platform temperature's aliases a period apart) by
+    :data:`COEF_PROFILE_TAUS` time constants in ``[0, max(2τ̂, τ̂ +``
     :data:`TAU_PROFILE_REACH` ``)]``.
+
+    With several data channels (the platform's y and z) each has its coefficient
+    ``c_k`` and the lag and τ are shared: ``ΔW`` is that of the summed power, and
+    channel ``k``'s interval is the hull of ``ĉ_k ± σ_k(L, τ)·√(1 − ΔW)`` with
+    ``W_k(L, τ) = W_k·P_k(L, τ)/P̂_k`` (the other channels' terms are zero at their own
+    best coefficients).  ``per_axis`` holds each channel's ``coefficient`` and
+    ``sigma`` (the final fit's), keyed by channel name.
 
     Where little of the channel lies outside the signal model (a temperature that is
     mostly orbit-periodic, a heater cycle on top) lag, τ and the coefficient trade
@@ -495,27 +506,68 @@ def coefficient_interval(
     line gets an interval over both signs (``tests/closure/test_coupling_sigma_ridge.py``).
 
     Returns ``{"coefficient_interval": [lo, hi], "coefficient_sigma_profile": (hi −
-    lo)/2}`` (channel units), empty for several data channels or nothing explained.
+    lo)/2}`` (channel units; with several channels those of the channel with the most
+    significant coefficient, and every channel's under ``"coefficient_axes"``), empty
+    when nothing is explained.
     """
-    if len(ctx.channel_masks()) != 1 or not (wald > 0 and np.isfinite(wald)):
+    masks = ctx.channel_masks()
+    names = list(ctx.channel_names) if len(masks) > 1 else [None]
+    if len(masks) > 1 and not per_axis:
+        return {}
+    if not (wald > 0 and np.isfinite(wald)):
         return {}
     tau_hi = max(2.0 * tau, tau + TAU_PROFILE_REACH)
-    lag_grid = np.linspace(lags[0], lags[1], COEF_PROFILE_LAGS)
-    c_all, p_all = [], []
-    for tc in np.linspace(0.0, tau_hi, COEF_PROFILE_TAUS):
-        z = _columns(ctx, name, x, float(tc), lag_grid)[ctx.use]
-        zr, nrm, ok = row_fit(ctx, (z - z.mean(axis=0)).T)
-        c_all.append(np.where(ok, zr / np.where(ok, nrm, 1.0), np.nan))
-        p_all.append(np.where(ok, zr**2 / np.where(ok, nrm, 1.0), 0.0))
-    c, p = np.concatenate(c_all), np.concatenate(p_all)
-    p_hat = max(float(p.max()), _power_at(ctx, name, x, tau, lag), 1e-300)
-    dw = wald * (1.0 - p / p_hat)
-    inside = (dw <= 1.0) & np.isfinite(c) & (p > 0)
-    sig = np.abs(c[inside]) / np.sqrt(wald * p[inside] / p_hat)
-    half = sig * np.sqrt(np.clip(1.0 - dw[inside], 0.0, 1.0))
-    lo = float(min(np.min(c[inside] - half, initial=np.inf), coef - sigma))
-    hi = float(max(np.max(c[inside] + half, initial=-np.inf), coef + sigma))
-    return {"coefficient_interval": [lo, hi], "coefficient_sigma_profile": 0.5 * (hi - lo)}
+    lag_grid = np.r_[np.linspace(lags[0], lags[1], COEF_PROFILE_LAGS), np.asarray(extra_lags)]
+
+    def fits(tc: float, lg) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """``ĉ_k`` and ``P_k`` (channels × lags) at one τ."""
+        z = _columns(ctx, name, x, float(tc), lg)[ctx.use]
+        z = (z - z.mean(axis=0)).T
+        c_k, p_k = [], []
+        for m in masks:
+            zr, nrm, ok = row_fit(ctx, z * m if len(masks) > 1 else z)
+            c_k.append(np.where(ok, zr / np.where(ok, nrm, 1.0), np.nan))
+            p_k.append(np.where(ok, zr**2 / np.where(ok, nrm, 1.0), 0.0))
+        return np.array(c_k), np.array(p_k)
+
+    parts = [fits(tc, lag_grid) for tc in np.linspace(0.0, tau_hi, COEF_PROFILE_TAUS)]
+    c = np.concatenate([a for a, _ in parts], axis=1)
+    p = np.concatenate([b for _, b in parts], axis=1)
+    total = p.sum(axis=0)
+    p_hat = max(float(total.max()), _power_at(ctx, name, x, tau, lag), 1e-300)
+    dw = wald * (1.0 - total / p_hat)
+    if len(masks) == 1:
+        p_hat_k, w_k, best = np.array([p_hat]), np.array([wald]), [(coef, sigma)]
+    else:
+        at_hat = fits(tau, [lag])[1][:, 0]
+        p_hat_k = at_hat * p_hat / max(float(at_hat.sum()), 1e-300)
+        best = [(per_axis[a]["coefficient"], per_axis[a]["sigma"]) for a in names]
+        w_k = np.array([(cb / sb) ** 2 if sb > 0 else np.nan for cb, sb in best])
+    out: dict[str, list[float]] = {}
+    for k, a in enumerate(names):
+        inside = (dw <= 1.0) & np.isfinite(c[k]) & (p[k] > 0)
+        if not (p_hat_k[k] > 0 and w_k[k] > 0):
+            inside[:] = False
+        sig = np.abs(c[k][inside]) / np.sqrt(w_k[k] * p[k][inside] / p_hat_k[k])
+        half = sig * np.sqrt(np.clip(1.0 - dw[inside], 0.0, 1.0))
+        cb, sb = best[k]
+        lo = float(min(np.min(c[k][inside] - half, initial=np.inf), cb - sb))
+        hi = float(max(np.max(c[k][inside] + half, initial=-np.inf), cb + sb))
+        out[a] = [lo, hi]
+    if len(masks) == 1:
+        lo, hi = out[None]
+        return {"coefficient_interval": [lo, hi], "coefficient_sigma_profile": 0.5 * (hi - lo)}
+    # the reported coefficient is the most significant channel's (final.describe)
+    main = names[int(np.argmax([abs(cb) / max(sb, 1e-300) for cb, sb in best]))]
+    lo, hi = out[main]
+    return {
+        "coefficient_interval": [lo, hi],
+        "coefficient_sigma_profile": 0.5 * (hi - lo),
+        "coefficient_axes": {
+            a: {"coefficient_interval": v, "coefficient_sigma_profile": 0.5 * (v[1] - v[0])}
+            for a, v in out.items()
+        },
+    }
 
 
 def _wald(e: Effect) -> float:
@@ -560,9 +612,11 @@ def add_lag_uncertainties(search: Search, final: Sequence[Found], effects: list[
     channel shares its channel's lag and gets none of its own.
 
     The coefficient's profile interval with lag and τ free
-    (:func:`coefficient_interval`, couplings of one data channel but angular ones) goes in the
-    details too, and its half-width replaces the effect's σ when larger (the
-    linearised σ kept as ``coefficient_sigma_linearised``; ``effects`` is updated).
+    (:func:`coefficient_interval`, every coupling but angular ones; over the lag's 95 %
+    set and the other lags that fit as well) goes in the details too, and its
+    half-width replaces the effect's σ when larger (the linearised σ kept as
+    ``coefficient_sigma_linearised``; ``effects`` is updated); with several data
+    channels each channel's σ in ``details["axes"]`` likewise (``sigma_linearised``).
     """
     for i, (f, e) in enumerate(zip(final, effects, strict=True)):
         lag = f.prop.params.get("lag")
@@ -607,6 +661,11 @@ def add_lag_uncertainties(search: Search, final: Sequence[Found], effects: list[
         _cover_sigma(info, float(lag), top)
         if not angular:
             lags = info.get("lag_interval_95", [lag, lag])
+            alike = [
+                a["lag"]
+                for a in info.get("lag_alternatives", [])
+                if a["delta_w"] <= 1.0 or a.get("alias")
+            ]
             info.update(
                 coefficient_interval(
                     ctx,
@@ -618,8 +677,16 @@ def add_lag_uncertainties(search: Search, final: Sequence[Found], effects: list[
                     e.coefficient,
                     e.sigma,
                     lags,
+                    alike,
+                    e.details.get("axes"),
                 )
             )
+        for ax, v in info.pop("coefficient_axes", {}).items():
+            d = e.details["axes"][ax]
+            d["coefficient_interval"] = v["coefficient_interval"]
+            if v["coefficient_sigma_profile"] > 1.001 * d["sigma"]:
+                d["sigma_linearised"] = d["sigma"]
+                d["sigma"] = float(v["coefficient_sigma_profile"])
         e.details.update(info)
         prof = info.get("coefficient_sigma_profile", 0.0)
         if prof > 1.001 * e.sigma:  # the ridge of lag, τ and coefficient: the profile's σ

@@ -725,13 +725,27 @@ def _widened_couplings(final: list[Found], effects, cov, fit, n_jumps: int) -> N
     v_old = v_ww.copy()
     j = n_jumps
     for f, e in zip(final, effects, strict=True):
-        lin = e.details.get("coefficient_sigma_linearised")
-        if f.prop.name == "auxiliary" and lin and e.sigma > lin > 0:
-            g = e.sigma / lin  # its main column (the first; correlations kept)
-            v_ww[j, :] *= g
-            v_ww[:, j] *= g
+        if f.prop.name == "auxiliary":
+            for k, g in _widening(f, e):  # a main column: scaled, correlations kept
+                v_ww[j + k, :] *= g
+                v_ww[:, j + k] *= g
         j += f.prop.columns.shape[1]
     _propagate(cov, fit.a_mat, (v_ww - v_old)[n_jumps:, n_jumps:], n_jumps)
+
+
+def _widening(f: Found, e) -> list[tuple[int, float]]:
+    """``(column, σ after / σ before)`` of each main column of a coupling whose profile
+    widened its σ: the first column, or with several data channels each channel's first
+    (``f.prop.axes`` names the channel of every column)."""
+    if f.prop.axes is None:
+        lin = e.details.get("coefficient_sigma_linearised")
+        return [(0, e.sigma / lin)] if lin and e.sigma > lin > 0 else []
+    out = []
+    for ax, d in e.details.get("axes", {}).items():
+        lin = d.get("sigma_linearised")
+        if lin and d["sigma"] > lin > 0 and ax in f.prop.axes:
+            out.append((list(f.prop.axes).index(ax), d["sigma"] / lin))
+    return out
 
 
 def _propagate(cov, a, dv, offset: int = 0) -> None:
