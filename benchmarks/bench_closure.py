@@ -11,7 +11,11 @@ alternating plain and closure runs on the same file in the same session:
 * a day of accal's own simulator (``accal simulate grace --storm --thrusters``),
   the same two runs (no ``--aux``: the simulator writes channels only for couplings);
 * a one-day rotating-platform run (``tests.indep.platform_run``, τ = 600 s, mask
-  200 s): ``accal demod`` vs ``accal demod --close-loop``.
+  200 s): ``accal demod`` vs ``accal demod --close-loop``;
+* (not with ``--quick``) a GRACE-FO day and a platform run each with a temperature
+  coupling closure finds (:data:`COUPLED_GRACE`, :data:`COUPLED_PLATFORM`): the lag,
+  τ and coefficient profiles and the search again without the coupling's unknown
+  history cost most on such days.
 
 Targets (issue 19): a GRACE day with closure ≤ 15 s and ≤ 600 MB, a demod day ≤ 5 s.
 Peak RSS is the ``ru_maxrss`` of the run's process (``os.wait4`` in a small helper
@@ -46,6 +50,11 @@ from _closure_cases import ACCAL, git_state  # noqa: E402
 
 TEMPERATURES = ("temperature", "temperature_icu", "temperature_sensor", "temperature_sca")
 TARGETS = {"grace": (15.0, 600.0), "demod": (5.0, None)}  # [s], [MB] of the closure run
+#: Days with an effect closure finds (closure-detection cases whose coupling is found):
+#: ``tests.indep`` effect tuples, (kind, axis, channel, coef [m/s²/K], lag [s], τ [s]) and
+#: (kind, channel, coef, lag, axes).
+COUPLED_GRACE = ("coupling", "z", "temperature", 1e-8, 1755.07, 0.0)
+COUPLED_PLATFORM = ("coupling", "temperature", 3e-8, 23.3, "both")
 
 
 #: Runs one command in a small helper process and prints its rusage: the command is
@@ -110,6 +119,17 @@ def inputs(work: Path, quick: bool) -> dict[str, tuple[list[str], list[str]]]:
             )
         else:
             print(f"accal simulate grace failed: {proc.stderr.strip()[-300:]}", file=sys.stderr)
+    if not quick:  # a day whose coupling closure finds: the lag and coefficient profiles
+        cday = grace_day(7411, "D", effects=[COUPLED_GRACE], channels=("temperature",))
+        cdata = write_acc1b_grace(cday, work / cday.l1b_name())
+        caux = write_table(work / "AHK_coupled.parquet",
+                           {"gps_time": cday.time, "temperature": cday.channels["temperature"]},
+                           {"gps_time": "s", "temperature": "K"})  # fmt: skip
+        gb = ["grace-bias", str(cdata), "-j", "1", "-q", "--force", "--out"]
+        out["grace (tests.indep D, a 1e-8 m/s²/K temperature coupling, --aux)"] = (
+            [*gb, str(work / "plain-c")],
+            [*gb, str(work / "closure-c"), "--close-loop", "--aux", str(caux)],
+        )
     run = write_platform_run(platform_run(5), work / "platform_run.parquet")
     # --force: demod skips a run its manifest says is current (a repeat would time the skip)
     dm = ["demod", str(run), "--tau", "600", "--mask", "200", "-q", "--force", "--out"]
@@ -117,6 +137,14 @@ def inputs(work: Path, quick: bool) -> dict[str, tuple[list[str], list[str]]]:
         [*dm, str(work / "dplain")],
         [*dm, str(work / "dclosure"), "--close-loop"],
     )
+    if not quick:
+        crun = write_platform_run(platform_run(7304, effects=[COUPLED_PLATFORM]),
+                                  work / "platform_coupled.parquet")  # fmt: skip
+        dm = ["demod", str(crun), "--tau", "600", "--mask", "200", "-q", "--force", "--out"]
+        out["demod (tests.indep platform, 1 day, a 3e-8 m/s²/K temperature coupling)"] = (
+            [*dm, str(work / "dplain-c")],
+            [*dm, str(work / "dclosure-c"), "--close-loop"],
+        )
     return out
 
 

@@ -248,6 +248,7 @@ def close_loop_demod(
     catchall_knots: int = 24,
     options: dict[str, Any] | None = None,
     noise_psd: Any = None,
+    psd_update: Any = None,
 ) -> DemodClosure:
     """Close the loop on rotating-platform data with the demodulation model as base.
 
@@ -282,7 +283,7 @@ def close_loop_demod(
     min_fraction : float
         A period is used when it has at least this fraction of the median number of
         rest samples per period.
-    alpha, max_effects, orbit_period, catchall_knots, options, noise_psd
+    alpha, max_effects, orbit_period, catchall_knots, options, noise_psd, psd_update
         As in :func:`accal.closure.close_loop` (``options["settle_taus"]``: time
         constants searched by ``intra_period_shape`` [s]; ``options["max_lag"]``:
         longest auxiliary lag searched, default the larger of ``τ/2`` and
@@ -366,6 +367,7 @@ def close_loop_demod(
         channel=chan,
         channel_names=("y", "z"),
         noise_psd=noise_psd,
+        psd_update=psd_update,
         # rounding of the measurements (a noise-free simulation leaves nothing else)
         resolution=float(np.finfo(np.float64).eps * np.nanmax(np.abs(y_s[use_s]))),
     )

@@ -195,6 +195,7 @@ def close_loop(
     channel_units: dict[str, str] | None = None,
     screened: Sequence[dict[str, Any]] = (),
     signal_proxies: dict[str, ArrayLike] | None = None,
+    psd_update: Callable[[ClosureResult], Any] | None = None,
 ) -> ClosureResult:
     """Find the effects a linear base model lacks, add them and refit.
 
@@ -266,6 +267,13 @@ def close_loop(
         (:func:`accal.closure.validation.signal_proxy_test`: a storm's onset on every
         axis is not a bias step).  A series not finite on every used sample is left
         out (noted).
+    psd_update : callable, optional
+        For a noise model that depends on the effects found (``accal demod --psd auto``
+        estimates it again without them): when the search found any, called with
+        their fitted sum on every sample (N,) [m/s², NaN-free, as subtracted from
+        ``y``]; a PSD it returns replaces ``noise_psd`` in the final fit (None keeps
+        it).  The search does not use ``noise_psd`` (its tests estimate the noise from
+        the residual), so the caller need not search twice.
 
     Returns
     -------
@@ -314,9 +322,27 @@ def close_loop(
     swap_smooth(search)
     search, st = _without_unknown_history(search, st, use, setup, make, max_effects, stop)
     floored = stop is not None and stop(search)
+    if psd_update is not None and (search.found or jumps.jumps):
+        new_psd = psd_update(_effects_sum(search, setup, st, jumps.jumps))
+        noise_psd = noise_psd if new_psd is None else new_psd
     return _finish(
         search, setup, st, catchall_knots, noise_psd, floored, considered, opts, jumps.jumps
     )
+
+
+def _effects_sum(search: Search, setup: _Setup, st, jumps) -> NDArray[np.float64]:
+    """The effects found, fitted as in :func:`_finish`, summed on every sample (NaN as 0)."""
+    use = search.use
+    final = _final_effects(search)
+    basis = st["basis0"]
+    if final:
+        basis = basis.extend(np.column_stack([f.prop.columns[use] for f in final]))
+    gamma = basis.fit(setup.y_all[use]).gamma
+    cols = [f.prop.columns for f in final]
+    out = np.nan_to_num(np.column_stack(cols)) @ gamma if cols else np.zeros(search.t_all.size)
+    if jumps:
+        out = out + jump_columns(search.t_all, tuple(jumps)) @ np.array([j.size for j in jumps])
+    return out
 
 
 def _take_out_jumps(setup: _Setup, st, use, builders, level: float, notes: dict):

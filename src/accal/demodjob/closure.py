@@ -100,33 +100,37 @@ def close_run(
     # went unreported and a_Y was off by up to 76σ)
     aux = {k: v for k, v in chans.items() if np.isfinite(v).any() and np.ptp(v[np.isfinite(v)]) > 0}
 
-    def closure(noise_psd: Any) -> Any:
-        return close_loop_demod(
-            time,
-            (cols["m_y"], cols["m_z"]),
-            theta,
-            valid,
-            tau=opts.tau,
-            signal_model=opts.signal_model,
-            bias_model="affine",
-            bias_aux=bias_aux or None,
-            aux=aux or None,
-            alpha=opts.alpha,
-            rest_tol=opts.rest_tol,
-            # sigmas before/after with the demodulation's own noise model (--psd)
-            noise_psd=noise_psd,
-        )
-
-    res, periods = closure(psd)
     psd_after = psd
-    if str(opts.psd).lower() == "auto" and res.effect_columns.shape[1]:
-        # the PSD from the data was estimated on the declared model's residual, which
-        # holds the effects found: estimate it again without them and redo the closure
-        # with it (issue 20; QA: an undeclared 2e-8 temperature coupling made sigma 16x
-        # the error)
-        psd_after = _psd_without_effects(res, time, cols, theta, valid, bias_aux, opts, psd)
-        if psd_after is not psd:
-            res, periods = closure(psd_after)
+
+    def without_effects(model: np.ndarray) -> Any:
+        """With ``--psd auto``: the PSD estimated again without the effects found
+        (``model``, interleaved y, z; the first estimate was made on the declared
+        model's residual, which holds them; issue 20, QA: an undeclared 2e-8
+        temperature coupling made sigma 16x the error); None otherwise."""
+        nonlocal psd_after
+        if str(opts.psd).lower() != "auto":
+            return None
+        psd_after = _psd_without_effects(
+            (model[0::2], model[1::2]), time, cols, theta, valid, bias_aux, opts, psd
+        )
+        return psd_after
+
+    res, periods = close_loop_demod(
+        time,
+        (cols["m_y"], cols["m_z"]),
+        theta,
+        valid,
+        tau=opts.tau,
+        signal_model=opts.signal_model,
+        bias_model="affine",
+        bias_aux=bias_aux or None,
+        aux=aux or None,
+        alpha=opts.alpha,
+        rest_tol=opts.rest_tol,
+        # sigmas before/after with the demodulation's own noise model (--psd)
+        noise_psd=psd,
+        psd_update=without_effects,  # the final fit again with it, not the search
+    )
     if opts.method == "gls":  # also with no effect: "before" and "after" are GLS values
         periods = _gls_after(
             res, periods, time, cols, theta, valid, bias_aux, opts, psd, psd_after=psd_after
@@ -175,7 +179,7 @@ def _effects_model(res: Any) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _psd_without_effects(
-    res: Any,
+    model: tuple[np.ndarray, np.ndarray],
     time: np.ndarray,
     cols: dict[str, np.ndarray],
     theta: np.ndarray,
@@ -184,11 +188,12 @@ def _psd_without_effects(
     opts: DemodOptions,
     psd: Any,
 ) -> Any:
-    """The PSD from the data (``--psd auto``) of the run with the closure's effects removed.
+    """The PSD from the data (``--psd auto``) of the run with the closure's effects
+    ``model = (m_y, m_z)`` [m s⁻²] removed.
 
     ``psd`` itself when the run is too short for it.
     """
-    my, mz = _effects_model(res)
+    my, mz = model
     r = demodulate(
         time,
         cols["m_y"] - my,
