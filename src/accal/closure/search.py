@@ -101,6 +101,11 @@ class Search:
     _states: dict = field(default_factory=dict, repr=False)
 
     # ---------------------------------------------------------------- model states
+    def drop_caches(self) -> None:
+        """Forget the cached model states and candidate caches (rebuilt when needed)."""
+        self.cache.clear()
+        self._states.clear()
+
     def state(self, found: Sequence[Found]) -> tuple[Basis, FitResult, NDArray[np.float64]]:
         """Basis, fit and leverage spectrum of the null model plus ``found`` (cached)."""
         key = tuple(id(f) for f in found)

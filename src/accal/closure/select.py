@@ -432,6 +432,7 @@ def _without_unknown_history(search, st, use, setup, make, max_effects, stop):
         return search, st
     lead, coupled = unknown.lead, unknown.channels
     use2 = use & ~unknown.mask
+    search.drop_caches()  # memory for the second search (rebuilt if this one is kept)
     st2 = setup.build(use2)
     again = make(st2, use2)
     run(again, max_effects, stop)
