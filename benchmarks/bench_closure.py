@@ -41,6 +41,7 @@ import json  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
 import tempfile  # noqa: E402
+import textwrap  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -183,6 +184,12 @@ def table(rows: dict[str, dict[str, list[dict]]]) -> list[str]:
     return lines
 
 
+def _label(name: str) -> str:
+    """A data set's name wrapped for a tick label: the command, then its description."""
+    head, _, rest = name.partition(" (")
+    return head + "\n" + "\n".join(textwrap.wrap(rest.rstrip(")"), 18)[:5])
+
+
 def figure(rows: dict[str, dict[str, list[dict]]], path: Path) -> None:
     """Bars of the median wall time and peak RSS, with the range; the targets dashed
     (15 s and 5 s, 600 MB)."""
@@ -200,8 +207,7 @@ def figure(rows: dict[str, dict[str, list[dict]]], path: Path) -> None:
             med = np.array([np.median(x) for x in v])
             err = np.array([[m - min(x), max(x) - m] for m, x in zip(med, v, strict=True)]).T
             axp.bar(np.arange(len(names)) + 0.4 * j, med, 0.4, yerr=err, label=k)
-        axp.set_xticks(np.arange(len(names)) + 0.2, [n.split(" (")[0] + "\n" + n.split(" (")[1][:28]
-                                                    for n in names], fontsize=7)  # fmt: skip
+        axp.set_xticks(np.arange(len(names)) + 0.2, [_label(n) for n in names], fontsize=6)
         axp.set_ylabel(lab)
     for y, axp in ((15.0, axs[0]), (5.0, axs[0]), (600.0, axs[1])):
         axp.axhline(y, color="k", ls="--", lw=0.8)
