@@ -33,7 +33,6 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from accal.closure.basis import Basis, BlockBase
-from accal.closure.candidates import step_placebo_sigma
 from accal.closure.epochprofile import add_epoch_uncertainties
 from accal.closure.final import covariances, describe, refer_exponentials
 from accal.closure.inputs import (
@@ -59,6 +58,7 @@ from accal.closure.results import BaseCoefficient, ClosureResult, Effect
 from accal.closure.search import Found, Search, run, swap_smooth
 from accal.closure.significance import describe_smooth, unexplained_test
 from accal.closure.validation import SignalProxies
+from accal.closure.widen import placebo_step_sigmas, widened_couplings
 from accal.errors import ValidationError, check_option
 
 __all__ = [
@@ -195,7 +195,7 @@ def close_loop(
     channel_units: dict[str, str] | None = None,
     screened: Sequence[dict[str, Any]] = (),
     signal_proxies: dict[str, ArrayLike] | None = None,
-    psd_update: Callable[[ClosureResult], Any] | None = None,
+    psd_update: Callable[[NDArray[np.float64]], Any] | None = None,
 ) -> ClosureResult:
     """Find the effects a linear base model lacks, add them and refit.
 
@@ -641,7 +641,7 @@ def _finish(
         for f, p in zip(final, ps, strict=True)
     ]
     if basis.n_blocks > 1 and any(f.prop.name == "bias_step" for f in final):
-        _placebo_step_sigmas(search.context(final, basis, fit, lev), final, found, cov, fit)
+        placebo_step_sigmas(search.context(final, basis, fit, lev), final, found, cov, fit)
     effects = describe(found, fit.gamma, cov["v_ww"], st["span"], st["t0"], units)
     if setup.t_first is not None and setup.t_first < st["t0"]:
         # a search that left out the record's start fitted its exponentials from its own
@@ -649,7 +649,7 @@ def _finish(
         # reported for a 3e-9 decay 5400 s earlier)
         effects = refer_exponentials(effects, setup.t_first)
     add_lag_uncertainties(search, final, effects)
-    _widened_couplings(final, effects, cov, fit, len(jumps))
+    widened_couplings(final, effects, cov, fit, len(jumps))
     add_epoch_uncertainties(search, final, effects)
     unexplained = []
     if not floored:
@@ -711,82 +711,6 @@ def _finish(
         considered=tuple(considered),
         signal_model=_signal_model(st["template"], search.proxies),
     )
-
-
-def _placebo_step_sigmas(ctx, final: list[Found], found, cov, fit) -> None:
-    """A step's size variance: the larger of the noise model's and the placebo epochs'
-    (:func:`~accal.closure.candidates.step_placebo_sigma`), in ``cov`` (in place); both
-    σ in the effect's details.
-
-    The base coefficients after the closure are the plain ones less ``A γ`` (``A``:
-    ``fit.a_mat``, per block), so the wider step covariance ``V_ww + ΔV`` reaches them
-    as ``cov_b + A ΔV Aᵀ`` (the step's own block: its a_Y, a_Z), ``cov_d + A ΔV Aᵀ``
-    and ``cov_bg − A ΔV`` (error propagation of ``b_after = b_plain − A γ``).
-    """
-    v_ww = cov["v_ww"]
-    v_old = v_ww.copy()
-    j = 0
-    for i, f in enumerate(final):
-        q = f.prop.columns.shape[1]
-        if f.prop.name == "bias_step" and f.prop.params.get("epoch") is not None:
-            emp = step_placebo_sigma(ctx, float(f.prop.params["epoch"]))
-            if emp is not None and emp.size == q:
-                model = np.sqrt(np.maximum(np.diag(v_ww)[j : j + q], 0.0))
-                for k in range(q):
-                    if emp[k] > model[k] > 0:  # scale its row and column: correlations kept
-                        g = emp[k] / model[k]
-                        v_ww[j + k, :] *= g
-                        v_ww[:, j + k] *= g
-                found[i][2]["sigma_noise_model"] = [float(x) for x in model]
-                found[i][2]["sigma_placebo"] = [float(x) for x in emp]
-        j += q
-    _propagate(cov, fit.a_mat, v_ww - v_old)
-
-
-def _widened_couplings(final: list[Found], effects, cov, fit, n_jumps: int) -> None:
-    """A coupling whose σ its profile widened (:func:`~accal.closure.lagprofile.
-    add_lag_uncertainties`): its row and column of the effects' covariance scaled to
-    that σ, and the change carried to the base coefficients as in
-    :func:`_placebo_step_sigmas` (in place; the jumps' ``n_jumps`` columns come first)."""
-    v_ww = cov["v_ww"]
-    v_old = v_ww.copy()
-    j = n_jumps
-    for f, e in zip(final, effects, strict=True):
-        if f.prop.name == "auxiliary":
-            for k, g in _widening(f, e):  # a main column: scaled, correlations kept
-                v_ww[j + k, :] *= g
-                v_ww[:, j + k] *= g
-        j += f.prop.columns.shape[1]
-    _propagate(cov, fit.a_mat, (v_ww - v_old)[n_jumps:, n_jumps:], n_jumps)
-
-
-def _widening(f: Found, e) -> list[tuple[int, float]]:
-    """``(column, σ after / σ before)`` of each main column of a coupling whose profile
-    widened its σ: the first column, or with several data channels each channel's first
-    (``f.prop.axes`` names the channel of every column)."""
-    if f.prop.axes is None:
-        lin = e.details.get("coefficient_sigma_linearised")
-        return [(0, e.sigma / lin)] if lin and e.sigma > lin > 0 else []
-    out = []
-    for ax, d in e.details.get("axes", {}).items():
-        lin = d.get("sigma_linearised")
-        if lin and d["sigma"] > lin > 0 and ax in f.prop.axes:
-            out.append((list(f.prop.axes).index(ax), d["sigma"] / lin))
-    return out
-
-
-def _propagate(cov, a, dv, offset: int = 0) -> None:
-    """A change ``dv`` of the effects' covariance carried to the base coefficients:
-    ``b_after = b_plain − A γ`` gains ``A dv Aᵀ`` (``cov_b``, ``cov_d``) and ``cov(b, γ)``
-    loses ``A dv`` (the effects' columns of ``cov_bg`` from ``offset``)."""
-    if not np.any(dv):
-        return
-    add = a @ (dv[None] @ np.transpose(a, (0, 2, 1)))  # a: (segments, p, k)
-    cov["cov_b"] = cov["cov_b"] + add
-    cov["cov_d"] = cov["cov_d"] + add
-    bg = cov["cov_bg"].copy()
-    bg[:, :, offset:] = bg[:, :, offset:] - a @ dv[None]
-    cov["cov_bg"] = bg
 
 
 def _base_coefficients(basis, bbase, fit0, fit, cov) -> tuple[BaseCoefficient, ...]:
