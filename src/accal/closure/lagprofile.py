@@ -278,8 +278,8 @@ def profile_intervals(
     lo, hi = _contiguous(inside, lag, top, step)
     if free is not None:
         lo, hi = _widened(inside_free, lag, top, step, lo, hi)
-    alts = _alternatives((power, powers), delta_w, (lag, p_hat, period), lo, hi, top, step)
-    alike = [a["lag"] for a in alts if a["delta_w"] <= 1.0 or a.get("alias")]
+    alts = _alternatives(power, powers, delta_w, (lag, p_hat, period), lo, hi, top, step)
+    alike = _alike_lags(alts)
     ambiguous = bool(alike)
     half = 0.5 * (hi - lo)  # each other lag is as uncertain as the chosen one
     lo_all = max(min([lo] + [v - half for v in alike]), 0.0)
@@ -384,11 +384,16 @@ def _is_alias(d_lag: float, p: float, p_hat: float, period: float) -> bool:
     return k >= 1 and abs(d_lag - k * period) <= 0.25 * period
 
 
-def _alternatives(power, delta_w, at, lo, hi, top, step) -> list[dict[str, Any]]:
+def _alike_lags(alternatives: Sequence[dict[str, Any]]) -> list[float]:
+    """The lags of ``lag_alternatives`` that fit as well as the chosen one: ``ΔW ≤ 1``,
+    or an alias a period apart."""
+    return [a["lag"] for a in alternatives if a["delta_w"] <= 1.0 or a.get("alias")]
+
+
+def _alternatives(power, powers, delta_w, at, lo, hi, top, step) -> list[dict[str, Any]]:
     """Other local maxima of the profile over ``[0, top]`` with ``ΔW ≤ ALT_DELTA_W``,
-    and aliases a period apart (:func:`_is_alias`); ``power`` is ``(P, P at an array of
-    lags)``, ``at`` is (lag, power, period)."""
-    power, powers = power
+    and aliases a period apart (:func:`_is_alias`); ``power`` is ``P(L)``, ``powers``
+    ``P`` at an array of lags (the grid), ``at`` is (lag, power, period)."""
     lag, p_hat, period = at
     if top <= 0:
         return []
@@ -506,9 +511,8 @@ def coefficient_interval(
     line gets an interval over both signs (``tests/closure/test_coupling_sigma_ridge.py``).
 
     Returns ``{"coefficient_interval": [lo, hi], "coefficient_sigma_profile": (hi −
-    lo)/2}`` (channel units; with several channels those of the channel with the most
-    significant coefficient, and every channel's under ``"coefficient_axes"``), empty
-    when nothing is explained.
+    lo)/2}`` (channel units; with several channels every channel's under
+    ``"coefficient_axes"`` instead), empty when nothing is explained.
     """
     masks = ctx.channel_masks()
     names = list(ctx.channel_names) if len(masks) > 1 else [None]
@@ -554,20 +558,11 @@ def coefficient_interval(
         lo = float(min(np.min(c[k][inside] - half, initial=np.inf), cb - sb))
         hi = float(max(np.max(c[k][inside] + half, initial=-np.inf), cb + sb))
         out[a] = [lo, hi]
-    if len(masks) == 1:
-        lo, hi = out[None]
-        return {"coefficient_interval": [lo, hi], "coefficient_sigma_profile": 0.5 * (hi - lo)}
-    # the reported coefficient is the most significant channel's (final.describe)
-    main = names[int(np.argmax([abs(cb) / max(sb, 1e-300) for cb, sb in best]))]
-    lo, hi = out[main]
-    return {
-        "coefficient_interval": [lo, hi],
-        "coefficient_sigma_profile": 0.5 * (hi - lo),
-        "coefficient_axes": {
-            a: {"coefficient_interval": v, "coefficient_sigma_profile": 0.5 * (v[1] - v[0])}
-            for a, v in out.items()
-        },
+    per = {
+        a: {"coefficient_interval": v, "coefficient_sigma_profile": 0.5 * (v[1] - v[0])}
+        for a, v in out.items()
     }
+    return per[None] if len(masks) == 1 else {"coefficient_axes": per}
 
 
 def _wald(e: Effect) -> float:
@@ -661,11 +656,7 @@ def add_lag_uncertainties(search: Search, final: Sequence[Found], effects: list[
         _cover_sigma(info, float(lag), top)
         if not angular:
             lags = info.get("lag_interval_95", [lag, lag])
-            alike = [
-                a["lag"]
-                for a in info.get("lag_alternatives", [])
-                if a["delta_w"] <= 1.0 or a.get("alias")
-            ]
+            alike = _alike_lags(info.get("lag_alternatives", []))
             info.update(
                 coefficient_interval(
                     ctx,
@@ -681,12 +672,14 @@ def add_lag_uncertainties(search: Search, final: Sequence[Found], effects: list[
                     e.details.get("axes"),
                 )
             )
-        for ax, v in info.pop("coefficient_axes", {}).items():
+        per = info.pop("coefficient_axes", {})
+        for ax, v in per.items():
             d = e.details["axes"][ax]
             d["coefficient_interval"] = v["coefficient_interval"]
             if v["coefficient_sigma_profile"] > 1.001 * d["sigma"]:
                 d["sigma_linearised"] = d["sigma"]
                 d["sigma"] = float(v["coefficient_sigma_profile"])
+        info.update(per.get(e.axis, {}))  # the reported coefficient's channel
         e.details.update(info)
         prof = info.get("coefficient_sigma_profile", 0.0)
         if prof > 1.001 * e.sigma:  # the ridge of lag, τ and coefficient: the profile's σ

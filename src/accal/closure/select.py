@@ -330,16 +330,20 @@ def close_loop(
     )
 
 
-def _effects_sum(search: Search, setup: _Setup, st, jumps) -> NDArray[np.float64]:
-    """The effects found, fitted as in :func:`_finish`, summed on every sample (NaN as 0)."""
-    use = search.use
+def _final_fit(search: Search, setup: _Setup, st) -> tuple[list[Found], Basis, Any]:
+    """The final model's effects, its basis (the null model plus their columns) and fit."""
     final = _final_effects(search)
     basis = st["basis0"]
     if final:
-        basis = basis.extend(np.column_stack([f.prop.columns[use] for f in final]))
-    gamma = basis.fit(setup.y_all[use]).gamma
+        basis = basis.extend(np.column_stack([f.prop.columns[search.use] for f in final]))
+    return final, basis, basis.fit(setup.y_all[search.use])
+
+
+def _effects_sum(search: Search, setup: _Setup, st, jumps) -> NDArray[np.float64]:
+    """The effects found, fitted as in :func:`_finish`, summed on every sample (NaN as 0)."""
+    final, _, fit = _final_fit(search, setup, st)
     cols = [f.prop.columns for f in final]
-    out = np.nan_to_num(np.column_stack(cols)) @ gamma if cols else np.zeros(search.t_all.size)
+    out = np.nan_to_num(np.column_stack(cols)) @ fit.gamma if cols else np.zeros(search.t_all.size)
     if jumps:
         out = out + jump_columns(search.t_all, tuple(jumps)) @ np.array([j.size for j in jumps])
     return out
@@ -625,12 +629,8 @@ def _finish(
     t_u, chan_u, names = st["t_u"], st["chan_u"], search.names
     bbase, basis0 = st["bbase"], st["basis0"]
     fit0 = basis0.fit(setup.y_all_given[use]) if jumps else st["fit0"]
-    final = _final_effects(search)
+    final, basis, fit = _final_fit(search, setup, st)
     ps = [search.p_without(i, final) for i in range(len(final))] if final else []
-    basis = basis0
-    if final:
-        basis = basis0.extend(np.column_stack([f.prop.columns[use] for f in final]))
-    fit = basis.fit(y_all[use])
     lev = search.leverage(basis)
     cov = covariances(grid, basis, fit, lev, basis0, fit0, st["lev0"], noise_psd)
     jcols = jump_columns(t_all, tuple(jumps))
