@@ -50,7 +50,8 @@ def _prop(col: np.ndarray, name: str) -> Proposal:
 
 
 def test_state_of_a_new_effect_at_a_reused_id_is_its_own(monkeypatch):
-    """Every effect gets the same id, as a copy at a freed effect's address does."""
+    """Every effect gets the same id, as a copy at a freed effect's address does (the
+    cache was keyed by ids; it is keyed by the effects now, which this must not see)."""
     import accal.closure.search as search_module
 
     monkeypatch.setattr(search_module, "id", lambda obj: 1, raising=False)

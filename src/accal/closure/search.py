@@ -109,15 +109,13 @@ class Search:
     def state(self, found: Sequence[Found]) -> tuple[Basis, FitResult, NDArray[np.float64]]:
         """Basis, fit and leverage spectrum of the null model plus ``found`` (cached).
 
-        The cache is keyed by the effects' identities and holds the effects themselves:
-        an ``id`` is unique only while its object lives, and a key of ids alone was hit
-        by new effects at the addresses of freed ones (the final fit's copies), which
-        then got a model that already held them (p = 1, a 30σ effect dropped on about
-        one run in eight).
+        Keyed by the effects themselves (:class:`Found` compares by identity), so the
+        cache keeps them alive: a key of ``id()`` values was hit by new effects at the
+        addresses of freed ones (the final fit's copies), which then got a model that
+        already held them (p = 1, a 30σ effect dropped on about one run in eight).
         """
-        key = tuple(id(f) for f in found)
-        held = self._states.get(key)
-        if held is None or any(a is not b for a, b in zip(held[0], found, strict=True)):
+        key = tuple(found)
+        if key not in self._states:
             basis = self.basis0
             if found:
                 basis = basis.extend(
@@ -125,9 +123,8 @@ class Search:
                 )
             if len(self._states) >= 16:
                 self._states.pop(next(iter(self._states)))
-            held = (tuple(found), basis, basis.fit(self.y_u), self.leverage(basis))
-            self._states[key] = held
-        return held[1:]
+            self._states[key] = (basis, basis.fit(self.y_u), self.leverage(basis))
+        return self._states[key]
 
     def leverage(self, basis: Basis) -> NDArray[np.float64]:
         """Leverage spectrum, with the measured suppression of the null model (``beta``)."""
