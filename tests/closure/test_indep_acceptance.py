@@ -205,4 +205,40 @@ def test_platform_shape_that_stands_in_for_a_coupling_is_not_removed():
         true = np.interp(per.t_mid, tp.index.to_numpy(), tp[f"a_{ax}"].to_numpy())
         before = np.sqrt(np.mean((getattr(per, f"a_{ax}_before") - true) ** 2))
         after = np.sqrt(np.mean((getattr(per, f"a_{ax}_after") - true) ** 2))
-        assert after <= 1.1 * before, (ax, before, after)
+        sigma = float(np.median(getattr(per, f"sigma_{ax}_after")))
+        # issue 19's bound for an injected effect; measured a_Y 4.98e-12 -> 5.54e-12
+        # (σ 4.9e-12): the coupling is kept at the alias 2666.5 s of 1465.8 s, whose
+        # random walk moves a_Y (σ holds that spread, closure/aliasspread.py); with the
+        # shape in its place the error had been 1.8e-10
+        assert after <= max(before / 5.0, 2.0 * sigma), (ax, before, after, sigma)
+
+
+def test_platform_coupling_at_an_alias_lag_keeps_honest_sigmas():
+    """A 3e-8 m/s²/K coupling at 1543 s on a platform run whose temperature repeats with
+    the rotation: the search keeps the alias 343 s (lags 943 and 1543 s listed as
+    aliases).  Closure-detection seed 7307 had a_Y std z 3.19 after closure: the first
+    period, 343 s of it left out, 52σ off; and the aliases move a_Y by ~0.9σ RMS, which
+    σ did not hold.  Now that period is left out and σ holds the aliases' spread
+    (measured: std z 1.18 -> 1.06, a_Z 1.14 -> 1.05; 1.33 without the spread)."""
+    from accal.estimators.noise import as_psd
+
+    run = platform_run(
+        7307, days=1.0, effects=[("coupling", "temperature", -3e-8, 1543.09, "both")]
+    )
+    t, m, theta, aux = _platform(run)
+    res, per = close_loop_demod(
+        t, m, theta, tau=600.0, aux=aux, rest_tol=1e-9, noise_psd=as_psd(None)
+    )
+    (e,) = [e for e in res.effects if e.name == "auxiliary"]
+    # measured −3.0264e-8 ± 1.1e-10: 2.4σ, 0.9 % off (an alias's coefficient is biased,
+    # couplings._shortest_lag; the σ holds the noise only)
+    assert abs(e.coefficient + 3e-8) < 0.02 * 3e-8
+    aliases = e.details["base_sigma_aliases"]
+    assert any(abs(a - 1543.09) < 10 for a in aliases), aliases
+    assert 0 not in per.period_index
+    tp = run.periods.set_index("period")
+    for ax in "YZ":
+        true = tp.loc[per.period_index, f"a_{ax}_rest"].to_numpy()
+        z = (getattr(per, f"a_{ax}_after") - true) / getattr(per, f"sigma_{ax}_after")
+        assert 0.8 < float(np.std(z)) < 1.25, ax
+        assert float(np.max(np.abs(z))) < 4.5, ax

@@ -32,6 +32,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from accal.closure.aliasspread import add_alias_spread
 from accal.closure.basis import Basis, BlockBase
 from accal.closure.epochprofile import add_epoch_uncertainties
 from accal.closure.final import covariances, describe, refer_exponentials
@@ -650,6 +651,7 @@ def _finish(
         effects = refer_exponentials(effects, setup.t_first)
     add_lag_uncertainties(search, final, effects)
     widened_couplings(final, effects, cov, fit, len(jumps))
+    add_alias_spread(search, final, effects, cov, basis)
     add_epoch_uncertainties(search, final, effects)
     unexplained = []
     if not floored:

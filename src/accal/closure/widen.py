@@ -18,7 +18,7 @@ import numpy as np
 from accal.closure.candidates import step_placebo_sigma
 from accal.closure.search import Found
 
-__all__ = ["placebo_step_sigmas", "propagate", "widened_couplings"]
+__all__ = ["add_base_covariance", "placebo_step_sigmas", "propagate", "widened_couplings"]
 
 
 def placebo_step_sigmas(ctx, final: list[Found], found, cov, fit) -> None:
@@ -95,3 +95,16 @@ def propagate(cov, a, dv, offset: int = 0) -> None:
     bg = cov["cov_bg"].copy()
     bg[:, :, offset:] = bg[:, :, offset:] - a @ dv[None]
     cov["cov_bg"] = bg
+
+
+def add_base_covariance(cov, basis, extra) -> None:
+    """Add ``extra`` (n_blocks, p, p), per block of the base, to the base coefficients'
+    covariance after the closure and to that of their change (``cov_b``, ``cov_d``, per
+    segment of ``basis``; in place): a variance the final fit's noise model does not
+    hold (:func:`accal.closure.aliasspread.add_alias_spread`)."""
+    seg_of = basis.seg_of_block()
+    has = seg_of >= 0
+    for key in ("cov_b", "cov_d"):
+        out = cov[key].copy()
+        out[seg_of[has]] += extra[has]
+        cov[key] = out
