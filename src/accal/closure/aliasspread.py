@@ -27,12 +27,24 @@ Regression Analysis*, sec. 3.7):
    \\qquad \\gamma(L) = (\\tilde Z^\\top \\tilde Z)^{-1} \\tilde Z^\\top r,
 
 with ``β_R(v)`` the base part of the least-squares fit of ``v`` on the rest of the model,
-``Z̃`` the coupling's columns (one per data channel) with that model projected out and
-``r`` the rest model's residual.
+``Z̃`` the coupling's columns (one per data channel; with its square when the coupling
+is the pair) with that model projected out and ``r`` the rest model's residual.
+
+The coupling's own coefficients get the same between-model term, ``Σ_i (γ_i − γ̂)² / K``:
+at an alias the channel's random walk is a regressor error, which attenuates the
+coefficient (errors in variables; Fuller 1987, *Measurement Error Models*, §1.1),
+and the profile's ``ΔW`` between aliases cannot tell which one is free of it (it is
+computed as if the noise were the same at every lag, where the random walk's part sits
+at the low frequencies the noise is red at: on seed 7307 the true lag had ``ΔW`` 2627).
+On the 7 platform coupling seeds the coefficients' z went from 0.47, −3.13, 2.24, 1.66,
+−2.43, 2.20, −1.52 to 0.45, −2.90, 2.24, 1.66, −1.40, 1.31, −0.98 (the 2nd and the 3rd's
+lags are off the truth by more than an alias: 329.5 s with τ 10 s for 932.5 s, and
+10.6 s with τ 14 s for 23.3 s).
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -40,7 +52,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from accal.closure.candidates import Context
-from accal.closure.couplings import SQUARED, _column
+from accal.closure.couplings import SQUARED, _column, square_about_mean
 from accal.closure.widen import add_base_covariance
 
 if TYPE_CHECKING:  # annotations only: the search imports the candidates
@@ -49,47 +61,96 @@ if TYPE_CHECKING:  # annotations only: the search imports the candidates
 __all__ = ["add_alias_spread", "base_shift"]
 
 
-def base_shift(ctx: Context, name: str, x: NDArray[np.float64], tau: float, lag: float):
-    """``Σ_j β_R(z_j(L)) γ_j(L)`` per block (n_blocks, p): what the coupling at ``lag``
-    (time constant ``tau``), re-fitted on the rest model ``ctx``, takes out of the base
-    coefficients (NaN on blocks the fit does not identify)."""
-    cols, _, _ = ctx.split(_column(ctx, name, x, tau, lag)[:, None], (name,))
+def base_shift(
+    ctx: Context, name: str, x: NDArray[np.float64], tau: float, lag: float, pair: bool = False
+):
+    """``(Σ_j β_R(z_j(L)) γ_j(L), γ(L))``: what the coupling at ``lag`` (time constant
+    ``tau``), re-fitted on the rest model ``ctx``, takes out of the base coefficients,
+    per block (n_blocks, p; NaN on blocks the fit does not identify), and its
+    coefficients, one per data channel (NaN for a channel it has no sample on); None
+    when it has none.  ``pair``: the channel with its square, at the same lag and
+    response (:func:`accal.closure.couplings._proposals`; the square's columns last)."""
+    col = [_column(ctx, name, x, tau, lag)]
+    if pair:
+        col.append(_column(ctx, name + SQUARED, square_about_mean(x), tau, lag))
+    cols, _, _ = ctx.split(np.column_stack(col), (name, name + SQUARED)[: len(col)])
     z = cols[ctx.use]
     keep = np.flatnonzero(np.any(z != 0.0, axis=0))
     fits = [ctx.basis.fit(z[:, j]) for j in keep]
     if not fits:
         return None
     zt = np.column_stack([f.resid for f in fits])
-    gamma, *_ = np.linalg.lstsq(zt, ctx.residual, rcond=None)
+    g, *_ = np.linalg.lstsq(zt, ctx.residual, rcond=None)
+    gamma = np.full(z.shape[1], np.nan)
+    gamma[keep] = g
     p = ctx.basis.p
-    return sum(g * f.beta.reshape(-1, p) for g, f in zip(gamma, fits, strict=True))
+    return sum(gj * f.beta.reshape(-1, p) for gj, f in zip(g, fits, strict=True)), gamma
 
 
 def add_alias_spread(
-    search: Search, final: Sequence[Found], effects: list[Any], cov: dict, basis: Any
+    search: Search,
+    final: Sequence[Found],
+    effects: list[Any],
+    cov: dict,
+    basis: Any,
+    n_jumps: int = 0,
 ) -> None:
-    """Add the spread of the base coefficients over each coupling's alias lags to
-    ``cov["cov_b"]`` and ``cov["cov_d"]`` (in place; ``basis`` the final model's, whose
-    segments ``cov`` is indexed by) and say so in the effect's details
-    (``base_sigma_aliases``: the aliases averaged over)."""
+    """Add the spread over each coupling's alias lags to the base coefficients'
+    covariance (``cov["cov_b"]``, ``cov["cov_d"]``, per segment of the final model's
+    ``basis``) and to the coupling's own coefficients (their σ in ``effects``, their rows
+    and columns of ``cov["v_ww"]``, whose first ``n_jumps`` columns are the jumps'); in
+    place.  The details say which aliases (``base_sigma_aliases``) and the σ before
+    (``coefficient_sigma_without_aliases``, per channel ``sigma_without_aliases``)."""
+    j0 = n_jumps
     for i, (f, e) in enumerate(zip(final, effects, strict=True)):
+        q, start = f.prop.columns.shape[1], j0
+        j0 += q
         alts = [float(a["lag"]) for a in e.details.get("lag_alternatives", []) if a.get("alias")]
         name = str(f.prop.channel)
         x = search.aux.get(name)
         lag = f.prop.params.get("lag")
         if f.prop.name != "auxiliary" or not alts or x is None or lag is None:
             continue
-        if name.endswith(SQUARED) or len(f.prop.labels) != len(f.prop.axes or (0,)):
-            continue  # a channel with its square: both would move together (not done)
+        pair = bool(f.prop.params.get("pair"))  # the channel and its square
+        main = len(set(f.prop.axes or (None,))) * (1 + pair)  # then any Jacobian columns
+        if name.endswith(SQUARED) or q < main:
+            continue
         others = [g for j, g in enumerate(final) if j != i]
         rb, rfit, rlev = search.state(others)
         ctx = search.context(others, rb, rfit, rlev)
         xa, tau = np.asarray(x, float), float(f.prop.params.get("tau") or 0.0)
-        held = base_shift(ctx, name, xa, tau, float(lag))
+        held = base_shift(ctx, name, xa, tau, float(lag), pair)
         if held is None:
             continue
-        d = np.stack([base_shift(ctx, name, xa, tau, lg) - held for lg in alts])
+        moved = [base_shift(ctx, name, xa, tau, lg, pair) for lg in alts]
+        d = np.stack([m[0] - held[0] for m in moved])
         d = np.where(np.isfinite(d), d, 0.0)  # (K − 1, n_blocks, p)
-        spread = np.einsum("kbp,kbq->bpq", d, d) / (len(alts) + 1)
-        add_base_covariance(cov, basis, spread)
-        e.details["base_sigma_aliases"] = alts
+        add_base_covariance(cov, basis, np.einsum("kbp,kbq->bpq", d, d) / (len(alts) + 1))
+        dg = np.stack([m[1] - held[1] for m in moved])
+        var_g = np.nansum(dg**2, axis=0) / (len(alts) + 1)  # per column
+        effects[i] = _widened_coefficients(e, f, var_g, cov["v_ww"], start)
+        effects[i].details["base_sigma_aliases"] = alts
+
+
+def _widened_coefficients(e: Any, f: Found, var_g, v_ww, start: int) -> Any:
+    """The coupling's coefficients' variance plus ``var_g`` (one per main column, the
+    first ones of the effect): its rows and columns of ``v_ww`` scaled (correlations
+    kept, in place), the effect's σ and per-channel σ updated; returns the effect."""
+    axes = list(f.prop.axes)[: var_g.size] if f.prop.axes is not None else [None]
+    sig: dict = {}
+    for k, ax in enumerate(axes):
+        old = float(np.sqrt(max(v_ww[start + k, start + k], 0.0)))
+        new = float(np.sqrt(old**2 + var_g[k]))
+        if old > 0 and new > old:
+            v_ww[start + k, :] *= new / old
+            v_ww[:, start + k] *= new / old
+        sig.setdefault(ax, var_g[k])  # a channel's first column: its coupling (then the square)
+    for ax, d in e.details.get("axes", {}).items():
+        if ax in sig and sig[ax] > 0:
+            d["sigma_without_aliases"] = d["sigma"]
+            d["sigma"] = float(np.hypot(d["sigma"], np.sqrt(sig[ax])))
+    extra = sig.get(e.axis, sig.get(None, 0.0))
+    if not extra > 0:
+        return e
+    e.details["coefficient_sigma_without_aliases"] = e.sigma
+    return dataclasses.replace(e, sigma=float(np.hypot(e.sigma, np.sqrt(extra))))

@@ -651,7 +651,7 @@ def _finish(
         effects = refer_exponentials(effects, setup.t_first)
     add_lag_uncertainties(search, final, effects)
     widened_couplings(final, effects, cov, fit, len(jumps))
-    add_alias_spread(search, final, effects, cov, basis)
+    add_alias_spread(search, final, effects, cov, basis, len(jumps))
     add_epoch_uncertainties(search, final, effects)
     unexplained = []
     if not floored:
