@@ -123,6 +123,8 @@ def add_alias_spread(
         if held is None:
             continue
         moved = [base_shift(ctx, name, xa, tau, lg, pair) for lg in alts]
+        if any(m is None for m in moved):  # an alias with no used sample: cannot say
+            continue
         d = np.stack([m[0] - held[0] for m in moved])
         d = np.where(np.isfinite(d), d, 0.0)  # (K − 1, n_blocks, p)
         add_base_covariance(cov, basis, np.einsum("kbp,kbq->bpq", d, d) / (len(alts) + 1))
