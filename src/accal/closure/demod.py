@@ -68,7 +68,8 @@ class DemodPeriods:
     """Per-period demodulated accelerations before and after closing the loop.
 
     Only periods whose ``a_Y`` and ``a_Z`` are determined (enough rest samples,
-    full rank) are listed.  "before": the declared demodulation model alone;
+    full rank) and whose samples the closure did not thin (:func:`_shifted_periods`;
+    said in a note) are listed.  "before": the declared demodulation model alone;
     "after": with the effects found added to the fit.  Sigmas are the
     coloured-noise uncertainties (residual PSD, sandwich covariance) [m s⁻²];
     ``sigma_change_*`` is that of the difference of the two correlated estimates.
