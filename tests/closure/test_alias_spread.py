@@ -9,11 +9,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from accal.closure.aliasspread import base_shift
 from accal.closure.basis import Basis
 from accal.closure.candidates import Context
-from accal.closure.demod import close_loop_demod
+from accal.closure.demod import _shifted_periods, close_loop_demod
 from accal.closure.residual import make_grid
 from accal.estimators.design import rest_mask
 
@@ -104,3 +106,29 @@ def test_a_period_the_lagged_coupling_thins_is_left_out(platform):
     z = (per.a_Y_after - truth[per.period_index]) / per.sigma_Y_after
     # measured: std z 0.75, max |z| 1.2 (the thinned period, had it been kept: ~50σ)
     assert float(np.max(np.abs(z))) < 4.5 and 0.5 < float(np.std(z)) < 1.5
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    n_per=st.integers(2, 8),
+    q=st.integers(4, 40),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_shifted_periods_match_a_per_period_loop(n_per, q, seed):
+    """``_shifted_periods`` against a plain loop over the periods; nothing thinned,
+    nothing flagged; a period's start cut moves its mean time (flagged when by over a
+    step)."""
+    rng = np.random.default_rng(seed)
+    n = n_per * q
+    t = np.arange(n, dtype=float)
+    period = np.arange(n) // q
+    use_t = rng.random(n) < 0.8
+    after = use_t & (rng.random(n) < 0.9)
+    cut = int(rng.integers(0, n_per))
+    after &= ~((period == cut) & (t < cut * q + q // 2))
+    got = _shifted_periods(after, use_t, t, period, n_per, 1.0)
+    for k in range(n_per):
+        a, b = use_t & (period == k), after & use_t & (period == k)
+        want = a.any() and b.any() and abs(t[b].mean() - t[a].mean()) > 1.0
+        assert got[k] == want
+    assert not _shifted_periods(use_t, use_t, t, period, n_per, 1.0).any()
