@@ -53,7 +53,7 @@ from numpy.typing import NDArray
 
 from accal.closure.candidates import Context
 from accal.closure.couplings import SQUARED, _column, square_about_mean
-from accal.closure.widen import add_base_covariance
+from accal.closure.widen import add_base_covariance, scale_variance
 
 if TYPE_CHECKING:  # annotations only: the search imports the candidates
     from accal.closure.search import Found, Search
@@ -144,8 +144,7 @@ def _widened_coefficients(e: Any, f: Found, var_g, v_ww, start: int) -> Any:
         old = float(np.sqrt(max(v_ww[start + k, start + k], 0.0)))
         new = float(np.sqrt(old**2 + var_g[k]))
         if old > 0 and new > old:
-            v_ww[start + k, :] *= new / old
-            v_ww[:, start + k] *= new / old
+            scale_variance(v_ww, start + k, new / old)
         sig.setdefault(ax, var_g[k])  # a channel's first column: its coupling (then the square)
     for ax, d in e.details.get("axes", {}).items():
         if ax in sig and sig[ax] > 0:

@@ -292,11 +292,17 @@ def _column(ctx: Context, name: str, x, tc: float, lag: float) -> NDArray[np.flo
 
 def _columns(ctx: Context, name: str, x, tc: float, lags) -> NDArray[np.float64]:
     """:func:`_column` at each of ``lags`` (N, len(lags)), the response computed once."""
+    tg, h = _grid_response(ctx, name, x, tc, lags)
+    return np.column_stack([np.interp(ctx.t_all - lag, tg, h) for lag in lags])
+
+
+def _grid_response(ctx: Context, name: str, x, tc: float, lags):
+    """``(times, response)``: the channel's response on the grid from early enough for
+    the longest of ``lags`` (and of the search) to the record's end."""
     step = ctx.grid.step
     lead = int(np.ceil(max(max(lags), max_lag(ctx.options, ctx.span)) / step)) + 2
     h = _response(ctx, name, x, lead, tc, cache=tc in AUX_TAUS)
-    tg = ctx.t0 + step * np.arange(-lead, ctx.grid.size)
-    return np.column_stack([np.interp(ctx.t_all - lag, tg, h) for lag in lags])
+    return ctx.t0 + step * np.arange(-lead, ctx.grid.size), h
 
 
 def _power_at(ctx: Context, name: str, x, tc: float, lag: float) -> float:
@@ -322,10 +328,7 @@ def _used_rows(ctx: Context, name: str, x, tc: float, lags) -> NDArray[np.float6
     regressor interpolated at the used samples' distinct times (the platform's two
     axes share each time) and spread to the samples (profile of a platform coupling
     day: 3.2 of 25 s in building all-sample columns, then selecting and transposing)."""
-    step = ctx.grid.step
-    lead = int(np.ceil(max(max(lags), max_lag(ctx.options, ctx.span)) / step)) + 2
-    h = _response(ctx, name, x, lead, tc, cache=tc in AUX_TAUS)
-    tg = ctx.t0 + step * np.arange(-lead, ctx.grid.size)
+    tg, h = _grid_response(ctx, name, x, tc, lags)
     key = ("used times", np.packbits(ctx.use).tobytes())  # contexts of one cache may differ
     if key not in ctx.cache:
         tu, inv = np.unique(ctx.t_all[ctx.use], return_inverse=True)

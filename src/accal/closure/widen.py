@@ -18,7 +18,13 @@ import numpy as np
 from accal.closure.candidates import step_placebo_sigma
 from accal.closure.search import Found
 
-__all__ = ["add_base_covariance", "placebo_step_sigmas", "propagate", "widened_couplings"]
+__all__ = [
+    "add_base_covariance",
+    "placebo_step_sigmas",
+    "propagate",
+    "scale_variance",
+    "widened_couplings",
+]
 
 
 def placebo_step_sigmas(ctx, final: list[Found], found, cov, fit) -> None:
@@ -41,10 +47,8 @@ def placebo_step_sigmas(ctx, final: list[Found], found, cov, fit) -> None:
             if emp is not None and emp.size == q:
                 model = np.sqrt(np.maximum(np.diag(v_ww)[j : j + q], 0.0))
                 for k in range(q):
-                    if emp[k] > model[k] > 0:  # scale its row and column: correlations kept
-                        g = emp[k] / model[k]
-                        v_ww[j + k, :] *= g
-                        v_ww[:, j + k] *= g
+                    if emp[k] > model[k] > 0:
+                        scale_variance(v_ww, j + k, emp[k] / model[k])
                 found[i][2]["sigma_noise_model"] = [float(x) for x in model]
                 found[i][2]["sigma_placebo"] = [float(x) for x in emp]
         j += q
@@ -61,9 +65,8 @@ def widened_couplings(final: list[Found], effects, cov, fit, n_jumps: int) -> No
     j = n_jumps
     for f, e in zip(final, effects, strict=True):
         if f.prop.name == "auxiliary":
-            for k, g in _widening(f, e):  # a main column: scaled, correlations kept
-                v_ww[j + k, :] *= g
-                v_ww[:, j + k] *= g
+            for k, g in _widening(f, e):  # a main column
+                scale_variance(v_ww, j + k, g)
         j += f.prop.columns.shape[1]
     propagate(cov, fit.a_mat, (v_ww - v_old)[n_jumps:, n_jumps:], n_jumps)
 
@@ -108,3 +111,10 @@ def add_base_covariance(cov, basis, extra) -> None:
         out = cov[key].copy()
         out[seg_of[has]] += extra[has]
         cov[key] = out
+
+
+def scale_variance(v, j: int, g: float) -> None:
+    """Scale the σ of entry ``j`` of the covariance ``v`` by ``g`` (its row and column;
+    correlations kept; in place)."""
+    v[j, :] *= g
+    v[:, j] *= g
