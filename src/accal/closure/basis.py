@@ -35,6 +35,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from accal.closure.nuisance import tail_sum_norms
 from accal.errors import ValidationError
 
 if TYPE_CHECKING:
@@ -295,17 +296,35 @@ class FitResult:
         Coefficients of the extra columns (NaN for columns left out as dependent).
     resid : ndarray, shape (n,)
         Residual on the used samples.
-    w_gamma : ndarray, shape (k_kept, n)
-        Weights of the kept ``gamma`` (``gamma[keep] = w_gamma @ y``).
     a_mat : ndarray, shape (n_seg, p, k_kept)
         ``L E`` per block (``beta_b = L_b y − a_mat_b gamma``).
+    qe, re : ndarray, shapes (n, k_kept) and (k_kept, k_kept)
+        The extra columns' orthonormal part and its triangle (``E_⊥ = qe re``), from
+        which :attr:`w_gamma` is formed when asked for.
     """
 
     beta: NDArray[np.float64]
     gamma: NDArray[np.float64]
     resid: NDArray[np.float64]
-    w_gamma: NDArray[np.float64]
     a_mat: NDArray[np.float64]
+    qe: NDArray[np.float64] = field(repr=False)
+    re: NDArray[np.float64] = field(repr=False)
+
+    @property
+    def k_kept(self) -> int:
+        """Number of kept extra columns."""
+        return int(self.re.shape[0])
+
+    @property
+    def w_gamma(self) -> NDArray[np.float64]:
+        """Weights of the kept ``gamma``, shape (k_kept, n): ``gamma[keep] = w_gamma @ y``.
+
+        Formed on demand (only the final fit's covariances need it): an (n, k) array per
+        cached model state cost 47 MB each on a 1 Hz day with the orbit template.
+        """
+        if not self.k_kept:
+            return np.zeros((0, self.qe.shape[0]))
+        return np.linalg.solve(self.re, self.qe.T)
 
 
 class Basis:
@@ -659,10 +678,7 @@ class Basis:
         seg = self.sample_seg
         partial = rc[:-1] - rc[self.seg_stop[seg]]
         out = np.sum(np.square(partial, out=partial), axis=1) + tail[seg + 1]
-        if self.qe.shape[1]:
-            em = self.qe * m[:, None]
-            s_e = np.cumsum(em[::-1], axis=0)[::-1]
-            out = out + np.sum(s_e**2, axis=1)
+        out += tail_sum_norms(self.qe, m)
         if self.nuisance is not None:
             out = out + self.nuisance.step_norms(mask)
         return out
@@ -766,12 +782,10 @@ class Basis:
         kept = self.extra[:, self.keep]
         gamma = np.full(k, np.nan)
         if self.keep.size:
-            w_gamma = np.linalg.solve(self.re, self.qe.T)  # (k_kept, n)
-            gamma[self.keep] = w_gamma @ y
+            gamma[self.keep] = np.linalg.solve(self.re, self.qe.T @ y)
             a_mat = np.einsum("spr,srk->spk", self.rinv, self.block_coef(kept))
             yb = y - kept @ gamma[self.keep]
         else:
-            w_gamma = np.zeros((0, self.n))
             a_mat = np.zeros((self.seg_start.size, self.p, 0))
             yb = y
         cb = self.block_coef(yb)[:, :, 0]  # (n_seg, p)
@@ -781,7 +795,7 @@ class Basis:
         b_ids = self.seg_block[act]
         beta[b_ids] = np.where(self.ident[act], beta_seg[act], np.nan)
         resid = y - self.project(y)
-        return FitResult(beta.ravel(), gamma, resid, w_gamma, a_mat)
+        return FitResult(beta.ravel(), gamma, resid, a_mat, self.qe, self.re)
 
     def seg_of_block(self) -> NDArray[np.int64]:
         """Segment index of every block (``-1`` when the block has no used sample)."""

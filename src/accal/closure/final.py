@@ -139,7 +139,7 @@ def covariances(
     rinv = basis.rinv
     v_ll = _sandwich(rinv, basis.block_cov(grid, psd))
     v_ll0 = _sandwich(rinv, basis0.block_cov(grid, psd0))
-    k = fit.w_gamma.shape[0]
+    k = fit.k_kept
     if k:
         wg = fit.w_gamma.T  # (n, k)
         g_fft = grid.fft(wg)

@@ -145,6 +145,30 @@ def bspline_columns(t: NDArray[np.float64], spacing: float) -> NDArray[np.float6
     return BSpline.design_matrix(t, knots, k).toarray()
 
 
+#: Columns per chunk in :func:`tail_sum_norms` (bounds its work array to n × 8 floats).
+_TAIL_CHUNK = 8
+
+
+def tail_sum_norms(q: NDArray[np.float64], m: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``‖Σ_{j ≥ i} m_j q_j‖²`` for every sample ``i``: ``q`` (n, k) rows, ``m`` (n,).
+
+    The squared norm of the projection of a step indicator ``1[j ≥ i]·m`` onto the
+    orthonormal columns ``q``.  Worked through in chunks of columns, in place, so a
+    1 Hz day with the orbit template's ~70 columns needs one n × 8 array, not three
+    n × k ones (47 MB each).
+    """
+    out = np.zeros(q.shape[0])
+    work = np.empty((q.shape[0], min(_TAIL_CHUNK, q.shape[1])))
+    for c0 in range(0, q.shape[1], _TAIL_CHUNK):
+        blk = q[:, c0 : c0 + _TAIL_CHUNK]
+        w = work[:, : blk.shape[1]]
+        np.multiply(blk, m[:, None], out=w)
+        rev = w[::-1]
+        np.cumsum(rev, axis=0, out=rev)  # reverse cumulative sums, in place
+        out += np.einsum("ij,ij->i", w, w)
+    return out
+
+
 class OrbitTemplate:
     """Projection onto orbit-phase bins × a polynomial in time (see the module notes).
 
@@ -376,12 +400,8 @@ class OrbitTemplate:
         dd = np.empty(self.n)
         dd[self._order] = d  # back to time order
         out = np.cumsum(dd[::-1])[::-1]
-        if self.qg.shape[1]:
-            gm = self.qg * m[:, None]
-            out -= np.sum(np.cumsum(gm[::-1], axis=0)[::-1] ** 2, axis=1)
-        if self.qs.shape[1]:
-            sm = self.qs * m[:, None]
-            out += np.sum(np.cumsum(sm[::-1], axis=0)[::-1] ** 2, axis=1)
+        out -= tail_sum_norms(self.qg, m)
+        out += tail_sum_norms(self.qs, m)
         return np.maximum(out, 0.0)
 
     def leverage(self, grid_size: int, step: float, counts: NDArray[np.float64]) -> NDArray:
@@ -416,9 +436,17 @@ class OrbitTemplate:
         """``Σ_j |DFT q_j|²`` of the dense columns on a grid (kept per grid)."""
         key = (int(grid_size), float(step))
         if key not in self._spectra:
-            place = np.zeros((self.qs.shape[1], grid_size))
-            place[:, self._grid_idx(grid_size, step)] = self.qs.T
-            self._spectra[key] = np.sum(np.abs(np.fft.rfft(place, axis=-1)) ** 2, axis=0)
+            idx = self._grid_idx(grid_size, step)
+            total = np.zeros(grid_size // 2 + 1)
+            for c0 in range(0, self.qs.shape[1], _TAIL_CHUNK):  # bounded work arrays
+                cols = self.qs[:, c0 : c0 + _TAIL_CHUNK]
+                place = np.zeros((cols.shape[1], grid_size))
+                place[:, idx] = cols.T
+                f = np.fft.rfft(place, axis=-1)
+                total += np.einsum("ij,ij->j", f.real, f.real) + np.einsum(
+                    "ij,ij->j", f.imag, f.imag
+                )
+            self._spectra[key] = total
         return self._spectra[key]
 
     def _grid_idx(self, grid_size: int, step: float) -> NDArray[np.int64]:

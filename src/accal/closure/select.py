@@ -662,7 +662,7 @@ def _finish(
             unexplained.append(describe_smooth(grid, t_u, zt @ w.gamma, w))
     effects = jump_effects(tuple(jumps)) + list(effects)
     base_out = _base_coefficients(basis, bbase, fit0, fit, cov)
-    k = fit.w_gamma.shape[0] + len(jumps)
+    k = fit.k_kept + len(jumps)
     nb, p = bbase.n_blocks, bbase.p
     seg_of = basis.seg_of_block()
     has = seg_of >= 0
