@@ -82,17 +82,30 @@ def test_a_lagged_coupling_through_the_filter_has_its_lag(l1b_day, tmp_path):
     (c,) = [e for e in y["effects"] if e["name"] == "auxiliary"]
     assert c["channel"] == "temperature"
     assert abs(c["coefficient"] - COEF) < 3 * c["sigma"]
-    assert abs(c["lag"] - LAG) < 3 * c["details"]["lag_sigma"], c
+    # the delay the data determine is lag + τ: this file's filter (seven 11-sample
+    # averages) is wider than accal's stand-in (seven 5 s boxcars), and the rest of the
+    # difference, symmetric, is fitted as a one-pole low-pass whose delay the lag gives
+    # back (measured: lag 883.8 s, τ 19.2 s, lag σ 4.8 s; at the least-squares optimum,
+    # couplings._polish; before, the refinement stopped near it with a σ of 7.1 s)
+    assert abs(c["lag"] + c["tau"] - LAG) < 3 * c["details"]["lag_sigma"], c
     (t,) = [d for d in y["considered"] if d["channel"] == "temperature"]
     assert t["status"] == "considered" and t["reason"] == pc.LOWPASSED
 
 
-def test_without_the_low_pass_the_lag_is_off(l1b_day, tmp_path, monkeypatch):
-    """The same day with the channel as read: the lag is shifted by the fitted τ."""
+def test_without_the_low_pass_the_delay_is_the_same(l1b_day, tmp_path, monkeypatch):
+    """The same day with the channel as read: the fitted low-pass takes up the
+    read-out noise and the filters' difference, the delay lag + τ is as above.
+
+    Before the (lag, τ) were polished to the least-squares optimum this test had
+    the lag off by over 3σ here and not with the low-passed channel; at the optimum
+    both give lag + τ ≈ 903 s (measured 882.5 + 20.6 s as read, 883.8 + 19.2 s
+    low-passed): what had told them apart was where the refinement stopped.
+    """
     monkeypatch.setattr(pc, "is_level1b", lambda meta: False)
     y = _closure(*l1b_day, tmp_path / "o")
     (c,) = [e for e in y["effects"] if e["name"] == "auxiliary"]
-    assert abs(c["lag"] - LAG) > 3 * c["details"]["lag_sigma"], c
+    assert c["tau"] > 5.0
+    assert abs(c["lag"] + c["tau"] - LAG) < 3 * c["details"]["lag_sigma"], c
 
 
 def test_smooth_channel_keeps_trends_and_gaps():

@@ -39,7 +39,10 @@ at the low frequencies the noise is red at: on seed 7307 the true lag had ``ΔW`
 On the 7 platform coupling seeds the coefficients' z went from 0.47, −3.13, 2.24, 1.66,
 −2.43, 2.20, −1.52 to 0.45, −2.90, 2.24, 1.66, −1.40, 1.31, −0.98 (the 2nd and the 3rd's
 lags are off the truth by more than an alias: 329.5 s with τ 10 s for 932.5 s, and
-10.6 s with τ 14 s for 23.3 s).
+10.6 s with τ 14 s for 23.3 s).  Those two had stopped on the lag/low-pass ridge:
+polished to the least-squares optimum (:func:`accal.closure.couplings._polish`) and with
+the signal model's spread below (:func:`add_signal_model_spread`) the z are 0.33, −0.77,
+0.92, 1.59, −0.86, 1.11, −0.97 (RMS 1.00).
 """
 
 from __future__ import annotations
@@ -58,7 +61,7 @@ from accal.closure.widen import add_base_covariance, scale_variance
 if TYPE_CHECKING:  # annotations only: the search imports the candidates
     from accal.closure.search import Found, Search
 
-__all__ = ["add_alias_spread", "base_shift"]
+__all__ = ["add_alias_spread", "add_signal_model_spread", "base_shift"]
 
 
 def base_shift(
@@ -134,10 +137,66 @@ def add_alias_spread(
         effects[i].details["base_sigma_aliases"] = alts
 
 
-def _widened_coefficients(e: Any, f: Found, var_g, v_ww, start: int) -> Any:
+def add_signal_model_spread(
+    search: Search,
+    final: Sequence[Found],
+    effects: list[Any],
+    cov: dict,
+    basis: Any,
+    fit: Any,
+    n_jumps: int = 0,
+) -> None:
+    """Add the spread of each coupling's coefficients between the declared signal model
+    and the one a degree beyond it to their σ (in place; demodulation bases only).
+
+    The per-period signal of the "mean" model is constant within a period, while the
+    signal changes (a daily term, a once-per-rev term); the change, modulated by θ, is
+    left in the residual with the period's rhythm, and a platform temperature kicked at
+    every rotation has that rhythm too.  On a platform run with a 3e-8 m/s²/K coupling
+    at the true lag (seed 7304, data drawn by ``tests.indep``) the least squares took
+    +1.7e-9 (y) and +2.9e-9 m/s²/K (z) from the signal alone, 5-9 times the
+    coefficient's σ, and 1.3e-10 and 2.2e-10 with the signal's slope in the model
+    (``signal0``, :func:`accal.closure.validation.validate`'s extension).  The data
+    do not say which model holds, so each coupling coefficient's variance gains the
+    between-model term of the two with equal weights (Hoeting et al. 1999, eq. 2, as
+    for the aliases above): ``d²/2``, ``d`` the change of the coefficient when the
+    final model (the other effects with it) is fitted with the extension.  Without
+    a leak ``E[d²]`` is the extension's extra variance (nested least squares), so the
+    σ grows by at most half of that.  The details keep the σ before
+    (``coefficient_sigma_without_signal_model``, per channel
+    ``sigma_without_signal_model``) and the change (``signal_model_change``).
+    """
+    if search.signal0 is None or not final:
+        return
+    ext = search.signal_state(final, basis)
+    g_ext = ext.fit(search.y_u).gamma
+    if g_ext.size != fit.gamma.size:
+        return
+    j0 = n_jumps
+    c0 = 0
+    for i, (f, e) in enumerate(zip(final, effects, strict=True)):
+        q = f.prop.columns.shape[1]
+        start, c_start = j0, c0
+        j0 += q
+        c0 += q
+        if f.prop.name != "auxiliary":
+            continue
+        pair = bool(f.prop.params.get("pair"))
+        main = len(set(f.prop.axes or (None,))) * (1 + pair)
+        if q < main:
+            continue
+        d = g_ext[c_start : c_start + main] - fit.gamma[c_start : c_start + main]
+        if not np.all(np.isfinite(d)):
+            continue
+        effects[i] = _widened_coefficients(e, f, d**2 / 2.0, cov["v_ww"], start, "signal_model")
+        effects[i].details["signal_model_change"] = d.tolist()
+
+
+def _widened_coefficients(e: Any, f: Found, var_g, v_ww, start: int, what: str = "aliases") -> Any:
     """The coupling's coefficients' variance plus ``var_g`` (one per main column, the
     first ones of the effect): its rows and columns of ``v_ww`` scaled (correlations
-    kept, in place), the effect's σ and per-channel σ updated; returns the effect."""
+    kept, in place), the effect's σ and per-channel σ updated; returns the effect.
+    ``what`` names the σ before in the details (``sigma_without_<what>``)."""
     axes = list(f.prop.axes)[: var_g.size] if f.prop.axes is not None else [None]
     sig: dict = {}
     for k, ax in enumerate(axes):
@@ -148,10 +207,10 @@ def _widened_coefficients(e: Any, f: Found, var_g, v_ww, start: int) -> Any:
         sig.setdefault(ax, var_g[k])  # a channel's first column: its coupling (then the square)
     for ax, d in e.details.get("axes", {}).items():
         if ax in sig and sig[ax] > 0:
-            d["sigma_without_aliases"] = d["sigma"]
+            d[f"sigma_without_{what}"] = d["sigma"]
             d["sigma"] = float(np.hypot(d["sigma"], np.sqrt(sig[ax])))
     extra = sig.get(e.axis, sig.get(None, 0.0))
     if not extra > 0:
         return e
-    e.details["coefficient_sigma_without_aliases"] = e.sigma
+    e.details[f"coefficient_sigma_without_{what}"] = e.sigma
     return dataclasses.replace(e, sigma=float(np.hypot(e.sigma, np.sqrt(extra))))

@@ -32,7 +32,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from accal.closure.aliasspread import add_alias_spread
+from accal.closure.aliasspread import add_alias_spread, add_signal_model_spread
 from accal.closure.basis import Basis, BlockBase
 from accal.closure.epochprofile import add_epoch_uncertainties
 from accal.closure.final import covariances, describe, refer_exponentials
@@ -652,6 +652,7 @@ def _finish(
     add_lag_uncertainties(search, final, effects)
     widened_couplings(final, effects, cov, fit, len(jumps))
     add_alias_spread(search, final, effects, cov, basis, len(jumps))
+    add_signal_model_spread(search, final, effects, cov, basis, fit, len(jumps))
     add_epoch_uncertainties(search, final, effects)
     unexplained = []
     if not floored:
