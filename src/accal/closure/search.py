@@ -97,6 +97,8 @@ class Search:
     removed: list[Found] = field(default_factory=list)
     notes: dict[tuple, dict[str, Any]] = field(default_factory=dict)
     iterations: int = 0
+    #: The selection stopped before it had finished (``run``'s ``until``).
+    paused: bool = False
     cache: dict = field(default_factory=dict, repr=False)
     _states: dict = field(default_factory=dict, repr=False)
 
@@ -259,8 +261,18 @@ class Search:
         return False
 
 
-def run(s: Search, max_effects: int, stop: Callable[[Search], bool] | None = None) -> Search:
-    """Forward selection with validation and backward elimination (module notes)."""
+def run(
+    s: Search,
+    max_effects: int,
+    stop: Callable[[Search], bool] | None = None,
+    until: Callable[[Search], bool] | None = None,
+) -> Search:
+    """Forward selection with validation and backward elimination (module notes).
+
+    ``until``: pause the selection after a step whose model it holds true
+    (``s.paused``; calling ``run`` again goes on from there).
+    """
+    s.paused = False
     seen: set[tuple] = set()
     while len(s.found) < max_effects and s.iterations < 3 * max_effects:
         if stop is not None and stop(s):
@@ -314,6 +326,9 @@ def run(s: Search, max_effects: int, stop: Callable[[Search], bool] | None = Non
         if key in seen:
             break
         seen.add(key)
+        if until is not None and until(s):
+            s.paused = True
+            break
     return s
 
 
