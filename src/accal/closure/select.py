@@ -18,10 +18,14 @@ and makes the final fit (:mod:`accal.closure.final`):
 4. forward selection (:func:`accal.closure.search.run`): test of significance with
    multiplicity, then validation (identifiable, confirmed on held-out stretches,
    plausible) before anything is added; significant candidates that fail are
-   reported in ``result.rejected`` with the reason;
+   reported in ``result.rejected`` with the reason; at the first coupling whose
+   lagged or filtered channel is unknown at used samples (before the record, after
+   its holes) the search is made again without those samples
+   (:func:`_without_unknown_history`);
 5. the final fit with the Jacobians of searched time constants and lags, the
-   coloured-noise covariances, and a catch-all test of what is left
-   (``unexplained``, reported, never removed).
+   coloured-noise covariances (coupling coefficients also with their spread over
+   alias lags and over the signal model, :mod:`accal.closure.aliasspread`), and a
+   catch-all test of what is left (``unexplained``, reported, never removed).
 """
 
 from __future__ import annotations
