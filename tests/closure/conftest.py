@@ -154,3 +154,27 @@ def make_platform(
 def platform():
     """The :func:`make_platform` factory."""
     return make_platform
+
+
+def block_context(t, y, use, block, cols, n_blocks: int, aux: dict):
+    """A closure :class:`~accal.closure.candidates.Context` of ``y`` on a per-block base
+    (``cols`` on the samples of each ``block``), fitted on the ``use`` samples."""
+    from accal.closure.basis import Basis
+    from accal.closure.candidates import Context
+    from accal.closure.residual import make_grid
+
+    basis = Basis(block[use], cols[use], n_blocks=n_blocks)
+    grid = make_grid(t[use])
+    return Context(
+        t_all=t,
+        use=use,
+        t0=float(t[use][0]),
+        span=float(np.ptp(t[use])),
+        grid=grid,
+        residual=basis.fit(y[use]).resid,
+        basis=basis,
+        leverage=basis.leverage(grid),
+        labels=frozenset(),
+        aux=aux,
+        orbit_period=None,
+    )

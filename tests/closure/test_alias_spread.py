@@ -13,13 +13,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from accal.closure.aliasspread import base_shift
-from accal.closure.basis import Basis
-from accal.closure.candidates import Context
 from accal.closure.demod import _shifted_periods, close_loop_demod
-from accal.closure.residual import make_grid
 from accal.estimators.design import rest_mask
 
-from .conftest import AY
+from .conftest import AY, block_context
 
 
 def _context(seed: int, n_blocks: int = 12, q: int = 300):
@@ -33,22 +30,7 @@ def _context(seed: int, n_blocks: int = 12, q: int = 300):
     x = kick + 0.05 * np.cumsum(rng.standard_normal(n)) / np.sqrt(q) + 1e-3 * t / q
     y = 2.0 + 0.1 * block + 0.3 * np.interp(t - 450.0, t, x) + 0.01 * rng.standard_normal(n)
     use = t >= 600.0  # the channel's history known at every used sample for lags ≤ 600 s
-    basis = Basis(block[use], cols[use], n_blocks=n_blocks)
-    grid = make_grid(t[use])
-    fit = basis.fit(y[use])
-    ctx = Context(
-        t_all=t,
-        use=use,
-        t0=float(t[use][0]),
-        span=float(np.ptp(t[use])),
-        grid=grid,
-        residual=fit.resid,
-        basis=basis,
-        leverage=basis.leverage(grid),
-        labels=frozenset(),
-        aux={"x": x},
-        orbit_period=None,
-    )
+    ctx = block_context(t, y, use, block, cols, n_blocks, {"x": x})
     return ctx, t, y, x, block, cols, use
 
 

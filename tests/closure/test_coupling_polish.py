@@ -13,10 +13,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from accal.closure.basis import Basis
-from accal.closure.candidates import Context
 from accal.closure.couplings import _polish, _power_at
-from accal.closure.residual import make_grid
+
+from .conftest import block_context
 
 Q = 300  # block length [samples, s]
 
@@ -41,22 +40,8 @@ def _context(seed: int, lag: float, tau: float = 0.0, n_blocks: int = 12):
             xr[k] = a * xr[k - 1] + (1 - a) * x[k]
     y = 2.0 + 0.1 * block + 0.3 * np.interp(t - lag, t, xr) + 0.002 * rng.standard_normal(n)
     use = t >= 600.0  # the channel's history known at every used sample
-    basis = Basis(block[use], np.column_stack([np.ones(n), u])[use], n_blocks=n_blocks)
-    grid = make_grid(t[use])
-    ctx = Context(
-        t_all=t,
-        use=use,
-        t0=float(t[use][0]),
-        span=float(np.ptp(t[use])),
-        grid=grid,
-        residual=basis.fit(y[use]).resid,
-        basis=basis,
-        leverage=basis.leverage(grid),
-        labels=frozenset(),
-        aux={"x": x},
-        orbit_period=None,
-    )
-    return ctx, x
+    cols = np.column_stack([np.ones(n), u])
+    return block_context(t, y, use, block, cols, n_blocks, {"x": x}), x
 
 
 def test_a_lag_found_as_a_low_pass_returns_to_no_low_pass():

@@ -8,7 +8,7 @@ Layer 2 (see ``shared/STYLE.md`` §4): arrays in, findings out; only
 >>> res.to_dict()["effects"]
 """
 
-from accal.closure.basis import BlockBase
+from accal.closure.blockbase import BlockBase
 from accal.closure.candidates import Context, Proposal
 from accal.closure.kinds import EFFECT_NAMES, Kind, effect_label, kind_of, kinds
 from accal.closure.platform import PlatformInfo

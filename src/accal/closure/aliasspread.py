@@ -115,8 +115,7 @@ def add_alias_spread(
         if f.prop.name != "auxiliary" or not alts or x is None or lag is None:
             continue
         pair = bool(f.prop.params.get("pair"))  # the channel and its square
-        main = len(set(f.prop.axes or (None,))) * (1 + pair)  # then any Jacobian columns
-        if name.endswith(SQUARED) or q < main:
+        if name.endswith(SQUARED) or q < _main_columns(f):
             continue
         others = [g for j, g in enumerate(final) if j != i]
         rb, rfit, rlev = search.state(others)
@@ -172,24 +171,25 @@ def add_signal_model_spread(
     g_ext = ext.fit(search.y_u).gamma
     if g_ext.size != fit.gamma.size:
         return
-    j0 = n_jumps
-    c0 = 0
+    c0 = 0  # the effect's first column in gamma (in v_ww after the jumps' columns)
     for i, (f, e) in enumerate(zip(final, effects, strict=True)):
-        q = f.prop.columns.shape[1]
-        start, c_start = j0, c0
-        j0 += q
+        q, c_start = f.prop.columns.shape[1], c0
         c0 += q
-        if f.prop.name != "auxiliary":
-            continue
-        pair = bool(f.prop.params.get("pair"))
-        main = len(set(f.prop.axes or (None,))) * (1 + pair)
-        if q < main:
+        main = _main_columns(f)
+        if f.prop.name != "auxiliary" or q < main:
             continue
         d = g_ext[c_start : c_start + main] - fit.gamma[c_start : c_start + main]
         if not np.all(np.isfinite(d)):
             continue
+        start = n_jumps + c_start
         effects[i] = _widened_coefficients(e, f, d**2 / 2.0, cov["v_ww"], start, "signal_model")
         effects[i].details["signal_model_change"] = d.tolist()
+
+
+def _main_columns(f: Found) -> int:
+    """A coupling's main columns, its first ones: one per data channel, twice with the
+    channel's square (the pair); any Jacobian columns follow."""
+    return len(set(f.prop.axes or (None,))) * (1 + bool(f.prop.params.get("pair")))
 
 
 def _widened_coefficients(e: Any, f: Found, var_g, v_ww, start: int, what: str = "aliases") -> Any:

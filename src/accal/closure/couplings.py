@@ -230,14 +230,9 @@ def _shortest_lag(ctx: Context, name: str, x, lag: float, tc: float, top: float)
     for k in range(int(lag // period), 0, -1):  # shortest first
         cand = lag - k * period
         lo, hi = max(0.0, cand - 0.25 * period), min(top, cand + 0.25 * period)
-        res = minimize_scalar(
-            lambda lg: -_power_at(ctx, name, x, tc, lg),
-            bounds=(lo, hi),
-            method="bounded",
-            options={"xatol": 0.25 * ctx.grid.step, "maxiter": 25},
-        )
-        if -res.fun >= 0.98 * here:
-            return float(res.x)
+        best, power = _best_lag_in(ctx, name, x, tc, lo, hi)
+        if power >= 0.98 * here:
+            return best
     return lag
 
 
@@ -348,14 +343,9 @@ def _refine(ctx: Context, name: str, x, lag: float, tc: float, lag_step: float, 
     p0 = _power_at(ctx, name, x, tc, lag)
     lo, hi = max(0.0, lag - lag_step), min(top, lag + lag_step)
     if hi > lo:
-        res = minimize_scalar(
-            lambda lg: -_power_at(ctx, name, x, tc, lg),
-            bounds=(lo, hi),
-            method="bounded",
-            options={"xatol": 0.25 * ctx.grid.step, "maxiter": 25},
-        )
-        if -res.fun > p0:
-            lag, p0 = float(res.x), float(-res.fun)
+        best, power = _best_lag_in(ctx, name, x, tc, lo, hi)
+        if power > p0:
+            lag, p0 = best, power
     grid = sorted(AUX_TAUS)
     if tc not in grid or len(grid) < 2:
         return lag, tc, p0
@@ -451,13 +441,20 @@ def _lag_near(ctx: Context, name: str, x, lag: float, top: float, p0: float):
     lo, hi = max(0.0, lag - TAU_MIN_STEPS * step), min(top, lag + TAU_MIN_STEPS * step)
     if not hi > lo:
         return lag, p0
+    best, power = _best_lag_in(ctx, name, x, 0.0, lo, hi)
+    return (best, power) if power > p0 else (lag, p0)
+
+
+def _best_lag_in(ctx: Context, name: str, x, tc: float, lo: float, hi: float):
+    """``(lag, power)``: the lag in ``[lo, hi]`` explaining the most at time constant
+    ``tc`` (bounded Brent search to a quarter sample)."""
     res = minimize_scalar(
-        lambda lg: -_power_at(ctx, name, x, 0.0, lg),
+        lambda lg: -_power_at(ctx, name, x, tc, lg),
         bounds=(lo, hi),
         method="bounded",
-        options={"xatol": 0.25 * step, "maxiter": 25},
+        options={"xatol": 0.25 * ctx.grid.step, "maxiter": 25},
     )
-    return (float(res.x), float(-res.fun)) if -res.fun > p0 else (lag, p0)
+    return float(res.x), float(-res.fun)
 
 
 def _gauss_newton_step(ctx: Context, name: str, x, lag: float, tc: float):
@@ -478,10 +475,7 @@ def _gauss_newton_step(ctx: Context, name: str, x, lag: float, tc: float):
     base = np.column_stack(
         [rows[0], (rows[1] - rows[2]) / (lag + dl - lo), (up - down) / (2 * eps)]
     )
-    cols = []
-    for m in ctx.channel_masks():
-        cols.append(base * m[:, None])
-    z = np.column_stack(cols)
+    z = np.column_stack([base * m[:, None] for m in ctx.channel_masks()])
     zt = z - ctx.basis.project(z)
     coef, *_ = np.linalg.lstsq(zt, ctx.residual, rcond=None)
     a, b, e = coef[0::3], coef[1::3], coef[2::3]

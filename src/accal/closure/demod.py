@@ -3,7 +3,7 @@
 :func:`close_loop_demod` is the rotating-platform front end of the shared
 mechanism :func:`accal.closure.close_loop` (one mechanism, not two copies).  It
 builds the demodulation model of Lenoir et al. (2013) as a
-:class:`~accal.closure.basis.BlockBase` (one block per modulation period), with
+:class:`~accal.closure.blockbase.BlockBase` (one block per modulation period), with
 the two measurement axes as two data channels interleaved in time, and offers the
 generic candidates plus the two platform ones, :func:`~accal.closure.candidates.angle_offset`
 and :func:`~accal.closure.candidates.intra_period_shape`.
@@ -38,7 +38,8 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from accal.closure.basis import Basis, BlockBase
+from accal.closure.basis import Basis
+from accal.closure.blockbase import BlockBase
 from accal.closure.platform import PlatformInfo
 from accal.closure.results import ClosureResult
 from accal.closure.select import close_loop

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from accal.closure.basis import BlockBase
+from accal.closure.blockbase import BlockBase
 from accal.closure.validation import SignalProxies
 from accal.errors import ValidationError, check_option
 

@@ -517,6 +517,10 @@ def _norm(g: NDArray[np.float64], grid: Grid, e: int) -> float:
     return float(g[int(np.searchsorted(grid.idx, e)) :].sum())
 
 
+#: Candidate epochs per chunk in :func:`_exact`.
+EXACT_CHUNK = 8
+
+
 def _exact(grid, r, basis, k0, psd, cand, pos, project=True):
     """Size, σ and z of a step at each candidate grid epoch with the kernel as weights
     (null design projected out of them).
@@ -547,10 +551,6 @@ def _exact(grid, r, basis, k0, psd, cand, pos, project=True):
         sd[part] = np.sqrt(np.maximum(var, 0.0))
     z = np.where(sd > 0, size / np.where(sd > 0, sd, 1.0), 0.0)
     return z, size, sd
-
-
-#: Candidate epochs per chunk in :func:`_exact`.
-EXACT_CHUNK = 8
 
 
 def _weights(k0, grid, basis, epochs, project=True) -> NDArray[np.float64]:

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from accal.closure.basis import BlockBase
+from accal.closure.blockbase import BlockBase
 from accal.closure.residual import ResidualStats
 
 __all__ = ["BaseCoefficient", "ClosureResult", "Effect"]

@@ -37,7 +37,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from accal.closure.aliasspread import add_alias_spread, add_signal_model_spread
-from accal.closure.basis import Basis, BlockBase
+from accal.closure.basis import Basis
+from accal.closure.blockbase import BlockBase
 from accal.closure.epochprofile import add_epoch_uncertainties
 from accal.closure.final import covariances, describe, refer_exponentials
 from accal.closure.inputs import (
@@ -215,7 +216,7 @@ def close_loop(
     base : {"poly0", "poly1", "poly2", "poly3"}, array_like (N, p0) or BlockBase
         The declared model: a polynomial in ``t − t0`` (``t0``: first used sample;
         one per channel), a dense design, or a block-diagonal design
-        (:class:`~accal.closure.basis.BlockBase`, e.g. the per-period demodulation
+        (:class:`~accal.closure.blockbase.BlockBase`, e.g. the per-period demodulation
         model; its ``signal`` columns are the signal part of the null model).
     aux : dict of str to array_like, shape (N,), optional
         Channels offered to the coupling search (temperatures, angular
@@ -310,29 +311,18 @@ def close_loop(
     st, use, notes = _leave_out_outliers(setup, st, use, aux_all, n_spikes)
     families = _families(builders, orbit_period, st["template"] is not None)
     st, jumps = _take_out_jumps(setup, st, use, builders, alpha / (2.0 * families), notes)
-    fit0 = st["fit0"]
     proxies = usable_proxies(proxies_all, use, notes) if st["template"] else None
     opts.update(
         families=families,
         enabled=tuple(name for name, _ in builders),
         alpha=alpha,
-        residual_ptp=float(np.ptp(fit0.resid)),
+        residual_ptp=float(np.ptp(st["fit0"].resid)),
         signal_template=st["template"].period if st["template"] is not None else None,
     )
 
     make = _search_maker(setup, builders, alpha, opts, aux_all, ref_all, proxies, notes)
-    search = make(st, use)
     stop = _floor_stop(resolution)
-    # paused at the first coupling whose channel's history is unknown somewhere: the
-    # search without those samples replaces it (the rest of this one would be wasted)
-    run(search, max_effects, stop, until=_unknown_pause)
-    again = _without_unknown_history(search, use, setup, make, max_effects, stop)
-    if again is None:
-        if search.paused:  # not replaced: the selection goes on
-            run(search, max_effects, stop)
-        swap_smooth(search)
-    else:
-        search, st = again
+    search, st = _select(make, st, use, setup, max_effects, stop)
     floored = stop is not None and stop(search)
     if psd_update is not None and (search.found or jumps.jumps):
         new_psd = psd_update(_effects_sum(search, setup, st, jumps.jumps))
@@ -340,6 +330,24 @@ def close_loop(
     return _finish(
         search, setup, st, catchall_knots, noise_psd, floored, considered, opts, jumps.jumps
     )
+
+
+def _select(make, st, use, setup: _Setup, max_effects: int, stop) -> tuple[Search, dict]:
+    """The search on the null fit ``st`` and its ``(search, st)``.
+
+    Paused at the first coupling whose channel's history is unknown at used samples:
+    the search without those samples replaces it (:func:`_without_unknown_history`;
+    the rest of this one would be wasted), else it goes on.
+    """
+    search = make(st, use)
+    run(search, max_effects, stop, until=_unknown_pause)
+    again = _without_unknown_history(search, use, setup, make, max_effects, stop)
+    if again is not None:
+        return again
+    if search.paused:  # not replaced: the selection goes on
+        run(search, max_effects, stop)
+    swap_smooth(search)
+    return search, st
 
 
 def _final_fit(search: Search, setup: _Setup, st) -> tuple[list[Found], Basis, Any]:

@@ -7,7 +7,7 @@ the raw data's units, with the fit's scales held at their estimates (eq. 1 of
     a_raw = S⁻¹ a_ref + b(t) + n,   y_i = a_raw,i − (S⁻¹ a_ref)_i = Σ_k b_ik φ_k(t) + ...
 
 so the declared base of :func:`accal.closure.close_loop` is the bias basis
-``φ_k(t)`` alone (a :class:`~accal.closure.basis.BlockBase`), and every candidate
+``φ_k(t)`` alone (a :class:`~accal.closure.blockbase.BlockBase`), and every candidate
 (steps, couplings to the data's channels, polynomial and exponential drifts,
 and the scale where the fit held it fixed) is tested, validated and estimated
 against it, with the closure's own machinery deciding what is an instrument
@@ -35,7 +35,7 @@ import numpy as np
 
 from accal import __version__
 from accal.closure import close_loop, effect_label
-from accal.closure.basis import BlockBase
+from accal.closure.blockbase import BlockBase
 from accal.closure.report import to_markdown
 from accal.closure.select import MIN_SAMPLES
 from accal.gracejob.options import GraceBiasOptions
