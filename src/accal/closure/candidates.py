@@ -79,7 +79,7 @@ class Context:
         Frequencies not to propose again [Hz] (already modelled or rejected).
     options : dict
         Search settings (``step_tests``, ``min_segment``, ``max_lag``, ``n_lags``,
-        ``aux_taus``, ``fmax``, ``settle_taus``) and ``platform``
+        ``lag_scan``, ``aux_taus``, ``fmax``, ``settle_taus``) and ``platform``
         (:class:`PlatformInfo`, for ``angle_offset`` and ``intra_period_shape``).
     channel_all : ndarray of int, shape (N,), optional
         Data channel of every sample (several channels: e.g. the y and z axes of

@@ -14,12 +14,14 @@ reference`` when the scale factor is off by ``δs`` (the wavelet paper's eq. 9,
 
 The lag scan is fast: with one data channel, the numerator of the explained power
 of every lag of the grid comes from one FFT cross-correlation
-(:func:`_correlate_valid`) of the residual with the channel, and the
+(:func:`accal.closure.lagscan.correlate_valid`) of the residual with the channel, and the
 channel-only denominator (its norm with the null model projected out, at every
 lag) is computed once per channel and reused at every selection step.  The
 effects already in the model are left out of the scan's ranking (second order);
-the proposal's own test uses the exact projection.  Several data channels (the
-rotating platform) evaluate the lag grid directly.
+the proposal's own test uses the exact projection.  A base of many blocks (the
+rotating platform's per-period base) is scanned at every sample lag, exactly, by
+block-wise FFT correlations (:mod:`accal.closure.lagscan`); other designs evaluate
+the lag grid directly.
 """
 
 from __future__ import annotations
@@ -28,12 +30,18 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import fft
 from scipy.linalg import lapack
 from scipy.optimize import minimize, minimize_scalar
 
 from accal.closure.candidates import Context, Proposal, channel_power
 from accal.closure.kinds import channel_class
+from accal.closure.lagscan import (
+    block_scan,
+    block_spectra,
+    correlate_valid,
+    projected_width,
+    scan_power,
+)
 from accal.closure.significance import test_proposal
 
 __all__ = [
@@ -91,19 +99,6 @@ def first_order(x: NDArray[np.float64], dt: float, tau: float) -> NDArray[np.flo
     if info != 0:  # pragma: no cover - a unit diagonal is never singular
         raise RuntimeError(f"dtbtrs failed (info {info})")
     return y[:, 0] + x[0]
-
-
-def _correlate_valid(h: NDArray[np.float64], r: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``c[k] = Σ_j h[j + k]·r[j]`` for ``k = 0 .. len(h) − len(r)`` (``"valid"`` mode).
-
-    By FFT: the circular correlation of ``h`` with ``r`` zero-padded to a length
-    ``N ≥ len(h)`` equals the linear one wherever ``j + k < len(h)`` (no wrap), which
-    holds for every ``k`` kept (Oppenheim & Schafer, *Discrete-Time Signal
-    Processing*, 3rd ed., sec. 8.7).
-    """
-    n = fft.next_fast_len(h.size, real=True)
-    c = fft.irfft(fft.rfft(h, n) * np.conj(fft.rfft(r, n)), n)
-    return c[: h.size - r.size + 1]
 
 
 def square_about_mean(x: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -261,10 +256,61 @@ def _scan_fft(
     else:
         rg = np.zeros(grid.size)
         rg[grid.idx] = ctx.residual
-        num = _correlate_valid(hp, rg)[big - lags] ** 2
+        num = correlate_valid(hp, rg)[big - lags] ** 2
     den = ctx.cache[key]
     z2 = np.maximum(den, 0.0)
     return np.where(z2 > 1e-9 * np.max(z2, initial=0.0), num / np.maximum(z2, 1e-300), 0.0)
+
+
+def _raw_multiplicity(ctx: Context, name: str, tc: float, hp, big: int, top: float) -> float:
+    """:func:`lag_multiplicity` of the channel's response as read, cached per selection."""
+    key = ("m", name, tc, big)
+    if key not in ctx.cache:
+        ctx.cache[key] = lag_multiplicity(hp[big:], ctx.grid.step, top)
+    return ctx.cache[key]
+
+
+def _fine_scan(ctx: Context) -> bool:
+    """Whether the lags are scanned at every sample (:mod:`accal.closure.lagscan`): a
+    base of several blocks without a nuisance projection, unless ``options["lag_scan"]``
+    is ``"grid"``."""
+    if ctx.options.get("lag_scan", "fine") != "fine":
+        return False
+    basis = ctx.basis
+    return basis.nuisance is None and basis.n_blocks > 1 and ctx.grid.idx.size > 0
+
+
+def _scan_fine(ctx: Context, name: str, tc: float, hp, big: int, top: float):
+    """``(power at every lag 0 .. big samples, multiplicity)`` for a block base.
+
+    The power is exact (:func:`accal.closure.lagscan.scan_power`).  Multiplicity:
+    ``top/w + 1`` independent lags with ``w`` the projected columns' decorrelation
+    width (:func:`accal.closure.lagscan.projected_width`), at least the channel's
+    as read (:func:`lag_multiplicity`) and at most one per sample; both measured
+    once per channel and time constant, with the design of the first step.
+    """
+    # contexts sharing a cache may differ in their used samples (the search without a
+    # coupled channel's unknown start) or block base: both are part of the key
+    key = ("fine scan", name, tc, big, np.packbits(ctx.use).tobytes())
+    hit = ctx.cache.get(key)
+    if hit is None or hit[0] is not ctx.basis.q:
+        scan = block_scan(ctx.grid, ctx.basis, hp, big, _block_spectra(ctx, big, key[-1]))
+        width = projected_width(ctx.grid, ctx.basis, scan, big) * ctx.grid.step
+        m = min(max(top / width + 1.0, _raw_multiplicity(ctx, name, tc, hp, big, top)), big + 1.0)
+        hit = ctx.cache[key] = (ctx.basis.q, scan, float(m))
+    _, scan, m = hit
+    return scan_power(ctx.grid, ctx.basis, ctx.residual, scan, big), m
+
+
+def _block_spectra(ctx: Context, big: int, use_key: bytes):
+    """:func:`accal.closure.lagscan.block_spectra` of the context's blocks, shared by
+    its channels and time constants; only the latest used-sample set is kept (~10 MB a
+    base column on a day)."""
+    hit = ctx.cache.get("block spectra")
+    if hit is None or hit[0] is not ctx.basis.q or hit[1] != (big, use_key):
+        hit = (ctx.basis.q, (big, use_key), block_spectra(ctx.grid, ctx.basis, big))
+        ctx.cache["block spectra"] = hit
+    return hit[2]
 
 
 def _scan_direct(ctx: Context, hp: NDArray[np.float64], lags: NDArray[np.int64]):
@@ -518,6 +564,7 @@ def auxiliary(ctx: Context) -> list[Proposal]:
     step = ctx.grid.step
     top_all = max_lag(ctx.options, ctx.span)
     fft_path = ctx.n_chan == 1 and "null_basis" in ctx.cache
+    fine = not fft_path and _fine_scan(ctx)
     best = None  # (power, name, x, tc, lag, lag_step, top)
     mult = 0.0
     for name, x in _channels(ctx):
@@ -530,17 +577,22 @@ def auxiliary(ctx: Context) -> list[Proposal]:
         taus = (0.0,) if angular else tuple(ctx.options.get("aux_taus", AUX_TAUS))
         n_l = int(ctx.options.get("n_lags", N_LAGS))
         lags = np.unique(np.rint(np.linspace(0.0, top, n_l) / step).astype(np.int64))
-        lag_step = float((lags[1] - lags[0]) * step) if lags.size > 1 else 0.0
         big = int(lags.max())
+        if fine:
+            lags = np.arange(big + 1)
+        lag_step = float((lags[1] - lags[0]) * step) if lags.size > 1 else 0.0
         for tc in taus:
             hp = _response(ctx, name, x, big, tc)
-            if ("m", name, tc, big) not in ctx.cache:
-                ctx.cache[("m", name, tc, big)] = lag_multiplicity(hp[big:], step, top)
-            mult += ctx.cache[("m", name, tc, big)]
-            if fft_path:
-                pw = _scan_fft(ctx, hp, lags, ("den", name, tc, big))
+            if fine:
+                pw, m = _scan_fine(ctx, name, tc, hp, big, top)
             else:
-                pw = _scan_direct(ctx, hp, lags)
+                pw = (
+                    _scan_fft(ctx, hp, lags, ("den", name, tc, big))
+                    if fft_path
+                    else _scan_direct(ctx, hp, lags)
+                )
+                m = _raw_multiplicity(ctx, name, tc, hp, big, top)
+            mult += m
             j = int(np.argmax(pw))
             if best is None or pw[j] > best[0]:
                 best = (float(pw[j]), name, x, tc, float(lags[j] * step), lag_step, top)

@@ -291,7 +291,9 @@ def close_loop_demod(
         longest auxiliary lag searched, default the larger of ``τ/2`` and
         min(span/20, 1 h); ``options["lag_period"]``, default ``τ``: a channel that
         repeats with the pattern couples the same at lags a period apart, and the
-        shortest such lag that explains as much is taken).
+        shortest such lag that explains as much is taken; ``options["lag_scan"]``,
+        default ``"fine"``: the couplings' lags are scanned at every sample,
+        ``"grid"`` at 31 lags, :mod:`accal.closure.lagscan`).
 
     Returns
     -------
