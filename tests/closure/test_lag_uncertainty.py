@@ -205,3 +205,47 @@ def test_profile_with_no_information_spans_the_range():
     info = profile_intervals(_parabola(100.0, 5.0, 400.0), 100.0, 0.5, 1800.0, 1.0)
     assert info["lag_interval"] == [0.0, 1800.0] and info["lag_ambiguous"]
     assert profile_intervals(lambda lg: 0.0, 100.0, 400.0, 1800.0, 1.0) == {}
+
+
+def _two_peaks(ripple: float):
+    """A main peak at 700 s (σ 3 s, W 400), a narrow second one at 1,117.5 s (σ 1 s,
+    ΔW 2), ΔW 50 elsewhere, and a ripple of up to ``2·ripple`` in ΔW every 7 s."""
+
+    def power(lg: float) -> float:
+        dw = min(((lg - 700.0) / 3.0) ** 2, 2.0 + (lg - 1117.5) ** 2, 50.0)
+        dw += ripple * (1.0 - np.cos(2 * np.pi * (lg - 700.0) / 7.0))
+        return 2.0 * (1.0 - dw / 400.0)
+
+    return power
+
+
+def test_a_narrow_peak_between_the_profile_grid_lags_is_listed_with_the_dense_scan():
+    """The profile's 121-lag grid over 1,800 s (15 s apart) sees the floor on both
+    sides of a 2 s wide second peak; the powers at every sample lag (``dense``) list
+    it.  The ripple makes a local maximum every 7 s: not other lags (their
+    prominence is under ΔW = 1)."""
+    power = _two_peaks(0.1)
+    lags = np.arange(1801.0)
+    dense = (lags, np.array([power(g) for g in lags]))
+    sparse = profile_intervals(power, 700.0, 400.0, 1800.0, 1.0)
+    assert not any(abs(a["lag"] - 1117.5) < 2 for a in sparse["lag_alternatives"])
+    info = profile_intervals(power, 700.0, 400.0, 1800.0, 1.0, dense=dense)
+    (alt,) = info["lag_alternatives"]
+    assert abs(alt["lag"] - 1117.5) < 0.3 and abs(alt["delta_w"] - 2.0) < 0.3
+    assert not info["lag_ambiguous"]  # ΔW 2: listed, does not widen the 68 % interval
+
+
+def test_the_lag_of_the_signal_models_extension_widens_the_interval():
+    """A lag the extended signal model prefers (``model_lags``) is another lag that fits
+    as well, whatever its ΔW under the declared model; a whole period away it is an
+    alias."""
+    power = _parabola(1646.0, 3.0, 400.0)
+    info = profile_intervals(power, 1646.0, 400.0, 3600.0, 1.0, 600.0, model_lags=[3446.0])
+    (alt,) = [a for a in info["lag_alternatives"] if a.get("signal_model")]
+    assert alt["lag"] == 3446.0 and alt["alias"]
+    assert info["lag_ambiguous"]
+    lo, hi = info["lag_interval"]
+    assert lo <= 1643.0 and hi >= 3446.0
+    inside = profile_intervals(power, 1646.0, 400.0, 3600.0, 1.0, 600.0, model_lags=[1647.0])
+    assert not any(a.get("signal_model") for a in inside["lag_alternatives"])
+    assert inside["lag_interval"][1] < 1650.0

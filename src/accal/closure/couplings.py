@@ -270,7 +270,7 @@ def _raw_multiplicity(ctx: Context, name: str, tc: float, hp, big: int, top: flo
     return ctx.cache[key]
 
 
-def _fine_scan(ctx: Context) -> bool:
+def scans_every_lag(ctx: Context) -> bool:
     """Whether the lags are scanned at every sample (:mod:`accal.closure.lagscan`): a
     base of several blocks without a nuisance projection, unless ``options["lag_scan"]``
     is ``"grid"``."""
@@ -493,14 +493,48 @@ def _lag_near(ctx: Context, name: str, x, lag: float, top: float, p0: float):
 
 def _best_lag_in(ctx: Context, name: str, x, tc: float, lo: float, hi: float):
     """``(lag, power)``: the lag in ``[lo, hi]`` explaining the most at time constant
-    ``tc`` (bounded Brent search to a quarter sample)."""
+    ``tc`` (bounded Brent search to a quarter sample).
+
+    With the lags scanned at every sample (:func:`lag_powers`) the search starts from
+    the best sample lag of the window and refines within a sample of it: a window of
+    a few hundred seconds holds several peaks of a kicked platform temperature, and
+    Brent's search over all of it converged to another one (closure-detection seeds
+    7321 and 7322: couplings found at lags 3,000 s and 1,800 s beyond the truth, their
+    aliases not seen).
+    """
+    step = ctx.grid.step
+    dense = lag_powers(ctx, name, x, tc)
+    if dense is not None:
+        lags, pw = dense
+        inside = np.flatnonzero((lags >= lo - 1e-9) & (lags <= hi + 1e-9))
+        if inside.size:
+            k = inside[int(np.argmax(pw[inside]))]
+            lo, hi = max(lo, lags[k] - step), min(hi, lags[k] + step)
+            if not hi > lo:
+                return float(lags[k]), float(pw[k])
     res = minimize_scalar(
         lambda lg: -_power_at(ctx, name, x, tc, lg),
         bounds=(lo, hi),
         method="bounded",
-        options={"xatol": 0.25 * ctx.grid.step, "maxiter": 25},
+        options={"xatol": 0.25 * step, "maxiter": 25},
     )
-    return float(res.x), float(-res.fun)
+    lag, power = float(res.x), float(-res.fun)
+    if dense is not None and inside.size and pw[k] > power:
+        return float(lags[k]), float(pw[k])
+    return lag, power
+
+
+def lag_powers(ctx: Context, name: str, x, tc: float):
+    """``(lags [s], explained power)`` at every sample lag ``0 .. max_lag`` at time
+    constant ``tc`` (:mod:`accal.closure.lagscan`, the current model and residual), or
+    None where the lags are not scanned so (:func:`scans_every_lag`)."""
+    if not scans_every_lag(ctx):
+        return None
+    step = ctx.grid.step
+    big = int(np.rint(max_lag(ctx.options, ctx.span) / step))
+    hp = _response(ctx, name, np.asarray(x, dtype=np.float64), big, tc, cache=tc in AUX_TAUS)
+    pw, _ = _scan_fine(ctx, name, tc, hp, big, big * step)
+    return step * np.arange(big + 1), pw
 
 
 def _gauss_newton_step(ctx: Context, name: str, x, lag: float, tc: float):
@@ -563,8 +597,8 @@ def auxiliary(ctx: Context) -> list[Proposal]:
     """
     step = ctx.grid.step
     top_all = max_lag(ctx.options, ctx.span)
-    fft_path = ctx.n_chan == 1 and "null_basis" in ctx.cache
-    fine = not fft_path and _fine_scan(ctx)
+    fine = scans_every_lag(ctx)
+    fft_path = not fine and ctx.n_chan == 1 and "null_basis" in ctx.cache
     best = None  # (power, name, x, tc, lag, lag_step, top)
     mult = 0.0
     for name, x in _channels(ctx):

@@ -60,6 +60,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import signal
 from scipy.optimize import minimize_scalar
 
 from accal.closure.candidates import Context, row_fit
@@ -67,10 +68,12 @@ from accal.closure.couplings import (
     ANGULAR_MAX_LAG,
     SQUARED,
     _column,
-    _columns,
     _power_at,
     _powers_at,
+    _used_rows,
+    lag_powers,
     max_lag,
+    scans_every_lag,
 )
 from accal.closure.kinds import channel_class
 from accal.closure.results import Effect
@@ -144,6 +147,7 @@ def lag_uncertainty(
     top: float,
     *,
     low_pass: bool = True,
+    extended: Context | None = None,
 ) -> dict[str, Any]:
     """The lag's 68 % profile interval, its σ and the other lags that fit as well.
 
@@ -168,6 +172,16 @@ def lag_uncertainty(
         slow channel by about τ, so lag and τ trade along a ridge (closure-detection,
         24 days per size: with τ held the true lag was inside the 68 % interval for 2
         of 12 found couplings).  Other lags and islands are looked for with τ held.
+    extended : Context, optional
+        The same model with the signal's extension (demodulation: the per-period
+        signal's slope, :meth:`accal.closure.search.Search.signal_state`).  Where the
+        lags are scanned at every sample, its best lag, when outside the interval,
+        is another lag that fits as well (``"signal_model": True``; an alias when a
+        whole period away): the "mean" signal model leaks the signal's change within
+        a period, with the rotation's rhythm, into the residual, and a temperature
+        kicked at every rotation fits it at lags a period apart (closure-detection
+        seed 7322: 3e-8 m/s²/K at 1,646.9 s found at 3,446.5 s, ΔW 3,824 for the true
+        lag under the "mean" model; 1,647.0 s with the slope in the model).
 
     Returns
     -------
@@ -202,7 +216,15 @@ def lag_uncertainty(
             )
             return max(-float(res.fun), power(lg))
 
-    return profile_intervals(power, float(lag), float(wald), top, step, period, free, powers)
+    dense = lag_powers(ctx, name, x, tau)
+    model_lags = []
+    if extended is not None and dense is not None:
+        ext = lag_powers(extended, name, x, tau)
+        if ext is not None and ext[0].size:
+            model_lags.append(float(ext[0][int(np.argmax(ext[1]))]))
+    return profile_intervals(
+        power, float(lag), float(wald), top, step, period, free, powers, dense, model_lags
+    )
 
 
 def profile_intervals(
@@ -214,6 +236,8 @@ def profile_intervals(
     period: float = 0.0,
     free=None,
     powers=None,
+    dense=None,
+    model_lags: Sequence[float] = (),
 ) -> dict[str, Any]:
     """The lag's 68 % and 95 % profile sets from the explained power ``power(L)``.
 
@@ -237,6 +261,15 @@ def profile_intervals(
     powers : callable, optional
         ``power`` at an array of lags at once (the scans of a grid); by default
         ``power`` lag by lag.
+    dense : tuple of ndarray, optional
+        ``(lags, P)`` at every sample lag over ``[0, top]`` (:func:`lag_powers`): the
+        other lags that fit as well are looked for there instead of on
+        :data:`PROFILE_POINTS` lags (a kicked platform temperature's peaks are ~35 s
+        wide, the profile's grid 30 s apart).
+    model_lags : sequence of float
+        Lags another plausible model of the data chose (:func:`lag_uncertainty`'s
+        ``extended``): each outside the interval is an alternative that fits as well
+        (``"signal_model": True``, and ``"alias"`` when a whole period away).
 
     Returns
     -------
@@ -278,7 +311,14 @@ def profile_intervals(
     lo, hi = _contiguous(inside, lag, top, step)
     if free is not None:
         lo, hi = _widened(inside_free, lag, top, step, lo, hi)
-    alts = _alternatives(power, powers, delta_w, (lag, p_hat, period), lo, hi, top, step)
+    alts = _alternatives(power, powers, delta_w, (lag, p_hat, period), lo, hi, top, step, dense)
+    for m in model_lags:
+        if lo - step <= m <= hi + step or any(abs(a["lag"] - m) <= step for a in alts):
+            continue
+        k = round(abs(m - lag) / period) if period > 0 else 0
+        alias = k >= 1 and abs(abs(m - lag) - k * period) <= 0.25 * period
+        alt = {"lag": float(m), "delta_w": max(float(delta_w(power(m))), 0.0)}
+        alts.append({**alt, "signal_model": True, **({"alias": True} if alias else {})})
     alike = _alike_lags(alts)
     ambiguous = bool(alike)
     half = 0.5 * (hi - lo)  # each other lag is as uncertain as the chosen one
@@ -386,27 +426,51 @@ def _is_alias(d_lag: float, p: float, p_hat: float, period: float) -> bool:
 
 def _alike_lags(alternatives: Sequence[dict[str, Any]]) -> list[float]:
     """The lags of ``lag_alternatives`` that fit as well as the chosen one: ``ΔW ≤ 1``,
-    or an alias a period apart."""
-    return [a["lag"] for a in alternatives if a["delta_w"] <= 1.0 or a.get("alias")]
+    an alias a period apart, or the lag of the signal's extended model."""
+    return [
+        a["lag"]
+        for a in alternatives
+        if a["delta_w"] <= 1.0 or a.get("alias") or a.get("signal_model")
+    ]
 
 
-def _alternatives(power, powers, delta_w, at, lo, hi, top, step) -> list[dict[str, Any]]:
+def _alternatives(power, powers, delta_w, at, lo, hi, top, step, dense=None):
     """Other local maxima of the profile over ``[0, top]`` with ``ΔW ≤ ALT_DELTA_W``,
     and aliases a period apart (:func:`_is_alias`); ``power`` is ``P(L)``, ``powers``
-    ``P`` at an array of lags (the grid), ``at`` is (lag, power, period)."""
+    ``P`` at an array of lags (the grid), ``at`` is (lag, power, period); ``dense``
+    ``(lags, P)`` at every sample lag (used instead of the grid when given)."""
     lag, p_hat, period = at
     if top <= 0:
         return []
-    grid = np.linspace(0.0, top, PROFILE_POINTS)
+    if dense is not None:
+        grid, values = np.asarray(dense[0], float), np.asarray(dense[1], float)
+        keep = grid <= top + 1e-9
+        grid, values = grid[keep], values[keep]
+    else:
+        grid = np.linspace(0.0, top, PROFILE_POINTS)
+    if grid.size < 2:
+        return []
     spacing = float(grid[1] - grid[0])
     far = (grid < lo - spacing) | (grid > hi + spacing)
     if not far.any():
         return []
-    prof = np.full(grid.size, -np.inf)
-    prof[far] = powers(grid[far])
-    left = np.r_[-np.inf, prof[:-1]]
-    right = np.r_[prof[1:], -np.inf]
-    peaks = np.flatnonzero(far & (prof >= left) & (prof >= right) & np.isfinite(prof))
+    if dense is not None:
+        # at every sample the profile wiggles: a peak is another lag only when the
+        # profile dips between it and its neighbours by ΔW ≥ 1 (its prominence)
+        # (the ends may be peaks too: padded below every value)
+        prof = values
+        floor = float(np.min(prof)) - p_hat
+        found, _ = signal.find_peaks(
+            np.r_[floor, prof, floor], prominence=p_hat / max(delta_w(0.0), 1e-300)
+        )
+        found -= 1
+        peaks = found[far[found]]
+    else:
+        prof = np.full(grid.size, -np.inf)
+        prof[far] = powers(grid[far])
+        left = np.r_[-np.inf, prof[:-1]]
+        right = np.r_[prof[1:], -np.inf]
+        peaks = np.flatnonzero(far & (prof >= left) & (prof >= right) & np.isfinite(prof))
     # the grid can sit a fraction of a spacing off a narrow peak: refine the highest
     peaks = peaks[np.argsort(-prof[peaks])][:MAX_ALTERNATIVES]
     out = []
@@ -525,8 +589,8 @@ def coefficient_interval(
 
     def fits(tc: float, lg) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """``ĉ_k`` and ``P_k`` (channels × lags) at one τ."""
-        z = _columns(ctx, name, x, float(tc), lg)[ctx.use]
-        z = (z - z.mean(axis=0)).T
+        z = _used_rows(ctx, name, x, float(tc), lg)
+        z -= z.mean(axis=1, keepdims=True)
         c_k, p_k = [], []
         for m in masks:
             zr, nrm, ok = row_fit(ctx, z * m if len(masks) > 1 else z)
@@ -595,6 +659,14 @@ def _cover_sigma(info: dict[str, Any], lag: float, top: float) -> None:
         info[key] = [max(min(lo, lag - k * sigma), 0.0), min(max(hi, lag + k * sigma), top)]
 
 
+def _extended_context(search: Search, others: Sequence[Found], basis, lev) -> Context | None:
+    """The context of ``others`` with the signal's extension (None without one)."""
+    if search.signal0 is None:
+        return None
+    ext = search.signal_state(others, basis)
+    return search.context(others, ext, ext.fit(search.y_u), lev)
+
+
 def add_lag_uncertainties(search: Search, final: Sequence[Found], effects: list[Effect]) -> None:
     """Put each coupling's lag interval in its effect's details (in place).
 
@@ -629,7 +701,17 @@ def add_lag_uncertainties(search: Search, final: Sequence[Found], effects: list[
             top = min(top, ANGULAR_MAX_LAG)
         tau = float(f.prop.params.get("tau") or 0.0)
         info = lag_uncertainty(
-            ctx, name, np.asarray(x, float), tau, float(lag), _wald(e), top, low_pass=not angular
+            ctx,
+            name,
+            np.asarray(x, float),
+            tau,
+            float(lag),
+            _wald(e),
+            top,
+            low_pass=not angular,
+            extended=_extended_context(search, others, basis, lev)
+            if scans_every_lag(ctx)
+            else None,
         )
         if not info:
             continue
