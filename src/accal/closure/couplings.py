@@ -313,6 +313,8 @@ def _block_spectra(ctx: Context, big: int, use_key: bytes):
     base column on a day)."""
     hit = ctx.cache.get("block spectra")
     if hit is None or hit[0] is not ctx.basis.q or hit[1] != (big, use_key):
+        hit = None
+        ctx.cache.pop("block spectra", None)  # freed before the new one is made
         hit = (ctx.basis.q, (big, use_key), block_spectra(ctx.grid, ctx.basis, big))
         ctx.cache["block spectra"] = hit
     return hit[2]

@@ -49,6 +49,8 @@ __all__ = [
     "scan_power",
 ]
 
+#: Rows (the residual, the extra columns) correlated together by the scan.
+DENSE_BATCH = 4
 #: Blocks per FFT batch (bounds the memory of long records: a batch of 128 blocks of a
 #: 600 s period with a 3,600 s lag range is ~30 MB per column).
 BLOCK_BATCH = 128
@@ -201,11 +203,16 @@ def block_scan(
 
 
 def _dense_correlations(ctx_grid, basis, residual, h, big):
-    """``z_clᵀ r`` (C, L+1) and ``Q_eᵀ z_cl`` (k, C, L+1) for the extra columns."""
+    """``z_clᵀ r`` (C, L+1) and ``Q_eᵀ z_cl`` (k, C, L+1) for the extra columns, in
+    batches of :data:`DENSE_BATCH` rows (each row's correlation is a grid-long
+    transform per data channel, ~3 MB on a day)."""
     g = ctx_grid
     rows = np.vstack([residual[None, :], basis.qe.T])
-    c = correlate_valid(h, _placed(g.idx, g.channel, g.n_chan, g.size, rows))
-    return c[0], c[1:]
+    out = np.empty((rows.shape[0], g.n_chan, big + 1))
+    for a in range(0, rows.shape[0], DENSE_BATCH):
+        part = _placed(g.idx, g.channel, g.n_chan, g.size, rows[a : a + DENSE_BATCH])
+        out[a : a + DENSE_BATCH] = correlate_valid(h, part)
+    return out[0], out[1:]
 
 
 def scan_power(grid, basis, residual, scan: ChannelScan, big: int) -> NDArray[np.float64]:
