@@ -13,7 +13,7 @@ FUZZ_MINUTES ?= 10
 # pytest processes (pytest-xdist): one per core; TEST_WORKERS=0 runs in one process
 TEST_WORKERS ?= auto
 
-.PHONY: install run demo test test-all lint bench bench-readers bench-archive bench-demod-year bench-closure closure-detection fuzz-cli mc-sigma mc-sigma-indep mc-sigma-demod mc-reference bench-reference compare-outputs clean
+.PHONY: install run demo test test-all lint bench bench-readers bench-archive bench-demod-year bench-closure closure-detection coupling-scan-null fuzz-cli mc-sigma mc-sigma-indep mc-sigma-demod mc-reference bench-reference compare-outputs clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -107,6 +107,12 @@ bench-closure: $(STAMP)
 ##                    size, the real Swarm day (~45 min on 2 idle cores); QUICK=1: a few cases (~2 min)
 closure-detection: $(STAMP)
 	$(BIN)/python benchmarks/closure_detection.py $(if $(QUICK),--quick) --out $(OUT)/closure-detection
+
+## coupling-scan-null: false-alarm rate of the platform coupling scan (every sample lag vs the
+##                     31-lag grid) on clean platform runs, two noises, two temperatures
+##                     (~13 min on 2 cores; RUNS=100 per cell)
+coupling-scan-null: $(STAMP)
+	$(BIN)/python benchmarks/coupling_scan_null.py --runs $(or $(RUNS),100) --out $(OUT)/coupling-scan-null
 
 ## fuzz-cli: black-box mutation fuzzing of the CLI on mutated sample files (issue 23): cases,
 ##           outcomes by kind, every BAD case with its reproduction, peak RSS; FUZZ_MINUTES=10
