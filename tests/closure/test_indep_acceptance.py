@@ -287,3 +287,37 @@ def test_platform_coupling_between_the_grid_lags_is_found():
     assert abs(e.lag - truth) < 3 * e.details["lag_sigma"], (e.lag, e.details["lag_sigma"])
     grid, _ = close_loop_demod(t, m, theta, options={"lag_scan": "grid"}, **kw)
     assert not [e for e in grid.effects if e.name == "auxiliary"]
+
+
+def test_a_later_coupling_is_searched_again_without_its_made_up_start():
+    """A 3e-7 m/s²/K coupling through a 200 s low-pass at 400 s, added here to a clean
+    run (half on z; the low-pass an exact first-order recursion from the first value,
+    as accal assumes the channel's unknown history).  The search without the first
+    ~1,300 s, where the lagged, filtered channel is made up, did not find it (p_adj
+    0.024; 2e-5 with them): the first coupling stays, and the search went on to add the
+    channel's square at a 3,173 s lag, made up over its first 3,173 s, never searched
+    again without them (the code before: both in the model).  Now the square pauses
+    the search too, and without every coupling's made-up samples it is not kept
+    (measured: the coupling 3.12e-7 ± 3.6e-8 on y, 2.0e-8 ± 1.1e-7 on z; the square
+    eliminated)."""
+    from accal.estimators.noise import as_psd
+
+    run = platform_run(11, days=1.0)
+    t, (my, mz), theta, aux = _platform(run)
+    temp = aux["temperature"]
+    a = np.exp(-1.0 / 200.0)
+    y = np.empty_like(temp)
+    y[0] = temp[0]
+    for k in range(1, temp.size):
+        y[k] = a * y[k - 1] + (1 - a) * temp[k]
+    x = np.interp(t - 400.0, t, y)
+    res, _ = close_loop_demod(
+        t, (my + 3e-7 * x, mz + 1.5e-7 * x), theta, tau=600.0, aux=aux, rest_tol=1e-9,
+        noise_psd=as_psd(None),
+    )  # fmt: skip
+    assert [(e.name, e.channel) for e in res.effects] == [("auxiliary", "temperature")]
+    (e,) = res.effects
+    for ax, want in (("y", 3e-7), ("z", 1.5e-7)):
+        d = e.details["axes"][ax]
+        assert abs(d["coefficient"] - want) < 2 * d["sigma"], (ax, d["coefficient"], d["sigma"])
+    assert abs(e.lag + e.tau - 600.0) < 100.0  # lag 398 s, τ 212 s: on the lag/τ ridge

@@ -21,7 +21,8 @@ and makes the final fit (:mod:`accal.closure.final`):
    reported in ``result.rejected`` with the reason; at the first coupling whose
    lagged or filtered channel is unknown at used samples (before the record, after
    its holes) the search is made again without those samples
-   (:func:`_without_unknown_history`);
+   (:func:`~accal.closure.unknownhistory.without_unknown_history`), and a later
+   coupling it does not find again is rejected;
 5. the final fit with the Jacobians of searched time constants and lags, the
    coloured-noise covariances (coupling coefficients also with their spread over
    alias lags and over the signal model, :mod:`accal.closure.aliasspread`), and a
@@ -31,7 +32,7 @@ and makes the final fit (:mod:`accal.closure.final`):
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -63,6 +64,13 @@ from accal.closure.residual import characterise, make_grid, projection_bias
 from accal.closure.results import BaseCoefficient, ClosureResult, Effect
 from accal.closure.search import Found, Search, run, swap_smooth
 from accal.closure.significance import describe_smooth, unexplained_test
+from accal.closure.unknownhistory import (
+    UNKNOWN_DEPTH,
+    new_unknown,
+    reject_unconfirmed,
+    unknown_pause,
+    without_unknown_history,
+)
 from accal.closure.validation import SignalProxies
 from accal.closure.widen import placebo_step_sigmas, widened_couplings
 from accal.errors import ValidationError, check_option
@@ -336,15 +344,35 @@ def _select(make, st, use, setup: _Setup, max_effects: int, stop) -> tuple[Searc
     """The search on the null fit ``st`` and its ``(search, st)``.
 
     Paused at the first coupling whose channel's history is unknown at used samples:
-    the search without those samples replaces it (:func:`_without_unknown_history`;
-    the rest of this one would be wasted), else it goes on.
+    the search without those samples replaces it when it finds the coupling again
+    (:func:`~accal.closure.unknownhistory.without_unknown_history`; the rest of this
+    one would be wasted); else this one goes on with it, pausing again at the next
+    such coupling, which is rejected unless found again without every coupling's
+    made-up samples (at most :data:`~accal.closure.unknownhistory.UNKNOWN_DEPTH`
+    times).
     """
     search = make(st, use)
-    run(search, max_effects, stop, until=_unknown_pause)
-    again = _without_unknown_history(search, use, setup, make, max_effects, stop)
-    if again is not None:
-        return again
-    if search.paused:  # not replaced: the selection goes on
+    kept: set = set()  # couplings kept unconfirmed (the first search's first ones)
+
+    def pause(s: Search) -> bool:
+        return unknown_pause(s, frozenset(kept))
+
+    run(search, max_effects, stop, until=pause)
+    for _ in range(UNKNOWN_DEPTH):
+        if not search.paused:
+            break
+        skip = frozenset(kept)
+        again = without_unknown_history(search, use, setup, make, max_effects, stop, skip=skip)
+        if again is not None:
+            return again
+        # not found without the made-up samples: the first coupling stays (unconfirmed),
+        # a later one is rejected; the selection goes on, pausing at the next one
+        if kept:
+            reject_unconfirmed(search, skip)
+        else:
+            kept.update(new_unknown(search, skip))
+        run(search, max_effects, stop, until=pause)
+    if search.paused:
         run(search, max_effects, stop)
     swap_smooth(search)
     return search, st
@@ -440,103 +468,6 @@ def _floor_stop(resolution: float | None) -> Callable[[Search], bool] | None:
         return True
 
     return at_floor
-
-
-def _unknown_pause(s: Search) -> bool:
-    """Whether ``s`` holds a coupling whose channel's history is unknown at a used sample."""
-    return _unknown_history(s, s.t_all) is not None
-
-
-#: Searches again at most this many times for couplings found only without the samples
-#: an earlier coupling's unknown history left out.
-UNKNOWN_DEPTH = 3
-
-
-def _without_unknown_history(search, use, setup, make, max_effects, stop, depth: int = 0):
-    """The search again without the samples a coupled channel's history is unknown at.
-
-    A lagged or low-passed channel is unknown before the record and after its holes
-    (its regressor there held the last value): those samples were fitted with a
-    made-up regressor (QA: a 1000 s lag, its coefficient 7σ off; after a resampled
-    gap, false steps).  Returns ``(search, st)`` of the second search when it keeps
-    the couplings, else None (``search`` stands).  ``search`` may be paused at the
-    coupling (:func:`~accal.closure.search.run`'s ``until``): the second search is a
-    whole one from the start, so the first one's remaining steps are not needed for it
-    (a platform coupling run: one selection step of ~1.2 s saved).
-    """
-    unknown = _unknown_history(search, search.t_all)
-    if unknown is None or int((use & ~unknown.mask).sum()) < MIN_SAMPLES:
-        return None
-    lead, coupled = unknown.lead, unknown.channels
-    use2 = use & ~unknown.mask
-    search.drop_caches()  # memory for the second search (rebuilt if this one is kept)
-    st2 = setup.build(use2)
-    again = make(st2, use2)
-    # another coupling with an unknown history among the samples left: the same again
-    run(again, max_effects, stop, until=_unknown_pause if depth + 1 < UNKNOWN_DEPTH else None)
-    deeper = None
-    if again.paused:
-        deeper = _without_unknown_history(again, use2, setup, make, max_effects, stop, depth + 1)
-        if deeper is None:
-            run(again, max_effects, stop)
-    if deeper is not None:
-        again, st2 = deeper
-    else:
-        swap_smooth(again)
-    kept = {f.prop.channel for f in again.found if f.prop.name == "auxiliary"}
-    if not coupled <= kept:
-        return None
-    again.note(
-        "auxiliary",
-        None,
-        f"{int((use & unknown.mask).sum())} samples left out of the analysis: the "
-        f"first {lead:.0f} s and as much after each hole of the coupled channel(s) "
-        f"{', '.join(sorted(coupled))}, whose lagged and filtered values are unknown "
-        "there",
-        {"left_out": lead},
-    )
-    return again, st2
-
-
-class _Unknown(NamedTuple):
-    mask: NDArray[np.bool_]
-    lead: float
-    channels: set
-
-
-def _unknown_history(search: Search, t_all: NDArray[np.float64]) -> _Unknown | None:
-    """Samples where an accepted coupling's lagged, filtered channel is not known.
-
-    For a lag ``L`` and a low-pass ``τ``: the first ``L + 5τ`` seconds of the channel
-    and as much after each of its holes (NaN, or a data gap over 5 steps).  None when
-    no accepted coupling has a lag of over 5 steps or a low-pass.
-    """
-    step = search.grid.step
-    mask = np.zeros(t_all.size, dtype=bool)
-    lead_max, chans = 0.0, set()
-    for f in search.found:
-        if f.prop.name != "auxiliary":
-            continue
-        lag, tc = float(f.prop.params.get("lag") or 0.0), float(f.prop.params.get("tau") or 0.0)
-        lead = (lag if lag > 5 * step else 0.0) + 5.0 * tc
-        if lead <= 0:
-            continue
-        name = str(f.prop.channel).removesuffix("^2")
-        x = search.aux.get(name)
-        if x is None:
-            continue
-        known = np.isfinite(x) & np.isfinite(t_all)
-        tk = np.unique(t_all[known])
-        if tk.size == 0:
-            continue
-        starts = [tk[0]] + list(tk[1:][np.diff(tk) > 5 * step])
-        for s0 in starts:
-            mask |= (t_all >= s0 - 1e-9) & (t_all < s0 + lead)
-        lead_max = max(lead_max, lead)
-        chans.add(f.prop.channel)
-    if not chans or not (mask & search.use).any():
-        return None
-    return _Unknown(mask, lead_max, chans)
 
 
 class _Setup:

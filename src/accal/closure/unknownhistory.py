@@ -1,0 +1,193 @@
+"""Couplings whose channel's history is unknown at used samples: search again without them.
+
+A lagged or low-passed channel is unknown before the record and after its holes (its
+regressor there holds the first or last value): the samples there are fitted with a
+made-up regressor (QA: a 1000 s lag, its coefficient 7σ off; after a resampled gap,
+false steps).  The selection pauses at the first coupling with such samples
+(:func:`unknown_pause`), searches again from the start without them
+(:func:`without_unknown_history`) and keeps that search when it finds the coupling
+again.  Otherwise the first search goes on with the coupling (its first one: fewer
+samples can lose a real coupling, a GRACE day at 1e-9 m/s²/K in closure-detection) and
+pauses at the next such coupling, which must be found again without every coupling's
+made-up samples or is rejected (:func:`reject_unconfirmed`): a later coupling can be
+fitting the misfit that the first one's made-up samples leave.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import TYPE_CHECKING, NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from accal.closure.inputs import MIN_SAMPLES
+from accal.closure.search import run, swap_smooth
+
+if TYPE_CHECKING:  # annotations only
+    from accal.closure.search import Found, Search
+
+__all__ = [
+    "UNKNOWN_DEPTH",
+    "reject_unconfirmed",
+    "unknown_history",
+    "new_unknown",
+    "unknown_pause",
+    "without_unknown_history",
+]
+
+#: Searches again at most this many times for couplings found only without the samples
+#: an earlier coupling's unknown history left out.
+UNKNOWN_DEPTH = 3
+
+
+class Unknown(NamedTuple):
+    """Samples where accepted couplings' channels are unknown (:func:`unknown_history`)."""
+
+    mask: NDArray[np.bool_]
+    lead: float
+    channels: set
+
+
+def _regions(
+    search: Search, t_all: NDArray[np.float64], skip=frozenset()
+) -> list[tuple[Found, NDArray, float]]:
+    """``(effect, mask, lead)`` of every accepted coupling with an unknown history (but
+    those in ``skip``).
+
+    For a lag ``L`` and a low-pass ``τ``: the first ``L + 5τ`` seconds of the channel
+    and as much after each of its holes (NaN, or a data gap over 5 steps); couplings
+    with a lag of at most 5 steps and no low-pass have none.
+    """
+    step = search.grid.step
+    out = []
+    for f in search.found:
+        if f.prop.name != "auxiliary" or f in skip:
+            continue
+        lag, tc = float(f.prop.params.get("lag") or 0.0), float(f.prop.params.get("tau") or 0.0)
+        lead = (lag if lag > 5 * step else 0.0) + 5.0 * tc
+        if lead <= 0:
+            continue
+        x = search.aux.get(str(f.prop.channel).removesuffix("^2"))
+        if x is None:
+            continue
+        known = np.isfinite(x) & np.isfinite(t_all)
+        tk = np.unique(t_all[known])
+        if tk.size == 0:
+            continue
+        mask = np.zeros(t_all.size, dtype=bool)
+        for s0 in [tk[0]] + list(tk[1:][np.diff(tk) > 5 * step]):
+            mask |= (t_all >= s0 - 1e-9) & (t_all < s0 + lead)
+        out.append((f, mask, lead))
+    return out
+
+
+def unknown_history(search: Search, t_all: NDArray[np.float64], skip=frozenset()) -> Unknown | None:
+    """Samples where an accepted coupling's lagged, filtered channel is not known
+    (:func:`_regions`, all couplings but ``skip`` together); None when none of them is
+    used."""
+    regions = _regions(search, t_all, skip)
+    if not regions:
+        return None
+    mask = np.logical_or.reduce([m for _, m, _ in regions])
+    if not (mask & search.use).any():
+        return None
+    return Unknown(
+        mask, max(lead for _, _, lead in regions), {f.prop.channel for f, _, _ in regions}
+    )
+
+
+def unknown_pause(s: Search, skip=frozenset()) -> bool:
+    """Whether ``s`` holds a coupling (not in ``skip``) whose channel's history is
+    unknown at a used sample."""
+    return unknown_history(s, s.t_all, skip) is not None
+
+
+def new_unknown(search: Search, skip) -> list[Found]:
+    """The couplings not in ``skip`` whose channel's history is unknown at used samples."""
+    return [f for f, m, _ in _regions(search, search.t_all, skip) if (m & search.use).any()]
+
+
+def without_unknown_history(
+    search, use, setup, make, max_effects, stop, depth: int = 0, skip=frozenset()
+):
+    """The search again without the samples a coupled channel's history is unknown at.
+
+    Returns ``(search, st)`` of the second search when it keeps the couplings (but
+    those in ``skip``, kept in ``search`` unconfirmed), else None (``search`` stands;
+    :func:`reject_unconfirmed` is the caller's).  ``search``
+    may be paused at the coupling (:func:`~accal.closure.search.run`'s ``until``): the
+    second search is a whole one from the start, so the first one's remaining steps
+    are not needed for it (a platform coupling run: one selection step of ~1.2 s
+    saved).  A coupling the second search finds with samples of its own unknown is
+    searched for again the same way, at most :data:`UNKNOWN_DEPTH` times; not
+    confirmed so, it stays in the second search, as the first coupling of a search
+    does (rejecting it there, the first search went on and took the made-up start of
+    a 2,000 s lag and 1,500 s low-pass for a 10σ step: ``test_close_loop.py``).
+    """
+    if unknown_history(search, search.t_all, skip) is None:
+        return None
+    unknown = unknown_history(search, search.t_all)  # every coupling's made-up samples
+    if unknown is None or int((use & ~unknown.mask).sum()) < MIN_SAMPLES:
+        return None
+    lead = unknown.lead
+    coupled = {f.prop.channel for f in new_unknown(search, skip)}
+    use2 = use & ~unknown.mask
+    search.drop_caches()  # memory for the second search (rebuilt if this one is kept)
+    st2 = setup.build(use2)
+    again = make(st2, use2)
+    # another coupling with an unknown history among the samples left: the same again
+    run(again, max_effects, stop, until=unknown_pause if depth + 1 < UNKNOWN_DEPTH else None)
+    deeper = None
+    if again.paused:
+        deeper = without_unknown_history(again, use2, setup, make, max_effects, stop, depth + 1)
+        if deeper is None:  # its first coupling stays, as in the first search
+            run(again, max_effects, stop)
+    if deeper is not None:
+        again, st2 = deeper
+    else:
+        swap_smooth(again)
+    kept = {f.prop.channel for f in again.found if f.prop.name == "auxiliary"}
+    if not coupled <= kept:
+        return None
+    again.note(
+        "auxiliary",
+        None,
+        f"{int((use & unknown.mask).sum())} samples left out of the analysis: the "
+        f"first {lead:.0f} s and as much after each hole of the coupled channel(s) "
+        f"{', '.join(sorted(coupled))}, whose lagged and filtered values are unknown "
+        "there",
+        {"left_out": lead},
+    )
+    return again, st2
+
+
+def reject_unconfirmed(search: Search, skip=frozenset()) -> None:
+    """Move the couplings (not in ``skip``) whose channel's history is unknown at used
+    samples from the model to the rejected ones (in place; the search goes on from the
+    model without them).
+
+    The search without those samples (:func:`without_unknown_history`) did not find
+    them: their evidence rests on samples where a lagged, filtered channel was made
+    up, theirs or an earlier coupling's.  On a platform run with a 3e-7 m/s²/K
+    coupling through a 200 s low-pass at 400 s (p_adj 2e-5 with its made-up samples,
+    0.024 without; kept, as the first coupling of a search is) the search went on and
+    added the square of the channel at a 3,173 s lag, made up over its first 3,173 s
+    and never searched again without them (before 2026-11-28).
+    """
+    hit = [(f, m) for f, m, _ in _regions(search, search.t_all, skip) if (m & search.use).any()]
+    if not hit:
+        return
+    out = {id(f): int((m & search.use).sum()) for f, m in hit}
+    keep = []
+    for f in search.found:
+        if id(f) not in out:
+            keep.append(f)
+            continue
+        why = (
+            f"not confirmed without the {out[id(f)]} samples where its lagged and filtered "
+            "channel is unknown (the search without them did not find it)"
+        )
+        verdict = dataclasses.replace(f.verdict, ok=False, reason=why)
+        search.rejected.append(dataclasses.replace(f, verdict=verdict))
+    search.found[:] = keep
