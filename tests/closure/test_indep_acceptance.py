@@ -321,3 +321,24 @@ def test_a_later_coupling_is_searched_again_without_its_made_up_start():
         d = e.details["axes"][ax]
         assert abs(d["coefficient"] - want) < 2 * d["sigma"], (ax, d["coefficient"], d["sigma"])
     assert abs(e.lag + e.tau - 600.0) < 100.0  # lag 398 s, τ 212 s: on the lag/τ ridge
+
+
+def test_a_square_fitting_the_signals_in_period_leak_is_not_removed():
+    """A clean run (`tests.indep` seed 9001): the temperature with its square had
+    p_adj 7e-5 at the first step, the same under white noise of 1e-11 m/s² (so the
+    signal, not the noise): the "mean" per-period signal leaves the signal's change
+    within a period, with the rotation's rhythm, in the residual, and the square of a
+    temperature kicked at every rotation fits it.  It was removed (at 174 s, and at
+    466 s with the 31-lag grid); with the signal's slope in the model its p_adj is 1,
+    so it is not identifiable, reported and not removed."""
+    from accal.estimators.noise import as_psd
+
+    run = platform_run(9001, days=1.0)
+    t, m, theta, aux = _platform(run)
+    res, per = close_loop_demod(
+        t, m, theta, tau=600.0, aux=aux, rest_tol=1e-9, noise_psd=as_psd(None)
+    )
+    assert not res.effects, [(e.name, e.channel) for e in res.effects]
+    (rej,) = [e for e in res.rejected if e.name == "auxiliary"]
+    assert "signal's change within a modulation period" in rej.details["reason"]
+    assert np.all(per.a_Y_after == per.a_Y_before)
