@@ -156,15 +156,18 @@ def platform():
     return make_platform
 
 
-def block_context(t, y, use, block, cols, n_blocks: int, aux: dict):
+def block_context(
+    t, y, use, block, cols, n_blocks: int, aux: dict, *, extra=None, chan=None, names=()
+):
     """A closure :class:`~accal.closure.candidates.Context` of ``y`` on a per-block base
-    (``cols`` on the samples of each ``block``), fitted on the ``use`` samples."""
+    (``cols`` on the samples of each ``block``, ``extra`` dense columns beside them),
+    fitted on the ``use`` samples; ``chan``/``names``: several data channels."""
     from accal.closure.basis import Basis
     from accal.closure.candidates import Context
     from accal.closure.residual import make_grid
 
-    basis = Basis(block[use], cols[use], n_blocks=n_blocks)
-    grid = make_grid(t[use])
+    basis = Basis(block[use], cols[use], None if extra is None else extra[use], n_blocks)
+    grid = make_grid(t[use], None if chan is None else chan[use])
     return Context(
         t_all=t,
         use=use,
@@ -177,4 +180,6 @@ def block_context(t, y, use, block, cols, n_blocks: int, aux: dict):
         labels=frozenset(),
         aux=aux,
         orbit_period=None,
+        channel_all=chan,
+        channel_names=tuple(names),
     )

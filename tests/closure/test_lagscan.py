@@ -12,10 +12,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from accal.closure.basis import Basis
 from accal.closure.candidates import Context, channel_power
 from accal.closure.lagscan import block_scan, projected_width, scan_power
-from accal.closure.residual import make_grid
+
+from .conftest import block_context
 
 
 def _two_channel_context(seed: int, n: int, block_len: int, n_extra: int, holes: int):
@@ -42,30 +42,16 @@ def _two_channel_context(seed: int, n: int, block_len: int, n_extra: int, holes:
     cols[1::2] = np.column_stack(cz)
     extra = rng.standard_normal((2 * n, n_extra)).cumsum(axis=0) if n_extra else None
     n_blocks = int(blk_t.max()) + 1
-    basis = Basis(block[use], cols[use], None if extra is None else extra[use], n_blocks=n_blocks)
-    grid = make_grid(t[use], chan[use])
     y = rng.standard_normal(2 * n)
-    ctx = Context(
-        t_all=t,
-        use=use,
-        t0=float(t[use][0]),
-        span=float(np.ptp(t[use])),
-        grid=grid,
-        residual=basis.fit(y[use]).resid,
-        basis=basis,
-        leverage=np.zeros((2, 1)),
-        labels=frozenset(),
-        aux={},
-        orbit_period=None,
-        channel_all=chan,
-        channel_names=("y", "z"),
+    ctx = block_context(
+        t, y, use, block, cols, n_blocks, {}, extra=extra, chan=chan, names=("y", "z")
     )
-    # a kicked channel (a decay after every block start) plus a random walk, from
-    # ``big`` samples before the first grid point
     return ctx, rng
 
 
 def _channel(rng, size: int, block_len: int) -> np.ndarray:
+    """A kicked channel (a decay after every block start) plus a random walk, on
+    ``size`` grid points (from ``big`` samples before the first one)."""
     k = np.arange(size, dtype=float)
     return 290.0 + np.exp(-(k % block_len) / 17.0) + 0.1 * np.cumsum(rng.standard_normal(size))
 

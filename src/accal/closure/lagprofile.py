@@ -700,29 +700,14 @@ def add_lag_uncertainties(search: Search, final: Sequence[Found], effects: list[
         if angular:
             top = min(top, ANGULAR_MAX_LAG)
         tau = float(f.prop.params.get("tau") or 0.0)
+        xa, lag = np.asarray(x, float), float(lag)
+        extended = _extended_context(search, others, basis, lev) if scans_every_lag(ctx) else None
         info = lag_uncertainty(
-            ctx,
-            name,
-            np.asarray(x, float),
-            tau,
-            float(lag),
-            _wald(e),
-            top,
-            low_pass=not angular,
-            extended=_extended_context(search, others, basis, lev)
-            if scans_every_lag(ctx)
-            else None,
+            ctx, name, xa, tau, lag, _wald(e), top, low_pass=not angular, extended=extended
         )
         if not info:
             continue
-        sand = lag_sandwich_sigma(
-            ctx,
-            name,
-            np.asarray(x, float),
-            tau,
-            float(lag),
-            max(info["lag_sigma_68"], ctx.grid.step),
-        )
+        sand = lag_sandwich_sigma(ctx, name, xa, tau, lag, max(info["lag_sigma_68"], ctx.grid.step))
         info["lag_sigma_profile"] = info["lag_sigma"]
         if np.isfinite(sand):
             info["lag_sigma_sandwich"] = sand
@@ -735,7 +720,7 @@ def add_lag_uncertainties(search: Search, final: Sequence[Found], effects: list[
             if lin > info["lag_sigma"]:
                 info["lag_sigma"] = float(lin)
                 info["lag_sigma_method"] = "linearised"
-        _cover_sigma(info, float(lag), top)
+        _cover_sigma(info, lag, top)
         if not angular:
             lags = info.get("lag_interval_95", [lag, lag])
             alike = _alike_lags(info.get("lag_alternatives", []))
@@ -743,9 +728,9 @@ def add_lag_uncertainties(search: Search, final: Sequence[Found], effects: list[
                 coefficient_interval(
                     ctx,
                     name,
-                    np.asarray(x, float),
+                    xa,
                     tau,
-                    float(lag),
+                    lag,
                     _wald(e),
                     e.coefficient,
                     e.sigma,

@@ -314,11 +314,7 @@ def close_loop(
     opts = {**(options or {}), "channel_units": dict(channel_units or {})}
     fixed = bool(opts.get("orbit_period_fixed", False))
     setup = _Setup(t_all, y_all, base, chan_all, names, signal_model, orbit_period, fixed)
-    use, n_spikes = _spikes_out(t_all, y_all, chan_all, use)
-    st = setup.build(use)
-    st, use, notes = _leave_out_outliers(setup, st, use, aux_all, n_spikes)
-    families = _families(builders, orbit_period, st["template"] is not None)
-    st, jumps = _take_out_jumps(setup, st, use, builders, alpha / (2.0 * families), notes)
+    st, use, notes, families, jumps = _null_model(setup, use, aux_all, builders, alpha)
     proxies = usable_proxies(proxies_all, use, notes) if st["template"] else None
     opts.update(
         families=families,
@@ -338,6 +334,17 @@ def close_loop(
     return _finish(
         search, setup, st, catchall_knots, noise_psd, floored, considered, opts, jumps.jumps
     )
+
+
+def _null_model(setup: _Setup, use, aux_all, builders, alpha: float):
+    """The null fit on the samples left after spikes and outliers, with the bias jumps
+    told by their edge taken out: ``(st, use, notes, families, jumps)``."""
+    use, n_spikes = _spikes_out(setup.t_all, setup.y_all, setup.chan_all, use)
+    st = setup.build(use)
+    st, use, notes = _leave_out_outliers(setup, st, use, aux_all, n_spikes)
+    families = _families(builders, setup.orbit_period, st["template"] is not None)
+    st, jumps = _take_out_jumps(setup, st, use, builders, alpha / (2.0 * families), notes)
+    return st, use, notes, families, jumps
 
 
 def _select(make, st, use, setup: _Setup, max_effects: int, stop) -> tuple[Search, dict]:
