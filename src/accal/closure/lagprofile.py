@@ -60,7 +60,6 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import signal
 from scipy.optimize import minimize_scalar
 
 from accal.closure.candidates import Context, row_fit
@@ -76,6 +75,7 @@ from accal.closure.couplings import (
     scans_every_lag,
 )
 from accal.closure.kinds import channel_class
+from accal.closure.peaks import prominent_peaks
 from accal.closure.results import Effect
 from accal.closure.wald import sandwich_cov
 
@@ -364,9 +364,23 @@ def _widened(free, lag: float, top: float, step: float, lo: float, hi: float):
     fits per side instead of ~10 when τ is well determined."""
     tol = max(0.1 * step, 0.1 * (hi - lo))
     first = max(step, tol)
-    f_lo = _side(free, lo, 0.0, first, tol) if lo > 0 else 0.0
-    f_hi = _side(free, hi, top, first, tol) if hi < top else top
+    f_lo = _beyond(free, lo, 0.0, first, tol) if lo > 0 else 0.0
+    f_hi = _beyond(free, hi, top, first, tol) if hi < top else top
     return min(lo, f_lo), max(hi, f_hi)
+
+
+def _beyond(free, end: float, bound: float, first: float, tol: float) -> float:
+    """The end of ``{free ≥ 0}`` beyond ``end`` (inside) towards ``bound``
+    (:func:`_side`), tried first at ``tol`` from ``end``: when ``free < 0`` there the
+    end is within the tolerance of ``end`` and is ``end``, one fit instead of the
+    ~5 of doubling and bisection (a τ well determined leaves the held set as it is:
+    a platform coupling day's lag profile, 16 of 21 re-fits of τ saved)."""
+    probe = end + (tol if bound > end else -tol)
+    if (bound - probe) * (bound - end) <= 0:  # the bound is nearer than the tolerance
+        return end
+    if free(probe) < 0:
+        return end
+    return _side(free, probe, bound, first, tol)
 
 
 def _two_sigma_set(
@@ -460,7 +474,7 @@ def _alternatives(power, powers, delta_w, at, lo, hi, top, step, dense=None):
         # (the ends may be peaks too: padded below every value)
         prof = values
         floor = float(np.min(prof)) - p_hat
-        found, _ = signal.find_peaks(
+        found = prominent_peaks(
             np.r_[floor, prof, floor], prominence=p_hat / max(delta_w(0.0), 1e-300)
         )
         found -= 1
