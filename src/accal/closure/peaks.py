@@ -60,7 +60,10 @@ def prominences(x: NDArray[np.float64], peaks: NDArray[np.int64]) -> NDArray[np.
         return np.zeros(0)
     left = _nearest_higher(x)[peaks] + 1
     right = x.size - 2 - _nearest_higher(x[::-1])[x.size - 1 - peaks]
-    base = [max(x[a : k + 1].min(), x[k : b + 1].min()) for a, k, b in zip(left, peaks, right)]
+    base = [
+        max(x[a : k + 1].min(), x[k : b + 1].min())
+        for a, k, b in zip(left, peaks, right, strict=True)
+    ]
     return x[peaks] - np.asarray(base, dtype=np.float64)
 
 
