@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from accal.closure import close_loop
-from accal.closure.lagprofile import _crossing, _side, profile_intervals
+from accal.closure.lagprofile import _cover_sigma, _crossing, _side, profile_intervals
 from accal.closure.report import to_markdown
 
 N = 20_000
@@ -249,3 +249,23 @@ def test_the_lag_of_the_signal_models_extension_widens_the_interval():
     inside = profile_intervals(power, 1646.0, 400.0, 3600.0, 1.0, 600.0, model_lags=[1647.0])
     assert not any(a.get("signal_model") for a in inside["lag_alternatives"])
     assert inside["lag_interval"][1] < 1650.0
+
+
+def test_an_alias_lag_is_as_uncertain_as_the_chosen_one():
+    """The reported intervals hold each other lag that fits as well ± the chosen lag's
+    local σ (closure-detection platform runs: the true lag 0.1 s beyond an alias's
+    ± 0.06 s on 3 of 21), and the chosen lag ± its σ as before."""
+    info = {
+        "lag_sigma": 300.0,
+        "lag_interval": [759.38, 1360.56],  # the hull: the alias ± the profile's half-width
+        "lag_interval_95": [759.3, 1360.6],
+    }
+    _cover_sigma(info, 759.44, 3600.0, alike=[1360.5], local=0.54)
+    assert info["lag_interval"] == pytest.approx([759.44 - 300.0, 1360.5 + 0.54])
+    assert info["lag_interval_95"] == pytest.approx([759.44 - 600.0, 1360.5 + 2 * 0.54])
+    assert info["lag_interval_profile"] == [759.38, 1360.56]
+    lo, hi = info["lag_interval"]
+    assert lo <= 1360.6 <= hi  # the true lag of that run
+    bare = {"lag_sigma": 0.5, "lag_interval": [99.9, 100.1]}
+    _cover_sigma(bare, 100.0, 3600.0)
+    assert bare["lag_interval"] == pytest.approx([99.5, 100.5])

@@ -5,8 +5,9 @@ regressor there holds the first or last value): the samples there are fitted wit
 made-up regressor (QA: a 1000 s lag, its coefficient 7σ off; after a resampled gap,
 false steps).  The selection pauses at the first coupling with such samples
 (:func:`unknown_pause`), searches again from the start without them
-(:func:`without_unknown_history`) and keeps that search when it finds the coupling
-again.  Otherwise the first search goes on with the coupling (its first one: fewer
+(:func:`without_unknown_history`; when they are at most :data:`CONTINUE_SHARE` of the
+samples, from the first search's model, :func:`_continue_from`) and keeps that search
+when it finds the coupling again.  Otherwise the first search goes on with the coupling (its first one: fewer
 samples can lose a real coupling, a GRACE day at 1e-9 m/s²/K in closure-detection) and
 pauses at the next such coupling, which must be found again without every coupling's
 made-up samples or is rejected (:func:`reject_unconfirmed`): a later coupling can be
@@ -124,7 +125,8 @@ def without_unknown_history(
     may be paused at the coupling (:func:`~accal.closure.search.run`'s ``until``): the
     second search is a whole one from the start, so the first one's remaining steps
     are not needed for it (a platform coupling run: one selection step of ~1.2 s
-    saved).  A coupling the second search finds with samples of its own unknown is
+    saved); when the made-up samples are at most :data:`CONTINUE_SHARE` of the used
+    ones it starts from the first one's model instead (:func:`_continue_from`).  A coupling the second search finds with samples of its own unknown is
     searched for again the same way, at most :data:`UNKNOWN_DEPTH` times; not
     confirmed so, it stays in the second search, as the first coupling of a search
     does (rejecting it there, the first search went on and took the made-up start of
