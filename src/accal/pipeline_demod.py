@@ -16,7 +16,7 @@ keeps working.  The outputs of :func:`run_demod` are described in
 from __future__ import annotations
 
 from accal.demodjob.batch import process_run, run_demod
-from accal.demodjob.closure import change_statistics, close_run
+from accal.demodjob.closure import change_statistics, close_run, closure_summary
 from accal.demodjob.closure_outputs import apply_closure, write_demod_closure
 from accal.demodjob.diagnose import current_summaries, diagnose_demod_dir
 from accal.demodjob.options import (
@@ -79,6 +79,7 @@ __all__ = [
     "check_distinct_runs",
     "check_output_format",
     "close_run",
+    "closure_summary",
     "consistency_summary",
     "current_summaries",
     "diagnose_demod_dir",

@@ -285,6 +285,7 @@ def demodulate(
         DemodOptions,
         apply_closure,
         close_run,
+        closure_summary,
         estimate,
         load_psd,
         period_rows,
@@ -305,8 +306,7 @@ def demodulate(
         used = res.noise.used if getattr(res, "noise", None) is not None else noise
         entry, extended, _ = close_run(path, opts, path.parent, step=step, psd=used)
         rows, units = apply_closure(rows, units, extended)
-        keys = ("effects", "unexplained", "rms_before", "rms_after", "model")
-        summary["closure"] = {k: entry[k] for k in keys}
+        summary["closure"] = closure_summary(entry)
         summary_of_extended(summary, rows, entry["model"])  # the mean of the extended model
         closure = Closure({path.name: entry}, gps_time=False)
     result = Demodulation(

@@ -168,8 +168,15 @@ def _run_lines(path: Path, s: dict[str, Any], first_output: Path) -> list[str]:
             e["name"] + (f"({e['channel']})" if e.get("channel") else "") for e in c["effects"]
         ]
         found += ["unexplained"] * len(c["unexplained"])
+        after = c.get("noise_after")
+        noise = (
+            f"; noise at 2/tau without its effects {after['level_data']:.3g} m/s^2/sqrt(Hz) "
+            "(the sigma after the closure)"
+            if after
+            else ""
+        )
         lines.append(
             f"{path}: closure: {', '.join(found) or 'nothing found'}; residual RMS "
-            f"{c['rms_before']:.3g} -> {c['rms_after']:.3g} m/s^2 (closure.md)"
+            f"{c['rms_before']:.3g} -> {c['rms_after']:.3g} m/s^2{noise} (closure.md)"
         )
     return lines

@@ -276,10 +276,10 @@ def profile_intervals(
     dict
         As :func:`lag_uncertainty`, plus ``lag_interval_95`` [s, s] and
         ``lag_sigma_68`` (half the 68 % interval's width) [s], ``lag_sigma_local``
-        (half the width of the chosen lag's own contiguous 68 % set) [s].  ``lag_sigma`` is the
-        larger of ``lag_sigma_68`` and a quarter of the 95 % interval's width
-        (eq. 1 of the module docstring's profile: ``ΔW = 1`` and ``ΔW = 4`` are 1σ and
-        2σ on a parabola).
+        (half the width of the chosen lag's own contiguous 68 % set) [s].
+        ``lag_sigma`` is the larger of ``lag_sigma_68`` and a quarter of the 95 %
+        interval's width (eq. 1 of the module docstring's profile: ``ΔW = 1`` and
+        ``ΔW = 4`` are 1σ and 2σ on a parabola).
     """
     p_hat = power(lag) if free is None else max(power(lag), free(lag))
     if not (p_hat > 0 and np.isfinite(wald)):

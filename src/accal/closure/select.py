@@ -284,9 +284,10 @@ def close_loop(
     psd_update : callable, optional
         For a noise model that depends on the effects found (``accal demod --psd auto``
         estimates it again without them): when the search found any, called with
-        their fitted sum on every sample (N,) [m/s², NaN-free, as subtracted from
-        ``y``]; a PSD it returns replaces ``noise_psd`` in the final fit (None keeps
-        it).  The search does not use ``noise_psd`` (its tests estimate the noise from
+        their fitted sum on every sample (N,) [m/s², as subtracted from ``y``; NaN
+        at the samples the search left out because a coupled channel is made up
+        there (the first lag of the record), whose misfit is not noise]; a PSD it
+        returns replaces ``noise_psd`` in the final fit (None keeps it).  The search does not use ``noise_psd`` (its tests estimate the noise from
         the residual), so the caller need not search twice.
 
     Returns
@@ -329,7 +330,9 @@ def close_loop(
     search, st = _select(make, st, use, setup, max_effects, stop)
     floored = stop is not None and stop(search)
     if psd_update is not None and (search.found or jumps.jumps):
-        new_psd = psd_update(_effects_sum(search, setup, st, jumps.jumps))
+        model = _effects_sum(search, setup, st, jumps.jumps)
+        model[use & ~search.use] = np.nan  # left out by the search (a channel made up)
+        new_psd = psd_update(model)
         noise_psd = noise_psd if new_psd is None else new_psd
     return _finish(
         search, setup, st, catchall_knots, noise_psd, floored, considered, opts, jumps.jumps

@@ -7,11 +7,12 @@ false steps).  The selection pauses at the first coupling with such samples
 (:func:`unknown_pause`), searches again from the start without them
 (:func:`without_unknown_history`; when they are at most :data:`CONTINUE_SHARE` of the
 samples, from the first search's model, :func:`_continue_from`) and keeps that search
-when it finds the coupling again.  Otherwise the first search goes on with the coupling (its first one: fewer
-samples can lose a real coupling, a GRACE day at 1e-9 m/s²/K in closure-detection) and
-pauses at the next such coupling, which must be found again without every coupling's
-made-up samples or is rejected (:func:`reject_unconfirmed`): a later coupling can be
-fitting the misfit that the first one's made-up samples leave.
+when it finds the coupling again.  Otherwise the first search goes on with the
+coupling (its first one: fewer samples can lose a real coupling, a GRACE day at 1e-9
+m/s²/K in closure-detection) and pauses at the next such coupling, which must be found
+again without every coupling's made-up samples or is rejected
+(:func:`reject_unconfirmed`): a later coupling can be fitting the misfit that the
+first one's made-up samples leave.
 """
 
 from __future__ import annotations
@@ -126,8 +127,9 @@ def without_unknown_history(
     second search is a whole one from the start, so the first one's remaining steps
     are not needed for it (a platform coupling run: one selection step of ~1.2 s
     saved); when the made-up samples are at most :data:`CONTINUE_SHARE` of the used
-    ones it starts from the first one's model instead (:func:`_continue_from`).  A coupling the second search finds with samples of its own unknown is
-    searched for again the same way, at most :data:`UNKNOWN_DEPTH` times; not
+    ones it starts from the first one's model instead (:func:`_continue_from`).  A
+    coupling the second search finds with samples of its own unknown is searched for
+    again the same way, at most :data:`UNKNOWN_DEPTH` times; not
     confirmed so, it stays in the second search, as the first coupling of a search
     does (rejecting it there, the first search went on and took the made-up start of
     a 2,000 s lag and 1,500 s low-pass for a 10σ step: ``test_close_loop.py``).
@@ -144,7 +146,7 @@ def without_unknown_history(
     search.drop_caches()  # memory for the second search (rebuilt if this one is kept)
     st2 = setup.build(use2)
     again = make(st2, use2)
-    if share <= CONTINUE_SHARE and not _continue_from(again, search):
+    if share <= CONTINUE_SHARE and not _continue_from(again, search, coupled):
         return None
     # another coupling with an unknown history among the samples left: the same again
     run(again, max_effects, stop, until=unknown_pause if depth + 1 < UNKNOWN_DEPTH else None)
@@ -172,10 +174,11 @@ def without_unknown_history(
     return again, st2
 
 
-def _continue_from(again: Search, search: Search) -> bool:
+def _continue_from(again: Search, search: Search, coupled: set) -> bool:
     """Start ``again`` (the samples without the made-up ones) from ``search``'s model:
     its effects re-tested there, the least significant dropped while one is not
-    (:meth:`~accal.closure.search.Search.eliminate`); whether every coupling is kept.
+    (:meth:`~accal.closure.search.Search.eliminate`); whether the couplings to the
+    ``coupled`` channels (those to confirm) are kept.
 
     Used when the made-up samples are at most :data:`CONTINUE_SHARE` of the used
     ones.  The effects found before the coupling never saw its made-up regressor, and
@@ -198,7 +201,6 @@ def _continue_from(again: Search, search: Search) -> bool:
     again.removed.extend(search.removed)
     again.notes.update(search.notes)
     again.iterations = search.iterations
-    coupled = {f.prop.channel for f in new_unknown(search, frozenset())}
     again.eliminate(n_new=2)  # every effect re-tested, the last one too
     return coupled <= {f.prop.channel for f in again.found if f.prop.name == "auxiliary"}
 

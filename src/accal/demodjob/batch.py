@@ -56,7 +56,7 @@ from accal.batch import (
 )
 from accal.batch_runner import BatchJob, run_batch, scheduler_name
 from accal.batch_summary import peak_rss_mb, reset_peak_rss
-from accal.demodjob.closure import close_run
+from accal.demodjob.closure import close_run, closure_summary
 from accal.demodjob.closure_outputs import apply_closure, write_demod_closure
 from accal.demodjob.options import DemodOptions, DemodResult, DemodRunSummary, RunOutcome
 from accal.demodjob.outputs import (
@@ -98,9 +98,7 @@ def compute_run(path: Path, out_dir: Path, opts: DemodOptions, psd: Any) -> RunO
         used = res.noise.used if getattr(res, "noise", None) is not None else psd
         closure, extended, plots = close_run(path, opts, out_dir, step=step, psd=used)
         rows, units = apply_closure(rows, units, extended)
-        summary["closure"] = {
-            k: closure[k] for k in ("effects", "unexplained", "rms_before", "rms_after", "model")
-        }
+        summary["closure"] = closure_summary(closure)
         summary_of_extended(summary, rows, closure["model"])
     history = []
     if info.resample is not None:

@@ -136,6 +136,14 @@ def close_run(
             res, periods, time, cols, theta, valid, bias_aux, opts, psd, psd_after=psd_after
         )
     entry = res.to_dict()
+    if psd_after is not psd:  # --psd auto, effects found: the noise without them
+        f2 = 2.0 / opts.tau
+        entry["noise_after"] = {
+            "f_level": f2,
+            "level_data": float(np.sqrt(psd_after(f2))),
+            "units": "level m/s^2/sqrt(Hz) at f_level [Hz] = 2/tau (two-sided PSD), "
+            "estimated with the closure's effects removed",
+        }
     entry["method"] = opts.method
     entry["model"] = "+".join(["declared", *periods.effects])
     entry["periods"] = change_statistics(periods.to_table())
@@ -143,6 +151,14 @@ def close_run(
     stem = path.name.split(".")[0]
     plots = _closure_plots(res, out_dir, stem) if opts.plots else []
     return entry, periods, plots
+
+
+def closure_summary(entry: Mapping[str, Any]) -> dict[str, Any]:
+    """The closure's part of a run's ``summary.json``: its effects, the residual RMS
+    before and after, the model, and (``--psd auto``) the noise level without the
+    effects (``noise_after``)."""
+    keys = ("effects", "unexplained", "rms_before", "rms_after", "model", "noise_after")
+    return {k: entry[k] for k in keys if k in entry}
 
 
 def change_statistics(table: Mapping[str, Any]) -> dict[str, Any]:
@@ -191,9 +207,19 @@ def _psd_without_effects(
     """The PSD from the data (``--psd auto``) of the run with the closure's effects
     ``model = (m_y, m_z)`` [m s⁻²] removed.
 
-    ``psd`` itself when the run is too short for it.
+    Samples where the model is NaN (those the closure left out: a lagged channel
+    made up there) are left out of the estimate too: the misfit of the made-up
+    regressor there is not noise (QA, data drawn outside accal: a 3e-8 m/s²/K
+    coupling at 630 s left its first 630 s in the estimate, and every σ after the
+    closure came out ~12 times the error).  ``psd`` itself when the run is too short
+    for it.
     """
     my, mz = model
+    gone = ~(np.isfinite(my) & np.isfinite(mz))
+    if gone.any():
+        kept = np.ones(my.size, dtype=bool) if valid is None else np.asarray(valid, dtype=bool)
+        valid = kept & ~gone
+        my, mz = np.nan_to_num(my), np.nan_to_num(mz)
     r = demodulate(
         time,
         cols["m_y"] - my,

@@ -122,11 +122,18 @@ def _noise_warnings(summary: dict[str, Any]) -> list[str]:
             else f"sigma uses --psd {nz['apriori']} as asked: it is {ratio:.3g} x what the "
             "run's noise gives (drop --psd to use the data's)"
         )
+        after = (summary.get("closure") or {}).get("noise_after")
+        closed = (
+            f"; without the closure's effects the data give {after['level_data']:.3g}, "
+            "the sigma after the closure use that"
+            if after
+            else ""
+        )
         w.append(
             f"the noise of this run differs from the a-priori PSD ({nz['apriori']}) by more "
             f"than a factor {NOISE_RATIO_WARN:g}: sigma a-priori / sigma data = {ratio:.3g} "
             f"(noise at 2/tau: {nz['level_apriori']:.3g} a-priori, {nz['level_data']:.3g} "
-            f"data, m/s^2/sqrt(Hz)); {what}"
+            f"data, m/s^2/sqrt(Hz){closed}); {what}"
         )
     lk = summary.get("signal_leakage") or {}
     worst = max((lk[ax]["ratio"] for ax in ("Y", "Z") if ax in lk), default=float("nan"))
@@ -219,6 +226,12 @@ def _noise_markdown(s: dict[str, Any], e: Callable[[Any], str]) -> list[str]:
             f"{e(nz['level_apriori'])}, {e(nz['level_data'])} |",
             f"| σ a-priori / σ data (same estimator) | {e(nz['sigma_ratio'])} |",
         ]
+    after = (s.get("closure") or {}).get("noise_after")
+    if after:
+        rows.append(
+            f"| noise at 2/τ without the closure's effects (σ after it) [m/s²/√Hz] | "
+            f"{e(after['level_data'])} |"
+        )
     c = s.get("consistency") or {}
     if c.get("ratio") is not None:
         rows.append(
