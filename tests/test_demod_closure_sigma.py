@@ -5,7 +5,8 @@ The run is drawn by ``tests.indep`` (no accal code): a constant signal, white no
 3e-8 m/s²/K coupling to it at a 630 s lag.  The closure leaves the first 630 s out
 (the lagged channel is made up there); with ``--psd auto`` the noise is estimated again
 without the effects found, and that estimate took in the made-up samples' misfit: every
-σ came out ~5 times the error (QA, on data drawn outside accal: 7-33 times).
+σ came out ~5 times the error (QA, on data drawn outside accal: 7-33 times), and the
+run's mean kept the declared model's σ.
 """
 
 from __future__ import annotations
@@ -51,3 +52,13 @@ def test_sigma_after_a_lagged_coupling_is_the_error(tmp_path):
         # measured: 0.99 (Y) and 0.94 (Z); 0.19 before the fix, σ 2.65e-12 for an
         # error of 5e-13 m/s²
         assert 0.75 < np.sqrt(np.mean(z[ok] ** 2)) < 1.3
+        # the run's mean: its σ is the extended model's (the declared one's noise
+        # held the coupling; measured: 2.8e-12 m/s², now 6.7e-14, for errors of 8.2e-14
+        # and 8.8e-14)
+        summary = json.loads((out / "summary.json").read_text())
+        mean, sigma = summary["mean"][f"a_{ax}"], summary["mean"]["sigma"]
+        truth = float(np.mean(periods[f"a_{ax}_true"].to_numpy()[ok]))
+        per_period = float(np.median(periods[f"sigma_{ax}"].to_numpy()[ok]))
+        assert sigma < 3 * per_period / np.sqrt(ok.sum())
+        assert abs(mean - truth) < 3 * sigma
+        assert summary["declared"]["mean"]["sigma"] > 10 * sigma
