@@ -183,15 +183,12 @@ class Search:
         )
 
     # ---------------------------------------------------------------- one step's parts
-    def propose(self, ctx: Context) -> list[Proposal]:
-        """Every builder's proposals; notes (untestable candidates) are recorded."""
-        return [p for props in self.propose_by_builder(ctx).values() for p in props]
-
     def propose_by_builder(
         self, ctx: Context, kept: dict[str, list[Proposal]] | None = None
     ) -> dict[str, list[Proposal]]:
-        """Each builder's proposals (notes recorded); a builder in ``kept`` is not run
-        again, its proposals are those given (:func:`_kept_builders`)."""
+        """Each builder's proposals; notes (untestable candidates) are recorded.  A
+        builder in ``kept`` is not run again, its proposals are those given
+        (:func:`_kept_builders`)."""
         out: dict[str, list[Proposal]] = {}
         for name, build in self.builders:
             if kept is not None and name in kept:
