@@ -40,6 +40,7 @@ from numpy.typing import ArrayLike, NDArray
 from accal.closure.aliasspread import add_alias_spread, add_signal_model_spread
 from accal.closure.basis import Basis
 from accal.closure.blockbase import BlockBase
+from accal.closure.channelfault import fault_notes
 from accal.closure.epochprofile import add_epoch_uncertainties
 from accal.closure.final import covariances, describe, refer_exponentials
 from accal.closure.inputs import (
@@ -67,8 +68,8 @@ from accal.closure.significance import describe_smooth, unexplained_test
 from accal.closure.unknownhistory import (
     UNKNOWN_DEPTH,
     new_unknown,
+    pause_at,
     reject_unconfirmed,
-    unknown_pause,
     without_unknown_history,
 )
 from accal.closure.validation import SignalProxies
@@ -365,7 +366,7 @@ def _select(make, st, use, setup: _Setup, max_effects: int, stop) -> tuple[Searc
     kept: set = set()  # couplings kept unconfirmed (the first search's first ones)
 
     def pause(s: Search) -> bool:
-        return unknown_pause(s, frozenset(kept))
+        return pause_at(s, frozenset(kept))
 
     run(search, max_effects, stop, until=pause)
     for _ in range(UNKNOWN_DEPTH):
@@ -451,6 +452,8 @@ def _search_maker(
             proxies=proxies,
         )
         search.notes.update(notes)
+        for d in fault_notes(opts):  # channel faults a search before this one found
+            search.note(d["name"], d["channel"], d["note"], d["details"])
         search.cache["template"] = st["template"]
         search.cache["null_basis"] = st["basis0"]
         return search

@@ -23,8 +23,10 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from accal.closure.channelfault import mark_faults
 from accal.closure.final import with_jacobian
 from accal.closure.inputs import MIN_SAMPLES
+from accal.closure.madeup import made_up
 from accal.closure.search import Found, run, swap_smooth
 
 if TYPE_CHECKING:  # annotations only
@@ -35,6 +37,7 @@ __all__ = [
     "reject_unconfirmed",
     "unknown_history",
     "new_unknown",
+    "pause_at",
     "unknown_pause",
     "without_unknown_history",
 ]
@@ -60,32 +63,14 @@ def _regions(
     search: Search, t_all: NDArray[np.float64], skip=frozenset()
 ) -> list[tuple[Found, NDArray, float]]:
     """``(effect, mask, lead)`` of every accepted coupling with an unknown history (but
-    those in ``skip``).
-
-    For a lag ``L`` and a low-pass ``τ``: the first ``L + 5τ`` seconds of the channel
-    and as much after each of its holes (NaN, or a data gap over 5 steps); couplings
-    with a lag of at most 5 steps and no low-pass have none.
-    """
-    step = search.grid.step
+    those in ``skip``): :func:`accal.closure.madeup.made_up`."""
     out = []
     for f in search.found:
         if f.prop.name != "auxiliary" or f in skip:
             continue
-        lag, tc = float(f.prop.params.get("lag") or 0.0), float(f.prop.params.get("tau") or 0.0)
-        lead = (lag if lag > 5 * step else 0.0) + 5.0 * tc
-        if lead <= 0:
-            continue
-        x = search.aux.get(str(f.prop.channel).removesuffix("^2"))
-        if x is None:
-            continue
-        known = np.isfinite(x) & np.isfinite(t_all)
-        tk = np.unique(t_all[known])
-        if tk.size == 0:
-            continue
-        mask = np.zeros(t_all.size, dtype=bool)
-        for s0 in [tk[0]] + list(tk[1:][np.diff(tk) > 5 * step]):
-            mask |= (t_all >= s0 - 1e-9) & (t_all < s0 + lead)
-        out.append((f, mask, lead))
+        hit = made_up(search, f, t_all)
+        if hit is not None:
+            out.append((f, *hit))
     return out
 
 
@@ -108,6 +93,14 @@ def unknown_pause(s: Search, skip=frozenset()) -> bool:
     """Whether ``s`` holds a coupling (not in ``skip``) whose channel's history is
     unknown at a used sample."""
     return unknown_history(s, s.t_all, skip) is not None
+
+
+def pause_at(s: Search, skip=frozenset()) -> bool:
+    """The selection's pause: a coupling (not in ``skip``) whose channel the data do
+    not follow over a stretch (:func:`accal.closure.channelfault.mark_faults` marks the
+    channel unknown there), or whose channel's history is unknown at a used sample
+    (:func:`unknown_pause`)."""
+    return mark_faults(s, skip) or unknown_pause(s, skip)
 
 
 def new_unknown(search: Search, skip) -> list[Found]:
@@ -149,7 +142,7 @@ def without_unknown_history(
     if share <= CONTINUE_SHARE and not _continue_from(again, search, coupled):
         return None
     # another coupling with an unknown history among the samples left: the same again
-    run(again, max_effects, stop, until=unknown_pause if depth + 1 < UNKNOWN_DEPTH else None)
+    run(again, max_effects, stop, until=pause_at if depth + 1 < UNKNOWN_DEPTH else None)
     deeper = None
     if again.paused:
         deeper = without_unknown_history(again, use2, setup, make, max_effects, stop, depth + 1)

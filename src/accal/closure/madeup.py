@@ -1,0 +1,81 @@
+"""Where a coupling's regressor is made up: its channel unknown at the lag it needs.
+
+A coupling to channel ``x`` with lag ``L`` and a first-order low-pass ``τ`` needs, at a
+sample ``t``, the channel over ``[t − L − 5τ, t − L]`` (5τ: the response's memory to
+e⁻⁵ < 1 %).  Where that reaches a stretch the channel is unknown over (before its
+first value, a hole, after its last), the regressor holds interpolated or held values:
+such samples are made up (:mod:`accal.closure.unknownhistory` searches again without
+them; :mod:`accal.closure.channelfault` marks a faulty stretch unknown).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
+
+if TYPE_CHECKING:  # annotations only
+    from accal.closure.search import Found, Search
+
+__all__ = ["made_up", "unknown_stretches"]
+
+#: A hole of more than this many steps between finite values is unknown (shorter
+#: ones are interpolated).
+HOLE_STEPS = 5
+
+
+def unknown_stretches(
+    t_all: NDArray[np.float64], x: NDArray[np.float64], step: float
+) -> list[tuple[float, float]]:
+    """The channel's unknown stretches ``(a, b)`` in its own time [s]: before its first
+    finite value (``a = -inf``), each hole of more than :data:`HOLE_STEPS` steps
+    between finite values (NaN, or a data gap), after its last (``b = +inf``); empty
+    for a channel with no finite value."""
+    known = np.isfinite(x) & np.isfinite(t_all)
+    tk = np.unique(t_all[known])
+    if tk.size == 0:
+        return []
+    gaps = np.flatnonzero(np.diff(tk) > HOLE_STEPS * step)
+    return (
+        [(-np.inf, float(tk[0]))]
+        + [(float(tk[i]), float(tk[i + 1])) for i in gaps]
+        + [(float(tk[-1]), np.inf)]
+    )
+
+
+def made_up(
+    search: Search, f: Found, t_all: NDArray[np.float64]
+) -> tuple[NDArray[np.bool_], float] | None:
+    """``(mask, lead)`` of the samples where coupling ``f``'s regressor is made up
+    (module notes), None when there are none or ``f`` is not a coupling to an
+    offered channel.
+
+    A sample at ``t`` is made up where ``[t − L − 5τ, t − L]`` reaches an unknown
+    stretch ``(a, b)`` (:func:`unknown_stretches`): ``a + L < t < b + L + 5τ``.  The
+    record's start counts a lag of at most :data:`HOLE_STEPS` steps as none (``lead =
+    L + 5τ``, or ``5τ``): the first ``lead`` seconds of the channel and the samples
+    before its first value; after a hole the ``lead`` seconds from its end too.
+    Within the record a hole's interior is made up whatever the lag (a stretch marked
+    unknown by :mod:`accal.closure.channelfault`, a data gap: before 2026-11-29 only
+    the ``lead`` seconds after a hole were left out, and a hole longer than the lag
+    was interpolated).
+    """
+    if f.prop.name != "auxiliary":
+        return None
+    step = search.grid.step
+    lag, tc = float(f.prop.params.get("lag") or 0.0), float(f.prop.params.get("tau") or 0.0)
+    lead = (lag if lag > HOLE_STEPS * step else 0.0) + 5.0 * tc
+    x = search.aux.get(str(f.prop.channel).removesuffix("^2"))
+    if x is None:
+        return None
+    stretches = unknown_stretches(t_all, x, step)
+    if not stretches:
+        return None
+    eps = 1e-9
+    mask = t_all < stretches[0][1] + lead - eps  # before the first value, the first lead s
+    for a, b in stretches[1:-1]:
+        mask |= (t_all > a + lag + eps) & (t_all < b + lag + 5.0 * tc - eps)
+        mask |= (t_all >= b - eps) & (t_all < b + lead - eps)
+    mask |= t_all > stretches[-1][0] + lag + eps
+    return (mask, lead) if mask.any() else None
