@@ -338,7 +338,17 @@ def result_record(res: Any, t0: float) -> dict[str, Any]:
         "removed": [e["name"] for e in effects if e["instrument"]],
         "reported": bool(effects or res.unexplained),
         "considered": [dict(c) for c in getattr(res, "considered", ())],
+        "faults": faults_of(getattr(res, "notes", ())),
     }
+
+
+def faults_of(notes) -> list[dict[str, Any]]:
+    """The channel faults a closure marked (:mod:`accal.closure.channelfault` notes)."""
+    return [
+        {"channel": n.get("channel"), **n["details"]}
+        for n in notes or ()
+        if "fault_start" in (n.get("details") or {})
+    ]
 
 
 # ------------------------------------------------------------------ GRACE days, library path
@@ -517,6 +527,7 @@ def json_record(e: dict[str, Any], t0: float) -> dict[str, Any]:
         "removed_from_calibrated": list(e.get("removed_from_calibrated") or []),
         "considered": list(e.get("considered") or []),
         "model": e.get("model"),
+        "faults": faults_of(e.get("notes")),
     }
     rec["removed"] = [x["name"] for x in rec["effects"] if x["instrument"]]
     rec["reported"] = bool(rec["effects"] or rec["unexplained"])

@@ -575,6 +575,26 @@ def cli_api_table(results: list[dict]) -> list[str]:
     return lines
 
 
+def faults_table(results: list[dict]) -> list[str]:
+    """Runs where a coupled channel was taken as unknown over a stretch
+    (:mod:`accal.closure.channelfault`), per group, kind and size."""
+    lines = [
+        "| runs | n | runs with a fault | stretches (data time [s], relative change) |",
+        "|---|---|---|---|",
+    ]
+    key = lambda r: f"{r['source']} {r['path']} {r['kind'] or 'clean'} {r['size'] or ''}"  # noqa: E731
+    for k, rs in _group([r for r in results if r["axes"]], key).items():
+        hit = [(r, f) for r in rs for a in r["axes"] for f in a.get("faults") or []]
+        where = "; ".join(
+            f"{r['seed']}: {f['fault_start']:.0f}-{f['fault_stop']:.0f} "
+            f"({', '.join(f'{v:+.2f}' for v in f['relative_change'])})"
+            for r, f in hit[:6]
+        )
+        n_hit = len({id(r) for r, _ in hit})
+        lines.append(f"| {k} | {len(rs)} | {_frac(n_hit, len(rs))} | {where or '–'} |")
+    return lines
+
+
 def timing_table(results: list[dict]) -> list[str]:
     """Median seconds of one closure (library: per axis; CLI: per file, all axes)."""
     lines = ["| runs | n | median s | max s |", "|---|---|---|---|"]
@@ -712,6 +732,7 @@ def report(results: list[dict], meta: dict) -> str:
         ("Epochs of the steps found", epoch_table(results)),
         ("The real Swarm-A day (CLI, table input)", swarm_table(results)),
         ("Same days through the CLI and the library path", cli_api_table(results)),
+        ("Channel faults marked", faults_table(results)),
         ("Time per closure", timing_table(results)),
     ]  # fmt: skip
     lines = [

@@ -124,3 +124,21 @@ def test_fault_note_says_where_and_how_much():
     assert note["channel"] == "temperature"
     assert "500-1100 s" in note["note"] and "1200-1800 s" in note["note"]
     assert note["details"]["relative_change"] == [-0.98, -1.02]
+
+
+def test_a_hole_in_the_channel_longer_than_the_lag_is_not_bridged():
+    """The channel missing (NaN) for 3000 s, longer than the 600 s lag, over a bump the
+    data do carry: the samples whose lagged channel falls in the hole are left out.
+    Before 2026-11-29 only the 600 s after the hole were, and the data inside it were
+    fitted with the channel interpolated across the bump."""
+    t, y, temp = _day(1, glitch_in_file=True, glitch_in_data=True)
+    hole = (t >= GLITCH_AT - 1500.0) & (t < GLITCH_AT + 1500.0)
+    temp = np.where(hole, np.nan, temp)
+    res = _run(t, y, temp)
+    assert [e.name for e in res.effects] == ["auxiliary"], [e.name for e in res.effects]
+    e = res.effects[0]
+    assert abs(e.coefficient - COEF) < 2 * e.sigma
+    assert _faults(res) == []
+    left = [n for n in res.notes if "samples left out of the analysis" in n.get("note", "")]
+    n_left = max(int(n["note"].split()[0]) for n in left)
+    assert n_left >= int(3000.0 / DT)  # the hole's reach in the data, at least

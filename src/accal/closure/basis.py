@@ -235,7 +235,9 @@ class Basis:
         self._pad = None
         if ns > 1 and ns * lmax <= 1.5 * n:
             pos = np.arange(n) - self.seg_start[self.sample_seg]
-            self._pad = (pos, lmax)
+            # one flat index into the padded rows: a scatter/gather by one index array
+            # is ~30 % faster than by two (a platform day's 301 single-column calls)
+            self._pad = (self.sample_seg * lmax + pos, lmax)
             if ns * lmax == n:  # tiled: a view of q
                 qp = q.reshape(ns, lmax, p)
             else:
@@ -350,12 +352,14 @@ class Basis:
         if self.seg_start.size == 1:
             return (self.q.T @ z)[None]
         if self._pad is not None:
-            pos, lmax = self._pad
+            flat, lmax = self._pad
+            ns = self.seg_start.size
             if self._tiled:
-                zp = z.reshape(self.seg_start.size, lmax, z.shape[1])
+                zp = z.reshape(ns, lmax, z.shape[1])
             else:
-                zp = np.zeros((self.seg_start.size, lmax, z.shape[1]))
-                zp[self.sample_seg, pos] = z
+                zp = np.zeros((ns * lmax, z.shape[1]))
+                zp[flat] = z
+                zp = zp.reshape(ns, lmax, z.shape[1])
             return np.matmul(self._qpt, zp)
         out = np.empty((self.seg_start.size, self.p, z.shape[1]))
         for j in range(self.p):
@@ -367,9 +371,11 @@ class Basis:
         if self.seg_start.size == 1:
             return self.q @ c[0]
         if self._pad is not None:
-            pos, _ = self._pad
+            flat, lmax = self._pad
             prod = np.matmul(self._qp, c)
-            return prod.reshape(self.n, -1) if self._tiled else prod[self.sample_seg, pos]
+            if self._tiled:
+                return prod.reshape(self.n, -1)
+            return prod.reshape(self.seg_start.size * lmax, -1)[flat]
         out = np.zeros((self.n, c.shape[2]))
         for j in range(self.p):
             out += self.q[:, j : j + 1] * c[self.sample_seg, j, :]

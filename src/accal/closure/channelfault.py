@@ -10,16 +10,21 @@ a bias step and an exponential drift removed from the calibrated series, and per
 errors 10× those of the same runs with the sensor clean (2026-11-28).
 
 Right after a search adds a coupling, :func:`find_fault` asks whether its coefficient
-changes over one stretch of the record, against the data following the channel *less*
-there (the sign of a fault, not of a stronger response).  The model of the stretch
-``W`` is the coupling's column with the rest of the model projected out, ``z̃``, times
-the indicator of ``W``: an extra coefficient ``δ`` on ``z̃·1_W`` (a local change of the
-coupling; ``δ = −c`` where the data do not follow the channel at all).  Every window
-between :data:`FAULT_NODES` equally spaced nodes up to :data:`FAULT_MAX_SHARE` of the
-record is ranked by its white-noise explained power (cumulative sums, all windows at
-once); the best is tested like any candidate (the coloured-noise Wald test of
-:func:`accal.closure.significance.test_proposal`) with the number of windows as its
-multiplicity (Bonferroni), at the search's ``alpha``.
+changes over one stretch of the record, the data following the channel *less* there.
+The model of a stretch ``W``: the coupling's column with the rest of the model
+projected out, ``z̃``, centred on ``W`` and zero outside, with ``W``'s own offset free
+(a fault has its own level; uncentred, the window's column carried the channel's level
+there, and a glitch on a cold stretch came out as the data following the channel
+*more*).  Its coefficient ``δ`` is a local change of the coupling, relative to the
+coupling outside ``W`` (:func:`_relative`): ``−1`` where the data do not follow the
+channel at all.  Every window between :data:`FAULT_NODES` equally spaced nodes, up to
+:data:`FAULT_MAX_SHARE` of the record, is ranked by its white-noise explained power
+(cumulative sums, all windows at once) among those whose relative change is a fault's
+(:func:`_fault_like`); the best is tested like any candidate (the coloured-noise Wald
+test of :func:`accal.closure.significance.test_proposal`) with the number of windows
+as its multiplicity (Bonferroni), at the search's ``alpha``, and its relative change
+checked again with the test's covariance.  The stretch is then widened over the
+neighbouring nodes whose residual is loud (:func:`_grown`: the glitch's tails).
 
 A significant stretch is not an effect: nothing is removed for it.  The channel is
 taken as unknown over the stretch less the lag (:func:`mark_faults` sets it NaN there),
@@ -339,10 +344,9 @@ def mark_faults(search: Search, skip=frozenset()) -> bool:
         name = str(f.prop.channel)
         if f.prop.name != "auxiliary" or f in skip or name.endswith("^2"):
             continue
-        key = (name, f.prop.params.get("lag"), f.prop.params.get("tau"), id(f))
-        if key in checked or name not in search.aux:
+        if f in checked or name not in search.aux:  # Found: compared by identity
             continue
-        checked.add(key)
+        checked.add(f)
         mine = [g for g in faults if g.channel == name]
         if len(mine) >= MAX_FAULTS:
             continue

@@ -159,9 +159,8 @@ def without_unknown_history(
         "auxiliary",
         None,
         f"{int((use & unknown.mask).sum())} samples left out of the analysis: the "
-        f"first {lead:.0f} s and as much after each hole of the coupled channel(s) "
-        f"{', '.join(sorted(coupled))}, whose lagged and filtered values are unknown "
-        "there",
+        f"first {lead:.0f} s, and those whose lagged and filtered values reach a hole, "
+        f"of the coupled channel(s) {', '.join(sorted(coupled))}: unknown there",
         {"left_out": lead},
     )
     return again, st2
