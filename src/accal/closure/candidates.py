@@ -106,6 +106,10 @@ class Context:
         Series carrying the same signal (the other axes) on the used samples: the
         step scan looks for its epoch with them fitted
         (:class:`accal.closure.validation.SignalProxies`).
+    coupled : dict of str to (float, float)
+        The channels coupled in the model, each with its ``(lag, τ)`` [s]: the square
+        of such a channel is proposed on the same path
+        (:func:`accal.closure.couplings.auxiliary`).
     """
 
     t_all: NDArray[np.float64]
@@ -130,6 +134,7 @@ class Context:
     reference: NDArray[np.float64] | None = None
     blocked: frozenset = frozenset()
     proxies: NDArray[np.float64] | None = None
+    coupled: dict[str, tuple[float, float]] = field(default_factory=dict)
 
     def is_blocked(self, name: str, channel: str | None, key: Any = None) -> bool:
         """Whether the member ``(name, channel[, key])`` was rejected earlier."""

@@ -601,6 +601,15 @@ def auxiliary(ctx: Context) -> list[Proposal]:
     independent members searched, summed over the channels and time constants
     (:func:`lag_multiplicity`).  The coefficient is in m/s² per channel unit, at channel value 0 (the regressor is
     not de-meaned: the bias is the one at channel value 0, as ``b + c·x`` says).
+
+    The square of a channel already coupled is not searched: it is proposed at its
+    channel's lag and τ (``ctx.coupled``), one member, beside the search's best, each
+    proposal's multiplicity times the number of proposals (Bonferroni within the
+    family).  A nonlinear sensitivity to a temperature acts on the temperature the
+    linear term sees, and the final model gives the square its channel's lag
+    (:func:`accal.closure.lagprofile.add_lag_uncertainties`); searched on its own
+    it took a platform day's second selection step 0.5 s for four block scans, and
+    once a 3,173 s lag made up over its first 3,173 s (2026-11-28).
     """
     step = ctx.grid.step
     top_all = max_lag(ctx.options, ctx.span)
@@ -608,8 +617,13 @@ def auxiliary(ctx: Context) -> list[Proposal]:
     fft_path = not fine and ctx.n_chan == 1 and "null_basis" in ctx.cache
     best = None  # (power, name, x, tc, lag, lag_step, top)
     mult = 0.0
+    shared = []  # squares of coupled channels: on their channel's path, not searched
     for name, x in _channels(ctx):
         x = np.asarray(x, dtype=np.float64)
+        base = name.removesuffix(SQUARED)
+        if name != base and base in ctx.coupled:
+            shared.append((name, x, *ctx.coupled[base]))
+            continue
         ok = np.isfinite(x)
         if ok.sum() < 10 or np.ptp(x[ok]) == 0:
             continue
@@ -637,17 +651,26 @@ def auxiliary(ctx: Context) -> list[Proposal]:
             j = int(np.argmax(pw))
             if best is None or pw[j] > best[0]:
                 best = (float(pw[j]), name, x, tc, float(lags[j] * step), lag_step, top)
+    # a coupled channel's square on the same lag and low-pass (one thermal path: a
+    # nonlinear sensitivity to the temperature the linear term sees), one member each;
+    # the family then holds the search's best and these (Bonferroni over them)
+    n_props = len(shared) + (best is not None and best[0] > 0)
+    sq_props = [
+        p
+        for name, x, lag, tc in shared
+        for p in _proposals(ctx, name, x, tc, lag, float(max(n_props, 1)))
+    ]
     if best is None or not best[0] > 0:
-        return []
-    mult = max(mult, 1.0)
+        return sq_props
+    mult = max(mult, 1.0) * max(n_props, 1)
     _, name, x, tc, lag, lag_step, top = best
     props = _proposals(ctx, name, x, tc, lag, mult)
     if not _worth_refining(ctx, props):
-        return props
+        return props + sq_props
     lag, tc, _ = _refine(ctx, name, x, lag, tc, lag_step, top)
     lag = _shortest_lag(ctx, name, x, lag, tc, top)
     lag, tc = _polish(ctx, name, x, lag, tc, top)
-    return _proposals(ctx, name, x, tc, lag, mult)
+    return _proposals(ctx, name, x, tc, lag, mult) + sq_props
 
 
 def _worth_refining(ctx: Context, props: list[Proposal]) -> bool:
