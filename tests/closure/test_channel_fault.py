@@ -142,3 +142,11 @@ def test_a_hole_in_the_channel_longer_than_the_lag_is_not_bridged():
     left = [n for n in res.notes if "samples left out of the analysis" in n.get("note", "")]
     n_left = max(int(n["note"].split()[0]) for n in left)
     assert n_left >= int(3000.0 / DT)  # the hole's reach in the data, at least
+
+
+def test_fault_note_on_a_gps_time_scale_says_how_far_into_the_record():
+    t0 = 740059200.0
+    f = Fault("temperature", t0 + 5522.0, t0 + 6362.0, 600.0, (-0.68,), 3.4e-4, 113490, t0)
+    text = f.note()["note"]
+    assert "740064722-740065562 s (5522-6362 s into the record)" in text
+    assert "740064122-740064962 s (4922-5762 s into the record)" in text

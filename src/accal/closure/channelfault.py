@@ -91,7 +91,9 @@ class Fault:
     ``start``/``stop`` are data times [s]; the channel is unknown over them less
     ``lag``.  ``change`` is the fitted local change of the coefficient relative to
     the coupling's (−1: the data do not follow the channel at all there), per data
-    channel; ``p_adj`` the test's p-value times ``n_windows``.
+    channel; ``p_adj`` the test's p-value times ``n_windows``; ``t0`` the record's
+    first sample time [s] (the note says how far into the record the stretch is when
+    the time scale does not start at 0, e.g. GPS seconds).
     """
 
     channel: str
@@ -101,14 +103,20 @@ class Fault:
     change: tuple[float, ...]
     p_adj: float
     n_windows: int
+    t0: float = 0.0
+
+    def _when(self, a: float, b: float) -> str:
+        """``a-b s``, and how far into the record when its time scale does not start at 0."""
+        into = f" ({a - self.t0:.0f}-{b - self.t0:.0f} s into the record)" if self.t0 else ""
+        return f"{a:.0f}-{b:.0f} s{into}"
 
     def note(self) -> dict[str, Any]:
         """The closure note of this fault."""
         ch = ", ".join(f"{v:+.2f}" for v in self.change)
         text = (
             f"channel {self.channel} is taken as unknown over "
-            f"{self.start - self.lag:.0f}-{self.stop - self.lag:.0f} s: the data at "
-            f"{self.start:.0f}-{self.stop:.0f} s do not follow it as the rest of the record "
+            f"{self._when(self.start - self.lag, self.stop - self.lag)}: the data at "
+            f"{self._when(self.start, self.stop)} do not follow it as the rest of the record "
             f"does (coupling coefficient changed by {ch} of itself there, p "
             f"{self.p_adj:.2g} over {self.n_windows} stretches tried): a fault of the "
             "channel, not of the data; the samples it reaches are left out"
@@ -302,7 +310,8 @@ def find_fault(search: Search, f: Found) -> Fault | None:
     inside = (t_u >= edges[lo]) & (t_u < edges[hi]) & known
     a, b = float(t_u[inside][0]), float(t_u[inside][-1]) + search.grid.step  # [a, b)
     lag = float(f.prop.params.get("lag") or 0.0)
-    return Fault(str(f.prop.channel), a, b, lag, change, float(tested.p_adj), int(n_win))
+    t0 = float(np.nanmin(search.t_all))  # the record's first sample
+    return Fault(str(f.prop.channel), a, b, lag, change, float(tested.p_adj), int(n_win), t0)
 
 
 def _column_channels(search: Search, f: Found, known) -> list:
