@@ -34,6 +34,7 @@ if TYPE_CHECKING:
     from accal.closure.residual import Grid
 
 __all__ = [
+    "SQUARED",
     "Context",
     "Proposal",
     "bias_step",
@@ -43,6 +44,10 @@ __all__ = [
     "scan_multiplicity",
     "step_placebo_sigma",
 ]
+
+
+#: Suffix of a channel's square (about its mean) among the couplings.
+SQUARED = "^2"
 
 
 @dataclass(frozen=True)
@@ -255,6 +260,16 @@ class Proposal:
     jacobian: Callable[[], list[tuple[str, NDArray[np.float64]]]] | None = field(
         default=None, compare=False
     )
+
+    @property
+    def path(self) -> tuple[float, float]:
+        """A coupling's ``(lag, τ)`` [s] (0 for either when not set)."""
+        return float(self.params.get("lag") or 0.0), float(self.params.get("tau") or 0.0)
+
+    @property
+    def squared(self) -> bool:
+        """Whether this is a coupling to a channel's square (``NAME^2``)."""
+        return str(self.channel).endswith(SQUARED)
 
 
 Builder = Callable[[Context], list[Proposal]]

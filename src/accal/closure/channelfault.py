@@ -308,8 +308,8 @@ def find_fault(search: Search, f: Found) -> Fault | None:
     change = tuple(float(v) for v in per)
     lo, hi = _grown(sums, i, length)
     inside = (t_u >= edges[lo]) & (t_u < edges[hi]) & known
-    a, b = float(t_u[inside][0]), float(t_u[inside][-1]) + search.grid.step  # [a, b)
-    lag = float(f.prop.params.get("lag") or 0.0)
+    a, b = float(t_u[inside][0]), float(t_u[inside][-1]) + step  # [a, b)
+    lag = f.prop.path[0]
     t0 = float(np.nanmin(search.t_all))  # the record's first sample
     return Fault(str(f.prop.channel), a, b, lag, change, float(tested.p_adj), int(n_win), t0)
 
@@ -351,7 +351,7 @@ def mark_faults(search: Search, skip=frozenset()) -> bool:
     checked = search.cache.setdefault("faults checked", set())
     for f in search.found:
         name = str(f.prop.channel)
-        if f.prop.name != "auxiliary" or f in skip or name.endswith("^2"):
+        if f.prop.name != "auxiliary" or f in skip or f.prop.squared:
             continue
         if f in checked or name not in search.aux:  # Found: compared by identity
             continue

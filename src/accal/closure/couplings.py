@@ -33,7 +33,7 @@ from numpy.typing import NDArray
 from scipy.linalg import lapack
 from scipy.optimize import minimize, minimize_scalar
 
-from accal.closure.candidates import Context, Proposal, channel_power
+from accal.closure.candidates import SQUARED, Context, Proposal, channel_power
 from accal.closure.kinds import channel_class
 from accal.closure.lagscan import (
     block_scan,
@@ -55,8 +55,6 @@ __all__ = [
     "square_about_mean",
 ]
 
-#: Suffix of a channel's square (about its mean) among the couplings.
-SQUARED = "^2"
 #: Time constants of the first-order response searched [s] (0: none).
 AUX_TAUS = (0.0, 300.0, 1000.0, 3000.0)
 #: Lags on the search grid.

@@ -15,6 +15,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
+from accal.closure.candidates import SQUARED
+
 if TYPE_CHECKING:  # annotations only
     from accal.closure.search import Found, Search
 
@@ -64,9 +66,9 @@ def made_up(
     if f.prop.name != "auxiliary":
         return None
     step = search.grid.step
-    lag, tc = float(f.prop.params.get("lag") or 0.0), float(f.prop.params.get("tau") or 0.0)
+    lag, tc = f.prop.path
     lead = (lag if lag > HOLE_STEPS * step else 0.0) + 5.0 * tc
-    x = search.aux.get(str(f.prop.channel).removesuffix("^2"))
+    x = search.aux.get(str(f.prop.channel).removesuffix(SQUARED))
     if x is None:
         return None
     stretches = unknown_stretches(t_all, x, step)

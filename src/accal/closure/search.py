@@ -181,12 +181,9 @@ class Search:
             blocked=frozenset(blocked),
             proxies=None if self.proxies is None else self.proxies.columns[self.use],
             coupled={
-                str(f.prop.channel): (
-                    float(f.prop.params.get("lag") or 0.0),
-                    float(f.prop.params.get("tau") or 0.0),
-                )
+                str(f.prop.channel): f.prop.path
                 for f in found
-                if f.prop.name == "auxiliary" and not str(f.prop.channel).endswith("^2")
+                if f.prop.name == "auxiliary" and not f.prop.squared
             },
         )
 
