@@ -8,6 +8,7 @@ it and the a-priori PSD (:func:`_noise_report`), and the σ ratio of the two
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from dataclasses import replace
 from typing import Any
 
@@ -26,6 +27,43 @@ MIN_PERIODS_DATA_PSD = 24
 #: Distinct rest-mask layouts whose residual kernels are computed for the PSD estimate;
 #: the periods of further layouts (gaps, jitter) are left out of it.
 MAX_PSD_LAYOUTS = 24
+#: Bytes of residual kernels kept (:func:`_layout_kernel`): a closure run demodulates
+#: the same run again with its effects removed (same layouts, same kernels).
+KERNEL_CACHE_BYTES = 64 * 2**20
+_KERNELS: OrderedDict[bytes, tuple[NDArray, NDArray]] = OrderedDict()
+
+
+def _layout_kernel(
+    x: NDArray, m: NDArray, bins: NDArray, fs: float
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """:func:`accal.estimators.noise.residual_kernel` of one rest-mask layout, kept.
+
+    The kernel depends on the layout's design and mask only, not on the data: the
+    second demodulation of a closure run (its effects removed, ``close_run``) has the
+    same layouts, and its ~0.15 s of FFTs per layout are saved (``make
+    bench-closure``).  At most :data:`KERNEL_CACHE_BYTES` of kernels are kept (least
+    recently used dropped; each ``len(bins) × 4·q`` floats), read-only.
+    """
+    x = np.ascontiguousarray(x, dtype=np.float64)
+    m = np.ascontiguousarray(m, dtype=np.float64)
+    bins = np.ascontiguousarray(bins, dtype=np.int64)
+    key = b"".join(
+        (repr((x.shape, m.shape, bins.shape, float(fs))).encode(), x.tobytes(), m.tobytes(),
+         bins.tobytes())
+    )  # fmt: skip
+    hit = _KERNELS.get(key)
+    if hit is None:
+        hit = residual_kernel(x, m, bins, fs)
+        for a in hit:
+            a.setflags(write=False)
+        _KERNELS[key] = hit
+        while (
+            len(_KERNELS) > 1 and sum(k.nbytes for _, k in _KERNELS.values()) > KERNEL_CACHE_BYTES
+        ):
+            _KERNELS.popitem(last=False)
+    else:
+        _KERNELS.move_to_end(key)
+    return hit
 
 
 class _ResidualSpectra:
@@ -93,7 +131,7 @@ class _ResidualSpectra:
             return None
         f_grid, kern, power = None, 0.0, 0.0
         for count, pw, x, m in self.groups.values():
-            f_grid, k = residual_kernel(x, m, self.bins, self.fs)
+            f_grid, k = _layout_kernel(x, m, self.bins, self.fs)
             kern = kern + count * k
             power = power + pw
         return ResidualSpectrum(
