@@ -184,7 +184,7 @@ def _continue_from(again: Search, search: Search, coupled: set) -> bool:
     """
     basis = again.basis0
     for f in search.found:
-        g = Found(f.prop, f.p_adj, f.verdict, f.stat)
+        g = Found(f.prop, f.p_adj, f.verdict, f.stat, member=f.member)
         if f.aug is not None:
             g.aug = with_jacobian(f.prop, again.t_all, again.t0, again.use, basis)
         again.found.append(g)
