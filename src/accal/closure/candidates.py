@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from accal.closure.basis import Basis
-from accal.closure.distributions import chi2_sf
+from accal.closure.stepwidth import scan_factor, scan_length
 
 if TYPE_CHECKING:
     from accal.closure.residual import Grid
@@ -493,6 +493,9 @@ def bias_step(ctx: Context) -> list[Proposal]:
         fractions = np.array([min_seg / max(n, 1)])
     level = float(ctx.options.get("alpha", 0.01)) / float(ctx.options.get("families", 1))
     mult = max(m_tests, scan_multiplicity(fractions, len(masks), level))
+    length = scan_length(ctx, ok)  # a nuisance in the model: measured decorrelation
+    if length is not None:
+        mult = max(mult, scan_factor(2.0 * length, len(masks), level))
     out = [_step_proposal(ctx, [epoch], mult)]
     # the best second epoch given the first: two steps that mask each other (a box of
     # +1e-9/-1e-9 m/s²: alone each had p 1.0, the other inflating the low-frequency
@@ -647,22 +650,8 @@ def scan_multiplicity(fractions: NDArray[np.float64], k: int, level: float) -> f
     float
         The factor (at least 1).
     """
-    from scipy import optimize, special
-
     eps = np.clip(np.asarray(fractions, dtype=np.float64), 1e-12, 0.5)
-    logs = float(np.sum(2.0 * np.log((1.0 - eps) / eps)))
-    if logs <= 0.0 or not 0.0 < level < 1.0:
-        return 1.0
-    c = 2.0 ** (k / 2.0) * special.gamma(k / 2.0)
-
-    def excess(x2: float) -> float:  # log P(scan max > x2) - log level
-        return k / 2.0 * np.log(x2) - x2 / 2.0 - np.log(c) + np.log(logs) - np.log(level)
-
-    lo = max(float(k), 1.0)  # the tail formula holds beyond the mode
-    if excess(lo) <= 0.0:
-        return 1.0
-    x2 = optimize.brentq(excess, lo, 1e4)
-    return float(max(1.0, level / chi2_sf(x2, k)))
+    return scan_factor(float(np.sum(2.0 * np.log((1.0 - eps) / eps))), k, level)
 
 
 def channel_power(ctx: Context, z: NDArray[np.float64]) -> NDArray[np.float64]:
