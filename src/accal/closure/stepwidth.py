@@ -40,6 +40,9 @@ __all__ = ["WIDTH_EPOCHS", "WIDTH_LAG", "scan_factor", "scan_length"]
 WIDTH_EPOCHS = 48
 #: Epoch offset [scanned epochs] of the correlation measured.
 WIDTH_LAG = 4
+#: Epochs whose step columns are projected together (bounds the memory: 16 columns of
+#: a 1 Hz day are 11 MB).
+WIDTH_CHUNK = 8
 
 
 def scan_factor(logs: float, k: int, level: float) -> float:
@@ -90,15 +93,18 @@ def scan_length(ctx: Context, ok: NDArray[np.bool_]) -> float | None:
     q = np.r_[np.linspace(0.0, 1.0, WIDTH_EPOCHS), near, 1.0 - near]
     pick = np.unique(np.round(q * (m - 1)).astype(np.int64))
     t = ctx.t
-    cols = np.column_stack([t >= t[i] for i in np.r_[idx[pick], idx[pick + WIDTH_LAG]]])
-    cols = cols.astype(np.float64)
-    zt = cols - basis.project(cols)
-    nrm = np.sqrt(np.sum(zt**2, axis=0))
-    if not np.all(nrm > 1e-6 * np.sqrt(np.sum(cols**2, axis=0))):
-        return None
-    u = zt / nrm
-    k = pick.size
-    one_minus_rho = 0.5 * np.sum((u[:, :k] - u[:, k:]) ** 2, axis=0)  # stable near 1
+    one_minus_rho = np.empty(pick.size)
+    for a in range(0, pick.size, WIDTH_CHUNK):  # ~10 MB of columns at a time on a day
+        part = pick[a : a + WIDTH_CHUNK]
+        k = part.size
+        cols = np.column_stack([t >= t[i] for i in np.r_[idx[part], idx[part + WIDTH_LAG]]])
+        cols = cols.astype(np.float64)
+        zt = cols - basis.project(cols)
+        nrm = np.sqrt(np.sum(zt**2, axis=0))
+        if not np.all(nrm > 1e-6 * np.sqrt(np.sum(cols**2, axis=0))):
+            return None
+        zt /= nrm
+        one_minus_rho[a : a + k] = 0.5 * np.sum((zt[:, :k] - zt[:, k:]) ** 2, axis=0)
     inv = one_minus_rho / WIDTH_LAG
     pos = pick.astype(np.float64)
     inner = float(np.sum(0.5 * (inv[1:] + inv[:-1]) * np.diff(pos)))  # trapezoid rule
