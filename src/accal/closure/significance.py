@@ -35,6 +35,7 @@ from accal.closure.residual import (
     WaldResult,
     _quad,
     _two_sided,
+    as_leverage,
     estimate_psd,
     wald_test,
     white_plus_flicker,
@@ -86,29 +87,48 @@ class Tested:
     log_p: float = 0.0
 
 
-def _local_test(grid: Grid, residual, zt, freqs: list[float]) -> WaldResult:
-    """Wald test of sinusoid columns ``zt`` against the local spectrum at ``freqs``."""
+def _local_test(grid: Grid, residual, zt, freqs: list[float], lev=None) -> WaldResult:
+    """Wald test of sinusoid columns ``zt`` against the local spectrum at ``freqs``.
+
+    The local level is the ratio estimator of :func:`accal.closure.residual.estimate_psd`
+    over the window's ordinates: ``Σ P_k / Σ (1 − lev_k/n)``, with ``lev`` the model's
+    leverage spectrum (``basis_leverage``, shape (C, nf)) plus the sinusoid's own, and
+    ``2 Σ (1 − lev_k/n)`` degrees of freedom.  Without the correction the mean
+    periodogram counted the noise the model had taken as absent: with the orbit template
+    in the model (a fifth of the noise on a day, most of it near the harmonics) lines of
+    1-3e-12 m/s² on white noise of 1e-10 m/s² per sample, 2.5-4.4 times their σ, were
+    significant on 1 of 40 days at α = 0.01 (QA's generator, 24 CLI runs: 4 of 72 axes;
+    docs/closure.md).  ``lev`` None: the mean periodogram and the sinusoid's own
+    leverage, as before 2026-11-29 (:func:`test_proposal` passes the model's leverage
+    with the orbit template only: with a per-period block base, whose leverage takes
+    nearly all the noise at a slow line, a 1e-8 m/s² line at 5400 s on a platform run
+    was no longer found; open).
+    """
     gamma = zt.T @ residual
     r1 = residual - zt @ gamma
-    spec = np.abs(grid.fft(r1)[0]) ** 2 / np.maximum(grid.counts, 1.0)[:, None]
-    pg = np.mean(spec, axis=0)
-    nf = pg.size
+    nc = np.maximum(grid.counts, 1.0)[:, None]
+    raw = np.abs(grid.fft(r1)[0]) ** 2 / nc  # (C, nf)
+    nf = raw.shape[-1]
+    z_fft = grid.fft(zt)
+    lev_z = np.sum(np.abs(z_fft) ** 2, axis=0)
+    lev_all = lev_z if lev is None else as_leverage(lev, grid.n_chan) + lev_z
+    supp = np.clip(1.0 - lev_all / nc, 0.0, 1.0)  # (C, nf)
     df = 1.0 / (grid.size * grid.step)
     psd = np.zeros(nf)
-    n_ord = 0
+    n_eff = 0.0
     for f in freqs:
         k = int(round(f / df))
         idx = np.r_[k - LOCAL_HALF : k - LOCAL_GUARD, k + LOCAL_GUARD + 1 : k + LOCAL_HALF + 1]
         idx = idx[(idx > 0) & (idx < nf)]
-        if idx.size == 0:
+        eff = float(np.sum(supp[:, idx])) if idx.size else 0.0
+        if eff <= 0.5:  # nothing of the noise left there to compare with
             continue
         lo, hi = max(1, k - LOCAL_HALF), min(nf, k + LOCAL_HALF + 1)
-        psd[lo:hi] = np.maximum(psd[lo:hi], float(np.mean(pg[idx])))
-        n_ord += idx.size * grid.n_chan
+        level = float(np.sum(raw[:, idx])) / eff
+        psd[lo:hi] = np.maximum(psd[lo:hi], level)
+        n_eff += eff
     # outside the local windows: the binned estimate (the columns hold little there)
-    z_fft = grid.fft(zt)
-    lev = np.sum(np.abs(z_fft) ** 2, axis=0)
-    rest = estimate_psd(grid, r1, lev).psd
+    rest = estimate_psd(grid, r1, lev_all).psd
     psd = np.where(psd > 0, psd, rest)
     w = _two_sided(grid.size, nf) * psd
     cov = _quad(z_fft, w, grid.size)
@@ -116,7 +136,7 @@ def _local_test(grid: Grid, residual, zt, freqs: list[float]) -> WaldResult:
     q = zt.shape[1]
     cinv = np.linalg.pinv(cov, rcond=1e-12)
     stat = float(gamma @ cinv @ gamma) / q
-    dof = max(2.0 * n_ord, 2.0)
+    dof = max(2.0 * n_eff, 2.0)
     return WaldResult(gamma, cov, stat, dof, float(f_sf(stat, q, dof)), r1, psd)
 
 
@@ -142,7 +162,10 @@ def test_proposal(
     if zt.shape[1] == 0:
         return None
     freqs = sinusoid_freqs(prop)
-    w = _local_test(grid, resid, zt, freqs) if freqs else wald_test(grid, resid, zt, lev)
+    if freqs:  # the model's leverage corrects the local spectrum with the template only
+        w = _local_test(grid, resid, zt, freqs, lev if basis.nuisance is not None else None)
+    else:
+        w = wald_test(grid, resid, zt, lev)
     factor = max(prop.multiplicity, 1.0) * max(n_families, 1)
     p_adj = float(min(1.0, w.pvalue * factor))
     q = max(w.q, 1)
