@@ -6,7 +6,7 @@ neighbours within a few hundred seconds instead of hours, so the scan makes far 
 independent tests than Siegmund's count for a plain CUSUM (200 on a day).  On 80
 white-noise days drawn as below, bias steps were found on 7 at α = 0.01 before
 2026-11-29 (5 once the template's leverage was exact); with the multiplicity measured
-from the projected steps' decorrelation (:mod:`accal.closure.stepwidth`) on 1.
+from the projected steps' decorrelation (:mod:`accal.closure.multiplicity`) on 1.
 
 The days are drawn here with numpy: one day at 1 Hz of a bias, a 1e-12 m/s²/s drift
 and white noise of 1e-10 m/s² per sample, nothing else.
@@ -19,7 +19,7 @@ import pytest
 
 from accal.closure import close_loop
 from accal.closure.candidates import scan_multiplicity
-from accal.closure.stepwidth import scan_factor
+from accal.closure.multiplicity import scan_factor
 
 N = 86400
 T0 = 740059202.0

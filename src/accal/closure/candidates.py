@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from accal.closure.basis import Basis
-from accal.closure.stepwidth import scan_factor, scan_length
+from accal.closure.multiplicity import scan_factor, scan_length
 
 if TYPE_CHECKING:
     from accal.closure.residual import Grid

@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from accal.closure.candidates import Context, Proposal
+from accal.closure.multiplicity import frequency_search_factor
 from accal.closure.residual import estimate_psd
 
 __all__ = ["MAX_LINES", "ORBIT_HARMONICS", "periodic"]
@@ -238,6 +239,9 @@ def _excluded(f: float, ctx: Context, width: float) -> bool:
 ORBIT_HARMONICS = 6
 """Highest once-per-revolution harmonic the ``orbit`` proposal may include."""
 
+ORBIT_BAND = 0.06
+"""Relative width of the orbit frequency's search band (±3 % of ``1/orbit_period``)."""
+
 MAX_LINES = 2
 """Most ``line`` effects one selection adds (option ``max_lines``), strongest first."""
 
@@ -299,7 +303,7 @@ def _orbit_proposal(
     long_enough = ctx.span >= ctx.orbit_period
     harm: list[int] = []
     if long_enough and not _excluded(f0, ctx, 0.05 * f0) and 2 * f0 < freqs[-1]:
-        trial = f0 * (1 + np.linspace(-0.03, 0.03, 41))
+        trial = f0 * (1 + np.linspace(-0.5 * ORBIT_BAND, 0.5 * ORBIT_BAND, 41))
         pw = _line_power(tau, r, trial, masks) + _line_power(tau, r, 2 * trial, masks)
         f = float(trial[int(np.argmax(pw))])
         harm = _orbit_harmonics(ctx, tau, masks, f, n_max, fmax, df)
@@ -312,7 +316,8 @@ def _orbit_proposal(
     # from the line's 2f, the line was kept off, the orbit term had p = 1,
     # and the line was never proposed); once an orbit effect is in the model
     # its harmonics are kept off (in periodic)
-    m = max(1.0, 0.06 * f0 * ctx.span)
+    level = float(ctx.options.get("alpha", 0.01)) / float(ctx.options.get("families", 1))
+    m = frequency_search_factor(ctx.t, ORBIT_BAND * f0, harm, len(masks), level)
     labs = tuple(lab for n in harm for lab in (f"cos@{n * f!r}", f"sin@{n * f!r}"))
     cols, labs, axes = ctx.split(_harmonic_cols(tau_all, [n * f for n in harm]), labs)
     return Proposal(

@@ -1,4 +1,8 @@
-"""How many independent tests a step scan makes when the model holds a nuisance.
+"""How many independent tests a scan makes: step epochs beside a nuisance, a frequency band.
+
+:func:`scan_length` and :func:`scan_factor`: the step scan with the orbit template in
+the model (below).  :func:`frequency_search_factor`: sinusoids whose frequency is
+searched over a band (the orbit term), by Davies' bound.
 
 The corrected p of a bias step found by scanning every epoch is its single-epoch p
 times the scan's multiplicity (:func:`accal.closure.candidates.scan_multiplicity`):
@@ -33,7 +37,7 @@ from accal.closure.distributions import chi2_sf
 if TYPE_CHECKING:  # annotations only
     from accal.closure.candidates import Context
 
-__all__ = ["WIDTH_EPOCHS", "WIDTH_LAG", "scan_factor", "scan_length"]
+__all__ = ["WIDTH_EPOCHS", "WIDTH_LAG", "frequency_search_factor", "scan_factor", "scan_length"]
 
 #: Epochs, evenly spread over those scanned, at which the decorrelation is measured
 #: (plus eight each side geometrically closer to the ends).
@@ -111,3 +115,40 @@ def scan_length(ctx: Context, ok: NDArray[np.bool_]) -> float | None:
     total = inner + float(inv[0] * pos[0] + inv[-1] * (idx.size - 1 - pos[-1]))
     ctx.cache[key] = total
     return total
+
+
+def frequency_search_factor(
+    t: NDArray[np.float64], band: float, harmonics, n_chan: int, level: float
+) -> float:
+    """Bonferroni factor of sinusoids at ``h·f`` (``h`` in ``harmonics``) whose ``f`` is
+    searched over a band ``band`` wide [Hz], at the decision boundary.
+
+    Davies' bound for the supremum of a χ²_k process over a parameter (Davies 1987,
+    *Biometrika* 74, 33, eq. 3.4): ``P(sup > u) ≤ P(χ²_k > u) + V u^{(k−1)/2} e^{−u/2}
+    2^{−k/2} / Γ(k/2)``, with ``V = band · √λ`` the path length of the normalised
+    process; a sinusoid's derivative with respect to ``f`` is ``2π h (t − t̄)`` times its
+    quadrature, so ``λ = (2π)² Var(t) · mean(h²)`` (harmonics weighted alike).  ``k =
+    2 · len(harmonics) · n_chan``.  The factor is the bound over ``P(χ²_k > u)`` at the
+    ``u`` where the bound equals ``level``; at least 1.  On a 1 Hz day the orbit term
+    (``f`` and ``2f`` within ±3 %) gets ~6; the count of resolvable frequencies in the
+    fundamental's band alone (1 on a day) had such terms significant on 3 of 40
+    white-noise days at α = 0.01.
+    """
+    h = np.asarray(list(harmonics), dtype=np.float64)
+    k = 2 * h.size * max(int(n_chan), 1)
+    if k == 0 or band <= 0 or t.size < 2 or not 0.0 < level < 1.0:
+        return 1.0
+    v = float(band * 2.0 * np.pi * np.std(t) * np.sqrt(np.mean(h**2)))
+    lg = special.gammaln(k / 2.0)
+
+    def log_tail(u: float) -> float:  # log of Davies' second term
+        return np.log(v) + 0.5 * (k - 1) * np.log(u) - 0.5 * u - 0.5 * k * np.log(2.0) - lg
+
+    def excess(u: float) -> float:  # log(bound) − log(level)
+        return float(np.logaddexp(np.log(max(chi2_sf(u, k), 1e-300)), log_tail(u)) - np.log(level))
+
+    lo = float(k)
+    if excess(lo) <= 0.0:
+        return 1.0
+    u = optimize.brentq(excess, lo, 1e4)
+    return float(max(1.0, level / chi2_sf(u, k)))
