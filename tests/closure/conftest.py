@@ -183,3 +183,36 @@ def block_context(
         channel_all=chan,
         channel_names=tuple(names),
     )
+
+
+#: Start of the white-noise days [s] (GPS seconds of 2023-06-15).
+WHITE_T0 = 740059202.0
+
+
+def white_noise_day(seed: int, n: int = 86400) -> tuple[np.ndarray, np.ndarray]:
+    """``(t, y)``: one day at 1 Hz of a 1e-6 m/s² bias, a 1e-12 m/s²/s drift and white
+    noise of 1e-10 m/s² per sample, nothing else (drawn here with numpy)."""
+    t = WHITE_T0 + np.arange(n, dtype=float)
+    y = 1e-6 + 1e-12 * (t - WHITE_T0) + np.random.default_rng(seed).normal(0.0, 1e-10, n)
+    return t, y
+
+
+@pytest.fixture(scope="session")
+def white_day():
+    """The :func:`white_noise_day` factory."""
+    return white_noise_day
+
+
+def close_white(t, y, candidates):
+    """:func:`accal.closure.close_loop` of a white-noise day with the orbit template in
+    the null model (no reference; the period held at 5600 s)."""
+    from accal.closure import close_loop
+
+    return close_loop(t, y, orbit_period=5600.0, candidates=tuple(candidates),
+                      options={"orbit_period_fixed": True})  # fmt: skip
+
+
+@pytest.fixture(scope="session")
+def close_white_day():
+    """The :func:`close_white` runner."""
+    return close_white

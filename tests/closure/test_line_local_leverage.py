@@ -15,36 +15,20 @@ from __future__ import annotations
 
 import numpy as np
 
-from accal.closure import close_loop
 
-N = 86400
-T0 = 740059202.0
-
-
-def _day(seed: int) -> tuple[np.ndarray, np.ndarray]:
-    t = T0 + np.arange(N, dtype=float)
-    y = 1e-6 + 1e-12 * (t - T0) + np.random.default_rng(seed).normal(0.0, 1e-10, N)
-    return t, y
-
-
-def _run(t, y):
-    return close_loop(t, y, orbit_period=5600.0, candidates=("periodic",),
-                      options={"orbit_period_fixed": True})  # fmt: skip
-
-
-def test_white_noise_day_has_no_line():
+def test_white_noise_day_has_no_line(white_day, close_white_day):
     """Seed 21: a 1.3e-12 m/s² line at 0.54 cycles per orbit (2.6 times its σ) had
     corrected p 0.006; nothing now."""
-    res = _run(*_day(21))
+    res = close_white_day(*white_day(21), ("periodic",))
     assert res.effects == ()
 
 
-def test_a_real_line_is_still_found():
+def test_a_real_line_is_still_found(white_day, close_white_day):
     """A 5e-12 m/s² line (~10 times its σ) at 300 s on another white-noise day: found
     at its frequency, its amplitude within 3σ."""
-    t, y = _day(22)
-    y = y + 5e-12 * np.sin(2 * np.pi * (t - T0) / 300.0 + 0.3)
-    res = _run(t, y)
+    t, y = white_day(22)
+    y = y + 5e-12 * np.sin(2 * np.pi * (t - t[0]) / 300.0 + 0.3)
+    res = close_white_day(t, y, ("periodic",))
     lines = [e for e in res.effects if e.name == "periodic"]
     assert len(lines) == 1
     e = lines[0]

@@ -17,44 +17,29 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from accal.closure import close_loop
 from accal.closure.candidates import scan_multiplicity
 from accal.closure.multiplicity import scan_factor
 
-N = 86400
-T0 = 740059202.0
 
-
-def _day(seed: int) -> tuple[np.ndarray, np.ndarray]:
-    t = T0 + np.arange(N, dtype=float)
-    y = 1e-6 + 1e-12 * (t - T0) + np.random.default_rng(seed).normal(0.0, 1e-10, N)
-    return t, y
-
-
-def _run(t, y):
-    return close_loop(t, y, orbit_period=5600.0, candidates=("bias_step",),
-                      options={"orbit_period_fixed": True})  # fmt: skip
-
-
-def test_white_noise_day_has_no_step():
+def test_white_noise_day_has_no_step(white_day, close_white_day):
     """Seed 27: a 4.8σ "step" at 12,038 s had corrected p 3e-4 at a multiplicity of
     200; at the measured multiplicity (~3,400) it is not significant."""
-    res = _run(*_day(27))
+    res = close_white_day(*white_day(27), ("bias_step",))
     assert res.effects == ()
 
 
-def test_a_real_step_is_still_found_with_its_size():
+def test_a_real_step_is_still_found_with_its_size(white_day, close_white_day):
     """A 2e-10 m/s² step (~30σ of its size) at 30,000 s on another white-noise day:
     found there alone, its size within 3σ, at the larger multiplicity.  (Seed 27's
     4.9σ excursion at 12,038 s, with the step fitted, has corrected p 0.0035 at that
     multiplicity: a second step, as the test's level allows once in ~300 days.)"""
-    t, y = _day(1)
-    y = y + 2e-10 * (t >= T0 + 30000.0)
-    res = _run(t, y)
+    t, y = white_day(1)
+    y = y + 2e-10 * (t >= t[0] + 30000.0)
+    res = close_white_day(t, y, ("bias_step",))
     steps = [e for e in res.effects if e.name == "bias_step"]
     assert len(steps) == 1
     e = steps[0]
-    assert abs(e.epoch - (T0 + 30000.0)) <= 60.0
+    assert abs(e.epoch - (t[0] + 30000.0)) <= 60.0
     assert abs(e.coefficient - 2e-10) < 3 * e.sigma
     assert e.details["multiplicity"] > 1000.0
 
@@ -63,7 +48,7 @@ def test_scan_factor_is_the_cusum_count_for_the_cusum_length():
     """``scan_factor`` with Siegmund's CUSUM length ``2 ln((1 − ε)/ε)`` is the factor
     :func:`~accal.closure.candidates.scan_multiplicity` gives, and grows with the
     length."""
-    eps = 10.0 / N
+    eps = 10.0 / 86400  # a 1 Hz day, epochs from 10 samples
     logs = 2.0 * np.log((1.0 - eps) / eps)
     assert scan_factor(logs, 1, 0.01) == pytest.approx(scan_multiplicity(np.array([eps]), 1, 0.01))
     assert scan_factor(10 * logs, 1, 0.01) > 5 * scan_factor(logs, 1, 0.01)

@@ -156,6 +156,12 @@ class Context:
         return self.basis.dense_q()
 
     @property
+    def scan_level(self) -> float:
+        """The level a scan's multiplicity is taken at: alpha over the candidate
+        families (the decision boundary of a corrected p-value)."""
+        return float(self.options.get("alpha", 0.01)) / float(self.options.get("families", 1))
+
+    @property
     def n_chan(self) -> int:
         """Number of data channels."""
         return max(len(self.channel_names), 1)
@@ -491,7 +497,7 @@ def bias_step(ctx: Context) -> list[Proposal]:
         fractions = 1.0 / np.maximum(counts[scanned], 1)
     else:  # one scan over the record, epochs at least min_segment from the ends
         fractions = np.array([min_seg / max(n, 1)])
-    level = float(ctx.options.get("alpha", 0.01)) / float(ctx.options.get("families", 1))
+    level = ctx.scan_level
     mult = max(m_tests, scan_multiplicity(fractions, len(masks), level))
     length = scan_length(ctx, ok)  # a nuisance in the model: measured decorrelation
     if length is not None:

@@ -316,8 +316,7 @@ def _orbit_proposal(
     # from the line's 2f, the line was kept off, the orbit term had p = 1,
     # and the line was never proposed); once an orbit effect is in the model
     # its harmonics are kept off (in periodic)
-    level = float(ctx.options.get("alpha", 0.01)) / float(ctx.options.get("families", 1))
-    m = frequency_search_factor(ctx.t, ORBIT_BAND * f0, harm, len(masks), level)
+    m = frequency_search_factor(ctx.t, ORBIT_BAND * f0, harm, len(masks), ctx.scan_level)
     labs = tuple(lab for n in harm for lab in (f"cos@{n * f!r}", f"sin@{n * f!r}"))
     cols, labs, axes = ctx.split(_harmonic_cols(tau_all, [n * f for n in harm]), labs)
     return Proposal(
