@@ -476,7 +476,7 @@ def run_grace_api(case: Case) -> list[dict[str, Any]]:
             reference=ref[:, k] if ref is not None else None,
             channel_units=units,
             screened=screened,
-            options={"orbit_period_fixed": True},
+            options={"orbit_period_fixed": True, "step_transition": True},  # L1B-like
             **_proxies(y_all, k, ref),
         )
         seconds = time.perf_counter() - t_start

@@ -342,7 +342,8 @@ def close_the_loop(
             reference=series.axis(ax) - y if reference else None,
             channel_units=units,
             screened=left_out,
-            options={"orbit_period_fixed": True},
+            # a step in CRN-filtered data is a ramp (accal.closure.transition)
+            options={"orbit_period_fixed": True, "step_transition": is_level1b(series.meta)},
             signal_proxies=None
             if reference
             else {o: fit_series.axis(o) for o in series.axes if o != ax},

@@ -84,7 +84,9 @@ class Context:
         Frequencies not to propose again [Hz] (already modelled or rejected).
     options : dict
         Search settings (``step_tests``, ``min_segment``, ``max_lag``, ``n_lags``,
-        ``lag_scan``, ``aux_taus``, ``fmax``, ``settle_taus``) and ``platform``
+        ``lag_scan``, ``aux_taus``, ``fmax``, ``settle_taus``), ``step_transition``
+        (the data are low-passed, e.g. Level-1B: a bias step's final fit has the local
+        columns of its ramp, :mod:`accal.closure.transition`) and ``platform``
         (:class:`PlatformInfo`, for ``angle_offset`` and ``intra_period_shape``).
     channel_all : ndarray of int, shape (N,), optional
         Data channel of every sample (several channels: e.g. the y and z axes of
@@ -604,13 +606,16 @@ def _step_proposal(ctx: Context, epochs: list[float], mult: float) -> Proposal:
     cols = np.column_stack([(ctx.t_all >= e).astype(np.float64) for e in epochs])
     labs = tuple(f"step@{e!r}" for e in epochs)
     cols, labs, axes = ctx.split(cols, labs)
+    # the final fit models a ramp in low-passed data (options["step_transition"])
+    ramp = {"transition": True} if ctx.options.get("step_transition") else {}
     if len(epochs) == 1:
-        return Proposal("bias_step", None, cols, labs, mult, {"epoch": epochs[0]}, axes=axes)
+        params = {"epoch": epochs[0], **ramp}
+        return Proposal("bias_step", None, cols, labs, mult, params, axes=axes)
     n_c = max(ctx.n_chan, 1)
     parts = []
     for k, e in enumerate(epochs):  # columns of step k: one per channel
         idx = [k + len(epochs) * c for c in range(n_c)] if axes is not None else [k]
-        parts.append((idx, {"epoch": e}))
+        parts.append((idx, {"epoch": e, **ramp}))
     return Proposal(
         "bias_step",
         None,

@@ -26,6 +26,7 @@ from accal.closure.candidates import Proposal
 from accal.closure.kinds import EFFECT_NAMES, kind_of, unit_of
 from accal.closure.residual import Grid, _quad, _two_sided, estimate_psd
 from accal.closure.results import Effect
+from accal.closure.transition import transition_columns
 
 __all__ = [
     "covariances",
@@ -75,9 +76,13 @@ def with_jacobian(prop: Proposal, t_all, t0: float, use, rest: Basis) -> Proposa
     t0)/T)·e`` with ``β = A·δ/T`` (σ(T) = σ(β)·T/|A|); a coupling through a
     low-pass adds ``∂h/∂lnτ`` and ``∂h/∂lag`` (:attr:`Proposal.jacobian`).  A
     Jacobian that is not independent of ``rest`` (the base and the other effects)
-    is not added.
+    is not added.  A bias step in low-passed data (``options["step_transition"]`` of
+    :func:`accal.closure.close_loop`; one channel) gets the local columns of its
+    transition instead (:mod:`accal.closure.transition`).
     """
     cols = prop.columns
+    if prop.name == "bias_step" and prop.params.get("transition") and prop.axes is None:
+        return _with_transition(prop, t_all, use, rest)
     if prop.name == "exponential_drift" and prop.params.get("tau"):
         parts = [("tau", cols * ((t_all - t0) / float(prop.params["tau"]))[:, None])]
     elif prop.jacobian is not None:
@@ -98,6 +103,33 @@ def with_jacobian(prop: Proposal, t_all, t0: float, use, rest: Basis) -> Proposa
     if independent(rest, aug, use).columns.shape[1] != aug.columns.shape[1]:
         return prop
     return aug
+
+
+def _with_transition(prop: Proposal, t_all, use, rest: Basis) -> Proposal:
+    """A single-channel bias step with its transition's local columns
+    (:func:`accal.closure.transition.transition_columns`); those not independent of
+    ``rest`` and of the others (a gap at the epoch, a coarse sampling) are left out."""
+    steps = np.diff(t_all[use])
+    dt = float(np.median(steps[steps > 0])) if np.any(steps > 0) else 1.0
+    parts = transition_columns(t_all, float(prop.params["epoch"]), dt)
+    if not parts:
+        return prop
+    names = [k for k, _ in parts]
+    aug = Proposal(
+        prop.name,
+        prop.channel,
+        np.column_stack([prop.columns] + [d for _, d in parts]),
+        (*prop.labels, *(f"d{lb}/d{k}" for k in names for lb in prop.labels)),
+        prop.multiplicity,
+        prop.params,
+    )
+    red = independent(rest, aug, use)
+    kept = [aug.labels.index(lb) for lb in red.labels]
+    if 0 not in kept:
+        return prop
+    kept_names = [names[i - 1] for i in kept[1:]]
+    params = {**prop.params, "jacobian": 1, "jacobian_params": kept_names}
+    return Proposal(prop.name, prop.channel, red.columns, red.labels, prop.multiplicity, params)
 
 
 def _sandwich(rinv: NDArray[np.float64], g: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -213,6 +245,8 @@ def _nonlinear(prop: Proposal, c, cc, i: int, kw: dict, details: dict) -> None:
     n_e = int(prop.params.get("jacobian", 0))
     amp = float(c[i])
     for k, par in enumerate(prop.params.get("jacobian_params", ("tau",)) if n_e else ()):
+        if par.startswith("transition"):  # a step's shape (accal.closure.transition)
+            continue
         # β = A·δ (δ of ln T, or of the lag [s])
         jb = n_e * (k + 1) + i
         beta, s_beta = float(c[jb]), float(np.sqrt(max(cc[jb, jb], 0.0)))

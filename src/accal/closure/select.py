@@ -249,7 +249,11 @@ def close_loop(
     catchall_knots : int
         Knots of the piecewise-linear basis of the ``unexplained`` test; 0 disables it.
     options : dict, optional
-        Search settings passed to the builders (see :class:`Context`).
+        Search settings passed to the builders (see :class:`Context`); with
+        ``{"step_transition": True}`` (low-passed data such as GRACE Level-1B, as
+        ``grace-bias`` sets for those files) a bias step is fitted with the local
+        columns of its ramp, so its size is not taken for the ramp's shape
+        (:mod:`accal.closure.transition`).
     channel, channel_names : optional
         Several data channels on one time grid (e.g. the platform's y and z axes,
         interleaved in time); noises independent with a common PSD; every generic
