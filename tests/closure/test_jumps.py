@@ -142,3 +142,20 @@ def test_white_noise_is_left_to_the_least_squares_scan():
     notes = " ".join(n["note"] for n in res.notes)
     assert "not red enough" in notes
     assert not [e for e in res.effects if "method" in e.details]
+
+
+def test_a_jump_has_an_epoch_interval_that_holds_its_ramp():
+    """The jump test leaves its transition out, so its epoch interval is where the
+    kernel's size stays within σ of its best: it holds the ramp's middle and is no
+    wider than the transition's slack allows (here a ±35 s ramp in ±40 s)."""
+    for seed in range(4):
+        epoch = 9_000.0 + 1397.0 * seed + 0.5
+        t, y = red_day(100 + seed, step=(epoch, 3e-9))
+        res = _run(t, y)
+        (e,) = [e for e in res.effects if e.name == "bias_step"]
+        assert e.details["method"].startswith("spectrum-weighted jump")
+        lo, hi = e.details["epoch_interval"]
+        assert lo <= epoch <= hi, (seed, lo, epoch, hi)
+        assert lo <= e.epoch <= hi
+        assert hi - lo <= 4 * jumps.TRANSITION
+        assert e.details["epoch_sigma"] == pytest.approx(0.5 * (hi - lo))

@@ -65,7 +65,7 @@ made.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -162,6 +162,9 @@ class Jump:
         Half-width of the window around the jump in which neighbours are looked at [s].
     n_tests : int
         Epochs scanned.
+    epoch_info : dict
+        ``epoch_interval`` [s, s], ``epoch_sigma`` [s], ``epoch_ambiguous``
+        (:func:`_epoch_interval`; empty when not measured).
     """
 
     epoch: float
@@ -173,6 +176,7 @@ class Jump:
     halfwidth: float
     wide: float
     n_tests: int
+    epoch_info: dict[str, Any] = field(default_factory=dict)
 
     def details(self) -> dict[str, Any]:
         """JSON-able details for the effect's report."""
@@ -187,6 +191,7 @@ class Jump:
             "n_tests": self.n_tests,
             "p_accept": self.p_adj,
             "n_columns": 1,
+            **self.epoch_info,
         }
 
 
@@ -422,8 +427,50 @@ def _remeasured(grid, t, r, basis, leverage, jumps, at, pos) -> list[Jump]:
         col = (t >= j.epoch).astype(np.float64)
         r_j = r + j.size * (col - basis.project(col))
         _, size, sd = _exact(grid, r_j, basis, k0, psd, np.array([e], dtype=np.int64), pos)
-        out.append(replace(j, size=float(size[0]), sigma=float(sd[0])))
+        info = _epoch_interval(grid, t, r_j, basis, k0, psd, e, pos, j.epoch)
+        out.append(replace(j, size=float(size[0]), sigma=float(sd[0]), epoch_info=info))
     return out
+
+
+def _epoch_interval(grid, t, r, basis, k0, psd, e, pos, epoch) -> dict[str, Any]:
+    """Where a jump's transition can be, by its kernel's size at nearby epochs.
+
+    The kernel leaves ±:data:`TRANSITION` s out, so it does not see where inside that
+    the edge is: its size is the same (to noise) at every kernel epoch whose left-out
+    stretch holds the whole ramp, and drops where part of the ramp falls outside.  A
+    profile of its Wald statistic over the epoch is no guide here (the kernels at
+    neighbouring epochs use different samples: at 60σ a 0.1σ change of the noise's
+    share moves ``W`` by 12); the sizes are.  The interval is the contiguous set of
+    kernel epochs within ±2 transitions of the scan's epoch ``e`` whose size is within
+    one σ of the largest (same sign), widened by one sample and holding the reported
+    ``epoch`` (:func:`_midpoint`): where the ramp's middle can be.  It is a bound rather
+    than a 68 % interval: for a ramp shorter than the transition it spans the slack
+    (±5 s for seven 10 s boxcars, ±22 s for accal's CRN stand-in, ±40 s for a sharp
+    step).  ``epoch_ambiguous``: other such epochs away from that set.
+    """
+    w = max(1, int(round(TRANSITION / grid.step)))
+    near = np.arange(e - 2 * w, e + 2 * w + 1)
+    near = near[(near >= 0) & (near < grid.size)]
+    near = near[pos[near] >= 0]
+    if near.size == 0:
+        return {}
+    _, size, sd = _exact(grid, r, basis, k0, psd, near, pos)
+    sign = np.sign(size[int(np.argmin(np.abs(near - e)))])
+    signed = sign * size
+    best = int(np.argmax(signed))
+    inside = signed >= signed[best] - sd[best]
+    lo = hi = best
+    while lo > 0 and inside[lo - 1]:
+        lo -= 1
+    while hi + 1 < near.size and inside[hi + 1]:
+        hi += 1
+    t_lo = min(grid_time(t, grid, int(near[lo])) - grid.step, float(epoch))
+    t_hi = max(grid_time(t, grid, int(near[hi])) + grid.step, float(epoch))
+    return {
+        "epoch_interval": [t_lo, t_hi],
+        "epoch_sigma": max(0.5 * (t_hi - t_lo), grid.step),
+        "epoch_ambiguous": bool(np.any(inside[:lo]) or np.any(inside[hi + 1 :])),
+    }
 
 
 def _midpoint(grid: Grid, t: NDArray[np.float64], r: NDArray[np.float64], e: int,
