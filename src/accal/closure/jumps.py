@@ -437,13 +437,16 @@ def _epoch_interval(grid, t, r, basis, k0, psd, e, pos, epoch) -> dict[str, Any]
 
     The kernel leaves ±:data:`TRANSITION` s out, so it does not see where inside that
     the edge is: its size is the same (to noise) at every kernel epoch whose left-out
-    stretch holds the whole ramp, and drops where part of the ramp falls outside.  A
+    stretch holds the whole ramp, and changes where part of the ramp falls outside.  A
     profile of its Wald statistic over the epoch is no guide here (the kernels at
     neighbouring epochs use different samples: at 60σ a 0.1σ change of the noise's
     share moves ``W`` by 12); the sizes are.  The interval is the contiguous set of
-    kernel epochs within ±2 transitions of the scan's epoch ``e`` whose size is within
-    one σ of the largest (same sign), widened by one sample and holding the reported
-    ``epoch`` (:func:`_midpoint`): where the ramp's middle can be.  It is a bound rather
+    kernel epochs within ±2 transitions around the scan's epoch ``e`` whose size is
+    within one σ of the size at ``e`` (the one reported), widened by one sample and
+    holding the reported ``epoch`` (:func:`_midpoint`): where the ramp's middle can
+    be.  (Within one σ of the *largest* size instead, a sharp step's interval went
+    where the kernel's response to an edge just outside its transition overshoots;
+    the size at that set's middle was 250σ off, ``tests/test_cli_closure.py``.)  It is a bound rather
     than a 68 % interval: for a ramp shorter than the transition it spans the slack
     (±5 s for seven 10 s boxcars, ±22 s for accal's CRN stand-in, ±40 s for a sharp
     step).  ``epoch_ambiguous``: other such epochs away from that set.
@@ -455,11 +458,10 @@ def _epoch_interval(grid, t, r, basis, k0, psd, e, pos, epoch) -> dict[str, Any]
     if near.size == 0:
         return {}
     _, size, sd = _exact(grid, r, basis, k0, psd, near, pos)
-    sign = np.sign(size[int(np.argmin(np.abs(near - e)))])
-    signed = sign * size
-    best = int(np.argmax(signed))
-    inside = signed >= signed[best] - sd[best]
-    lo = hi = best
+    at = int(np.argmin(np.abs(near - e)))
+    inside = np.abs(size - size[at]) <= sd[at]
+    inside[at] = True
+    lo = hi = at
     while lo > 0 and inside[lo - 1]:
         lo -= 1
     while hi + 1 < near.size and inside[hi + 1]:
