@@ -426,13 +426,14 @@ def _remeasured(grid, t, r, basis, leverage, jumps, at, pos) -> list[Jump]:
     for j, e in zip(jumps, at, strict=True):
         col = (t >= j.epoch).astype(np.float64)
         r_j = r + j.size * (col - basis.project(col))
-        _, size, sd = _exact(grid, r_j, basis, k0, psd, np.array([e], dtype=np.int64), pos)
-        info = _epoch_interval(grid, t, r_j, basis, k0, psd, e, pos, j.epoch)
-        out.append(replace(j, size=float(size[0]), sigma=float(sd[0]), epoch_info=info))
+        info, size, sd = _epoch_interval(grid, t, r_j, basis, k0, psd, e, pos, j.epoch)
+        out.append(replace(j, size=size, sigma=sd, epoch_info=info))
     return out
 
 
-def _epoch_interval(grid, t, r, basis, k0, psd, e, pos, epoch) -> dict[str, Any]:
+def _epoch_interval(
+    grid, t, r, basis, k0, psd, e, pos, epoch
+) -> tuple[dict[str, Any], float, float]:
     """Where a jump's transition can be, by its kernel's size at nearby epochs.
 
     The kernel leaves ±:data:`TRANSITION` s out, so it does not see where inside that
@@ -456,9 +457,12 @@ def _epoch_interval(grid, t, r, basis, k0, psd, e, pos, epoch) -> dict[str, Any]
     near = near[(near >= 0) & (near < grid.size)]
     near = near[pos[near] >= 0]
     if near.size == 0:
-        return {}
+        _, size, sd = _exact(grid, r, basis, k0, psd, np.array([e], dtype=np.int64), pos)
+        return {}, float(size[0]), float(sd[0])
+    if not np.any(near == e):
+        near = np.sort(np.r_[near, e])
     _, size, sd = _exact(grid, r, basis, k0, psd, near, pos)
-    at = int(np.argmin(np.abs(near - e)))
+    at = int(np.flatnonzero(near == e)[0])
     inside = np.abs(size - size[at]) <= sd[at]
     inside[at] = True
     lo = hi = at
@@ -468,11 +472,17 @@ def _epoch_interval(grid, t, r, basis, k0, psd, e, pos, epoch) -> dict[str, Any]
         hi += 1
     t_lo = min(grid_time(t, grid, int(near[lo])) - grid.step, float(epoch))
     t_hi = max(grid_time(t, grid, int(near[hi])) + grid.step, float(epoch))
-    return {
+    info = {
         "epoch_interval": [t_lo, t_hi],
         "epoch_sigma": max(0.5 * (t_hi - t_lo), grid.step),
         "epoch_ambiguous": bool(np.any(inside[:lo]) or np.any(inside[hi + 1 :])),
     }
+    # the size at the midpoint's kernel when that is in the set: not the largest |z|
+    m = int(grid.idx[min(int(np.searchsorted(t, float(epoch))), t.size - 1)])
+    k = int(np.searchsorted(near, m))
+    if k < near.size and near[k] == m and lo <= k <= hi:
+        return info, float(size[k]), float(sd[k])
+    return info, float(size[at]), float(sd[at])
 
 
 def _midpoint(grid: Grid, t: NDArray[np.float64], r: NDArray[np.float64], e: int,
