@@ -52,7 +52,8 @@ from accal.closure.inputs import (
     usable_proxies,
     with_caller_notes,
 )
-from accal.closure.jumps import add_jump_covariance, jump_columns, jump_effects, jumps_first
+from accal.closure.jumpfit import add_jump_covariance, jump_columns, jump_effects
+from accal.closure.jumps import jumps_first
 from accal.closure.kinds import EFFECT_NAMES, kind_of, unit_of
 from accal.closure.lagprofile import add_lag_uncertainties
 from accal.closure.nuisance import (
