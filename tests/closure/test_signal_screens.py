@@ -130,3 +130,26 @@ def test_spikes_keeps_a_step_edge_on_a_steep_slope():
     hit = spikes(x, None, t)
     assert not hit[1980:2020].any(), np.flatnonzero(hit[1980:2020]) + 1980
     assert hit[3000:3003].all()
+
+
+def test_a_level_shift_flagged_in_two_runs_is_kept():
+    """The screen's runs a padding apart are judged as one: a step whose approach and
+    ramp were flagged as two runs 2 samples apart was left out (each run had the other
+    for a side); a burst split the same way is still left out."""
+    from accal.closure.outliers import OUTLIER_PAD, _bursts_only
+
+    rng = np.random.default_rng(3)
+    x = rng.normal(0.0, 1e-11, 2000)
+    x[1000:] += 1e-8  # the step
+    x[880:1000] += np.linspace(0.0, 3e-9, 120)  # the slope before it
+    hit = np.zeros(x.size, bool)
+    hit[880:990] = True
+    hit[990 + 2 * OUTLIER_PAD - 2 : 1010] = True  # a gap of 2 samples
+    assert hit.sum() < 130 and not hit[990]
+    assert not _bursts_only(hit, x).any()
+    y = rng.normal(0.0, 1e-11, 2000)
+    y[900:1000] += 5e-9  # a burst: back to the level before
+    burst = np.zeros(y.size, bool)
+    burst[900:948] = True
+    burst[950:1000] = True
+    assert np.array_equal(_bursts_only(burst, y), burst)
