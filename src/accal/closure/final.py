@@ -124,12 +124,11 @@ def _with_transition(prop: Proposal, t_all, use, rest: Basis) -> Proposal:
         prop.params,
     )
     red = independent(rest, aug, use)
-    kept = [aug.labels.index(lb) for lb in red.labels]
-    if 0 not in kept:
+    if red.labels[0] != prop.labels[0]:  # the step itself is not independent
         return prop
-    kept_names = [names[i - 1] for i in kept[1:]]
-    params = {**prop.params, "jacobian": 1, "jacobian_params": kept_names}
-    return Proposal(prop.name, prop.channel, red.columns, red.labels, prop.multiplicity, params)
+    kept = [names[aug.labels.index(lb) - 1] for lb in red.labels[1:]]
+    params = {**prop.params, "jacobian": 1, "jacobian_params": kept}
+    return dataclasses.replace(red, params=params)
 
 
 def _sandwich(rinv: NDArray[np.float64], g: NDArray[np.float64]) -> NDArray[np.float64]:

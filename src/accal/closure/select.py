@@ -250,11 +250,9 @@ def close_loop(
     catchall_knots : int
         Knots of the piecewise-linear basis of the ``unexplained`` test; 0 disables it.
     options : dict, optional
-        Search settings passed to the builders (see :class:`Context`); with
-        ``{"step_transition": True}`` (low-passed data such as GRACE Level-1B, as
-        ``grace-bias`` sets for those files) a bias step is fitted with the local
-        columns of its ramp, so its size is not taken for the ramp's shape
-        (:mod:`accal.closure.transition`).
+        Search settings passed to the builders (see :class:`Context`);
+        ``{"step_transition": True}`` for low-passed data (``grace-bias`` sets it for
+        Level-1B files): bias steps fitted as ramps (:mod:`accal.closure.transition`).
     channel, channel_names : optional
         Several data channels on one time grid (e.g. the platform's y and z axes,
         interleaved in time); noises independent with a common PSD; every generic
@@ -323,26 +321,39 @@ def close_loop(
     setup = _Setup(t_all, y_all, base, chan_all, names, signal_model, orbit_period, fixed)
     st, use, notes, families, jumps = _null_model(setup, use, aux_all, builders, alpha)
     proxies = usable_proxies(proxies_all, use, notes) if st["template"] else None
-    opts.update(
-        families=families,
-        enabled=tuple(name for name, _ in builders),
-        alpha=alpha,
-        residual_ptp=float(np.ptp(st["fit0"].resid)),
-        signal_template=st["template"].period if st["template"] is not None else None,
-    )
+    opts.update(_search_settings(st, builders, families, alpha))
 
     make = _search_maker(setup, builders, alpha, opts, aux_all, ref_all, proxies, notes)
     stop = _floor_stop(resolution)
     search, st = _select(make, st, use, setup, max_effects, stop)
     floored = stop is not None and stop(search)
-    if psd_update is not None and (search.found or jumps.jumps):
-        model = _effects_sum(search, setup, st, jumps.jumps)
-        model[use & ~search.use] = np.nan  # left out by the search (a channel made up)
-        new_psd = psd_update(model)
-        noise_psd = noise_psd if new_psd is None else new_psd
+    noise_psd = _updated_psd(search, setup, st, jumps.jumps, use, noise_psd, psd_update)
     return _finish(
         search, setup, st, catchall_knots, noise_psd, floored, considered, opts, jumps.jumps
     )
+
+
+def _updated_psd(search: Search, setup: _Setup, st, jumps, use, noise_psd, psd_update):
+    """``noise_psd``, or what ``psd_update`` (:func:`close_loop`) returns for the fitted
+    sum of the effects found (NaN where the search left samples out: a channel made
+    up there) when the search found any."""
+    if psd_update is None or not (search.found or jumps):
+        return noise_psd
+    model = _effects_sum(search, setup, st, jumps)
+    model[use & ~search.use] = np.nan
+    new_psd = psd_update(model)
+    return noise_psd if new_psd is None else new_psd
+
+
+def _search_settings(st, builders, families: int, alpha: float) -> dict[str, Any]:
+    """The options the builders get from the null fit ``st`` (:class:`Context`)."""
+    return {
+        "families": families,
+        "enabled": tuple(name for name, _ in builders),
+        "alpha": alpha,
+        "residual_ptp": float(np.ptp(st["fit0"].resid)),
+        "signal_template": st["template"].period if st["template"] is not None else None,
+    }
 
 
 def _null_model(setup: _Setup, use, aux_all, builders, alpha: float):
