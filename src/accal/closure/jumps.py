@@ -23,7 +23,7 @@ filter of the processing, signal and instrument alike, so a real step is a ramp 
 the filter's window; those weights have most of their weight above the filter's
 cut-off, where a filtered step has nothing, and did not see a 1e-8 m/s² one.  So the
 samples within ±:data:`TRANSITION` s of the epoch are left out of the test
-(:func:`_gapped`: the partitioned inverse of ``C`` on the other samples, exact for
+(:func:`gapped_weights`: the partitioned inverse of ``C`` on the other samples, exact for
 any transition shorter than that).  ``S`` is the binned, projection-corrected PSD of
 the null residual (:func:`accal.closure.noise_psd.estimate_psd`).  Any fixed weights
 give a valid test when their variance is computed exactly, so the kernel is taken as
@@ -70,10 +70,23 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import linalg
 from scipy.special import log_ndtr
 
-from accal.closure.noise_psd import Grid, estimate_psd, two_sided_weights
+from accal.closure.comb import WINDOW as COMB_WINDOW
+from accal.closure.comb import find_comb
+from accal.closure.edgekernel import (
+    TRANSITION,
+    edge_measure,
+    edge_scores,
+    edge_sizes,
+    edge_weights,
+    grid_time,
+    kernel_norm,
+    kernels_at,
+    step_kernel,
+    top_epochs,
+)
+from accal.closure.noise_psd import Grid, two_sided_weights
 from accal.closure.wald import quad_form
 
 __all__ = [
@@ -125,15 +138,6 @@ EDGE_SHARE = 0.5
 #: (`tests.indep` seed 31, cross-track: a lone 1.1e-9 m/s² eclipse edge whose pair 40 s
 #: away had been left out), and a thruster firing is not a bias step.
 CLEAR = 60.0
-#: Half-width [s] of the transition a step may take in the data, left out of its test:
-#: Level-1B data are low-passed by the CRN filter of the processing, so an instrument's
-#: step is a ramp over the filter's window (ACC1B ``qualflg`` bits 5-7 count from the
-#: "center of CRN filter window" beyond 15 s; seven 10 s boxcars, the tests' stand-in,
-#: span ±35 s).  A test of the step's *edge* found the unfiltered steps of the earlier
-#: generators and not one filtered like the data (1e-8 m/s², x axis).
-TRANSITION = 40.0
-#: Energy share that defines the kernel's half-width.
-ENERGY = 0.999
 
 
 @dataclass(frozen=True)
@@ -197,7 +201,8 @@ class JumpScan:
 
     ``jumps`` accepted; ``rejected``: significant epochs that failed the persistence
     check (``{"epoch", "size", "sigma", "size_wider_transition", "sigma_wider_transition",
-    "reason"}``); ``halfwidth`` of the last kernel [s] (None: no scan, see ``note``).
+    "reason"}``; jumps recurring at a common period, :mod:`accal.closure.comb`, are
+    among them); ``halfwidth`` of the last kernel [s] (None: no scan, see ``note``).
     """
 
     jumps: tuple[Jump, ...] = ()
@@ -205,68 +210,6 @@ class JumpScan:
     halfwidth: float | None = None
     n_tests: int = 0
     note: str = ""
-
-
-def _kernel(grid: Grid, r: NDArray[np.float64], lev: NDArray) -> tuple:
-    """The step kernels at grid index 0 and the PSD.
-
-    Returns ``kf`` (the rfft of ``k0``), ``k0`` (transition ±:data:`TRANSITION` s left
-    out, :func:`_gapped`), the PSD, the half-width of ``k0`` [samples] (99.9 % of its
-    energy) and ``k2`` (twice the transition left out, for the persistence check).
-    """
-    n = grid.size
-    psd = estimate_psd(grid, r, lev).psd
-    w = max(1, min(int(round(TRANSITION / grid.step)), n // 8))
-    k0, k2 = _gapped(psd, n, grid.step, (w, 2 * w))
-    c = n // 2
-    cs = np.cumsum(np.roll(k0, c) ** 2)  # lag 0 at index c
-    tot = float(cs[-1])
-    if not tot > 0:
-        return np.fft.rfft(k0), k0, psd, n, k2
-    m = np.arange(min(c, n - c - 1))
-    inner = cs[c + m] - np.r_[0.0, cs][c - m]  # energy within lags -m .. m
-    half = int(np.searchsorted(inner, ENERGY * tot))
-    return np.fft.rfft(k0), k0, psd, max(half, w), k2
-
-
-def _gapped(
-    psd: NDArray[np.float64], n: int, step: float, widths: tuple[int, ...]
-) -> list[NDArray[np.float64]]:
-    """GLS weights of a step at grid index 0 with the samples ``−w .. w−1`` left out,
-    for each ``w`` of ``widths`` (one PSD, so ``Q`` and the step's weights are shared).
-
-    With ``Q = C⁻¹`` the Whittle inverse of the noise covariance (circulant, ``1/S(f)``;
-    zero at f = 0: constants are the base's), the GLS weights of a unit step ``u``
-    given only the samples ``O`` outside the transition ``Γ`` are ``(C_OO)⁻¹ u_O``, and
-    by the partitioned inverse ``(C_OO)⁻¹ = Q_OO − Q_OΓ (Q_ΓΓ)⁻¹ Q_ΓO``:
-    ``g = a − Q (Q_ΓΓ)⁻¹ a_Γ`` with ``a = Q (u with Γ zeroed)``, which vanishes on Γ
-    (e.g. Golub & Van Loan 2013, Matrix Computations, §3.2.10 for the block inverse).
-    Per width two FFTs and one ``2w × 2w`` solve.  Any transition of the step inside Γ
-    (the Level-1B filter's ramp) leaves the weights' response ``Σ_{k≥0} g_k`` unchanged.
-    """
-    f = np.fft.rfftfreq(n, step)
-    inv = np.zeros(f.size)
-    good = (psd > 0) & np.isfinite(psd)
-    good[0] = False
-    inv[good] = 1.0 / psd[good]
-    d = 1.0 - np.exp(-2j * np.pi * f[good] * step)
-    kf = np.zeros(f.size, dtype=complex)
-    kf[good] = inv[good] / d  # Q u: the step's GLS weights, all samples used
-    q = np.fft.irfft(inv, n=n)
-    out = []
-    for w in widths:
-        gap = np.arange(-w, w) % n
-        u_gap = np.zeros(n)
-        u_gap[:w] = 1.0  # the step's samples inside Γ (indices 0 .. w−1)
-        a = np.fft.irfft(kf - np.fft.rfft(u_gap) * inv, n=n)
-        j = np.arange(2 * w)
-        b = linalg.solve(q[np.abs(j[:, None] - j[None, :])], a[gap], assume_a="pos")
-        b_full = np.zeros(n)
-        b_full[gap] = b
-        g = a - np.fft.irfft(np.fft.rfft(b_full) * inv, n=n)
-        g[gap] = 0.0  # zero there to rounding (the construction)
-        out.append(g)
-    return out
 
 
 def scan_jumps(
@@ -325,7 +268,7 @@ def scan_jumps(
     stop = ""
     at: list[int] = []  # grid epochs of the jumps
     for _ in range(max_jumps):
-        kf, k0, psd, half, k2 = _kernel(grid, r, leverage)
+        kf, k0, psd, half, k2 = step_kernel(grid, r, leverage)
         half_s = half * grid.step
         if half_s > HALF_MAX:
             what = f"stopped after {len(jumps)} jump(s)" if jumps else "not scanned"
@@ -340,9 +283,9 @@ def scan_jumps(
         n_tests = max(n_tests, int(ok.sum()))
         if not ok.any():
             break
-        score = _scores(grid, r, kf)
-        cand = _top(np.where(ok, score, -1.0), TOP, max(half, 1))
-        z, size, sd = _exact(grid, r, basis, k0, psd, cand, pos)
+        score = edge_scores(grid, r, kf)
+        cand = top_epochs(np.where(ok, score, -1.0), TOP, max(half, 1))
+        z, size, sd = edge_sizes(grid, r, basis, k0, psd, cand, pos)
         log_p = np.log(2.0) + log_ndtr(-np.abs(z)) + np.log(max(n_tests, 1))
         order = np.argsort(-np.abs(z))
         accepted = False
@@ -353,8 +296,8 @@ def scan_jumps(
                 break
             checks += 1
             e = int(cand[i])
-            g_e = _weights(k0, grid, basis, [e])[:, 0]
-            wide = _wide(grid, r, basis, psd, e, m, k2, g_e / _norm(g_e, grid, e))
+            g_e = edge_weights(k0, grid, basis, [e])[:, 0]
+            wide = _wide(grid, r, basis, psd, e, m, k2, g_e / kernel_norm(g_e, grid, e))
             common = {
                 "epoch": _midpoint(grid, t, r, e, float(size[i])),
                 "size": float(size[i]),
@@ -367,7 +310,7 @@ def scan_jumps(
             # and the orbit template spreads it to the same phase in other orbits)
             step_col = (t >= common["epoch"]).astype(np.float64)
             r_given = r - size[i] * (step_col - basis.project(step_col))
-            s_given = _scores(grid, r_given, kf)
+            s_given = edge_scores(grid, r_given, kf)
             # any used sample may hold the other edge, also beside a left-out stretch
             args = (grid, t, r_given, basis, k0, psd, pos, s_given, used, e, size[i])
             recur = _recurrence(*args, period)
@@ -406,8 +349,41 @@ def scan_jumps(
             "persistent jump: the residual has sharp structure of its own (e.g. eclipse "
             "edges the orbit template does not follow)"
         )
+    if len(jumps) >= 2:
+        ok = _scannable(used, miss, m, reach)
+        jumps, at, r, off = _off_comb(grid, t, r, basis, leverage, jumps, at, ok)
+        rejected.extend(off)
     jumps = _remeasured(grid, t, r, basis, leverage, jumps, at, pos)
     return JumpScan(tuple(jumps), tuple(rejected), half_s, n_tests, note=note)
+
+
+def _off_comb(grid, t, r, basis, leverage, jumps, at, ok):
+    """The jumps off any comb of recurring ones (:func:`accal.closure.comb.find_comb`):
+    ``(jumps, at, r, rejected)``, the residual with the comb's jumps back in and those
+    as rejected.  A tooth is measured at its best-ranked scannable epoch within
+    ±:data:`accal.closure.comb.WINDOW` s, by the kernel on the residual itself (as
+    :func:`_recurrence` does one orbit away)."""
+    found = find_comb(
+        np.array([j.epoch for j in jumps]),
+        np.array([j.size for j in jumps]),
+        np.array([j.sigma for j in jumps]),
+        (float(t[0]), float(t[-1])),
+        edge_measure(grid, t, r, leverage, COMB_WINDOW, ok),
+    )
+    if found is None:
+        return jumps, at, r, []
+    off = []
+    for i in found.members:
+        j = jumps[i]
+        col = (t >= j.epoch).astype(np.float64)
+        r = r + j.size * (col - basis.project(col))
+        off.append({
+            "epoch": j.epoch, "size": j.size, "sigma": j.sigma,
+            "size_wider_transition": j.size_wide, "sigma_wider_transition": j.sigma_wide,
+            "reason": found.reason(), "comb_period_s": found.period,
+        })  # fmt: skip
+    keep = [i for i in range(len(jumps)) if i not in found.members]
+    return [jumps[i] for i in keep], [at[i] for i in keep], r, off
 
 
 def _remeasured(grid, t, r, basis, leverage, jumps, at, pos) -> list[Jump]:
@@ -417,7 +393,7 @@ def _remeasured(grid, t, r, basis, leverage, jumps, at, pos) -> list[Jump]:
     days of tests/closure/test_jumps.py)."""
     if not jumps:
         return jumps
-    _, k0, psd, _, _ = _kernel(grid, r, leverage)
+    _, k0, psd, _, _ = step_kernel(grid, r, leverage)
     out = []
     for j, e in zip(jumps, at, strict=True):
         col = (t >= j.epoch).astype(np.float64)
@@ -458,7 +434,7 @@ def _epoch_interval(
     near = np.arange(e - 2 * w, e + 2 * w + 1)
     near = near[(near >= 0) & (near < grid.size)]
     near = near[pos[near] >= 0]  # holds e, a used sample
-    _, size, sd = _exact(grid, r, basis, k0, psd, near, pos)
+    _, size, sd = edge_sizes(grid, r, basis, k0, psd, near, pos)
     at = int(np.searchsorted(near, e))
     inside = np.abs(size - size[at]) <= sd[at]
     inside[at] = True
@@ -539,90 +515,9 @@ def _not_persistent(size: float, wide: dict[str, float] | None, window: float) -
     return None
 
 
-def _scores(grid: Grid, r: NDArray[np.float64], kf: NDArray[np.complex128]) -> NDArray:
-    """``|⟨G_e, r⟩|`` for every grid epoch (one cross-correlation): the ranking."""
-    rg = grid.place(r)[0, 0]
-    return np.abs(np.fft.irfft(np.fft.rfft(rg) * np.conj(kf), n=grid.size))
-
-
-def grid_time(t: NDArray[np.float64], grid: Grid, e: int) -> float:
-    """Time of the used sample at grid index ``e``."""
-    return float(t[int(np.searchsorted(grid.idx, e))])
-
-
-def _top(score: NDArray[np.float64], k: int, sep: int) -> NDArray[np.int64]:
-    """The ``k`` best indices of ``score`` at least ``sep`` apart (positive scores only)."""
-    order = np.argsort(-score)
-    out: list[int] = []
-    blocked = np.zeros(score.size, dtype=bool)
-    for i in order:
-        if score[i] < 0 or len(out) >= k:
-            break
-        if blocked[i]:
-            continue
-        out.append(int(i))
-        blocked[max(0, i - sep) : i + sep + 1] = True
-    return np.array(out, dtype=np.int64)
-
-
-def _kernels(k0: NDArray[np.float64], grid: Grid, epochs: NDArray[np.int64]) -> NDArray:
-    """The kernel at each grid epoch, on the used samples: (n, k)."""
-    n = grid.size
-    rows = (grid.idx[:, None] - epochs[None, :]) % n
-    return k0[rows]
-
-
-def _norm(g: NDArray[np.float64], grid: Grid, e: int) -> float:
-    """``gᵀ 1[t ≥ t_e]`` (the weights' response to a unit step at grid index ``e``)."""
-    return float(g[int(np.searchsorted(grid.idx, e)) :].sum())
-
-
-#: Candidate epochs per chunk in :func:`_exact`.
-EXACT_CHUNK = 8
-
-
-def _exact(grid, r, basis, k0, psd, cand, pos, project=True):
-    """Size, σ and z of a step at each candidate grid epoch with the kernel as weights
-    (null design projected out of them).
-
-    ``project=False``: the edge of the residual ``r`` itself, the weights as they are
-    (:func:`_neighbour`, :func:`_recurrence`: whether the residual has another edge
-    there, not whether a step there could be told from the orbit template; where the
-    template follows an eclipse edge, a projected kernel's σ is 10-20× larger and the
-    box the template leaves had an edge at only 3σ).  The candidates are worked
-    through :data:`EXACT_CHUNK` at a time (:data:`TOP` weight columns at once, their
-    projections, sums and spectra, held 290 MB on a 1 Hz day).
-    """
-    cand = np.asarray(cand, dtype=np.int64)
-    size, sd = np.zeros(cand.size), np.zeros(cand.size)
-    w = two_sided_weights(grid.size, psd.size) * psd
-    for c0 in range(0, cand.size, EXACT_CHUNK):
-        part = slice(c0, c0 + EXACT_CHUNK)
-        gm = _weights(k0, grid, basis, cand[part], project)
-        first = pos[cand[part]]  # used-sample position of each epoch
-        # response to the unit step: the sum of the weights from the epoch on
-        csum = np.cumsum(gm[::-1], axis=0)[::-1]
-        a = csum[first, np.arange(first.size)]
-        del csum
-        size[part] = (gm.T @ r) / a
-        f = grid.fft(gm)  # (k, C, nf)
-        # the quadratic form's diagonal (accal.closure.wald.quad_form): Σ |G|² w / N
-        var = np.einsum("kcf,f->k", f.real**2 + f.imag**2, w) / grid.size / a**2
-        sd[part] = np.sqrt(np.maximum(var, 0.0))
-    z = np.where(sd > 0, size / np.where(sd > 0, sd, 1.0), 0.0)
-    return z, size, sd
-
-
-def _weights(k0, grid, basis, epochs, project=True) -> NDArray[np.float64]:
-    """The kernel at grid ``epochs`` on the used samples, the null design projected
-    out (``project``): (n, k)."""
-    g = _kernels(k0, grid, np.asarray(epochs, dtype=np.int64))
-    return g - basis.project(g) if project else g
-
-
 def _wide(grid, r, basis, psd, e, m, k2, g_sharp) -> dict[str, float] | None:
     """The size at grid epoch ``e`` with twice the transition left out (``k2``,
-    :func:`_gapped`), its σ and the difference to the kernel's size in σ of the
+    :func:`gapped_weights`), its σ and the difference to the kernel's size in σ of the
     difference (exact, same PSD).  None when either side of ``e`` holds fewer than
     ``m/2`` used samples within ±``m``.
 
@@ -633,9 +528,9 @@ def _wide(grid, r, basis, psd, e, m, k2, g_sharp) -> dict[str, float] | None:
     lo, mid, hi = np.searchsorted(grid.idx, [e - m, e, e + m])
     if mid - lo < m // 2 or hi - mid < m // 2:
         return None
-    gw = _kernels(k2, grid, np.array([e], dtype=np.int64))[:, 0]
+    gw = kernels_at(k2, grid, np.array([e], dtype=np.int64))[:, 0]
     gw = gw - basis.project(gw)
-    gw = gw / _norm(gw, grid, e)
+    gw = gw / kernel_norm(gw, grid, e)
     w = two_sided_weights(grid.size, psd.size) * psd
     fw = grid.fft(np.column_stack([gw, g_sharp - gw]))
     cov = quad_form(fw, w, grid.size)
@@ -670,10 +565,10 @@ def _neighbour(grid, t, r, basis, k0, psd, pos, score, ok, e, size, m) -> str | 
     # kernels whose left-out transition is near this one see the same step
     near = 2 * max(1, int(round(TRANSITION / grid.step))) + 2
     s[max(e - near - a, 0) : e + near + 1 - a] = -1.0
-    picks = a + _top(s, NEIGHBOURS, 2)
+    picks = a + top_epochs(s, NEIGHBOURS, 2)
     if picks.size == 0:
         return None
-    z, sz, _ = _exact(grid, r, basis, k0, psd, picks, pos, project=False)
+    z, sz, _ = edge_sizes(grid, r, basis, k0, psd, picks, pos, project=False)
     for zk, sk, ek in zip(z, sz, picks, strict=True):
         if abs(sk) >= RECUR_SHARE * abs(size) and abs(zk) >= RECUR_Z:
             return (
@@ -713,7 +608,9 @@ def _recurrence(grid, t, r, basis, k0, psd, pos, score, ok, e, size, period) -> 
         picks.append(a + int(np.argmax(s)))
     if not picks:
         return None
-    z, sz, _ = _exact(grid, r, basis, k0, psd, np.array(picks, dtype=np.int64), pos, project=False)
+    z, sz, _ = edge_sizes(
+        grid, r, basis, k0, psd, np.array(picks, dtype=np.int64), pos, project=False
+    )
     for zk, sk, ek in zip(z, sz, picks, strict=True):
         if (
             np.sign(sk) == np.sign(size)
