@@ -56,12 +56,13 @@ from numpy.typing import NDArray
 
 from accal.closure.candidates import Context
 from accal.closure.couplings import SQUARED, _column, square_about_mean
+from accal.closure.validation import SIGNAL_STEP_REASON
 from accal.closure.widen import add_base_covariance, scale_variance
 
 if TYPE_CHECKING:  # annotations only: the search imports the candidates
     from accal.closure.search import Found, Search
 
-__all__ = ["add_alias_spread", "add_signal_model_spread", "base_shift"]
+__all__ = ["add_alias_spread", "add_signal_model_spread", "add_signal_step_spread", "base_shift"]
 
 
 def base_shift(
@@ -184,6 +185,44 @@ def add_signal_model_spread(
         start = n_jumps + c_start
         effects[i] = _widened_coefficients(e, f, d**2 / 2.0, cov["v_ww"], start, "signal_model")
         effects[i].details["signal_model_change"] = d.tolist()
+
+
+def add_signal_step_spread(search: Search, cov: dict, basis: Any, fit: Any) -> None:
+    """Add the spread between a bias step and a step of the signal to the base
+    coefficients' covariance (``cov["cov_b"]``, ``cov["cov_d"]``; in place), for each
+    significant bias step rejected because a change of the signal at its epoch
+    explains it as well (:func:`accal.closure.validation.signal_step_p`).
+
+    The data then say that something changed there, not what: a bias step (which the
+    model without it leaves in that period's ``a_Y``, ``a_Z``: 7.8σ on a run with a
+    1e-9 m/s² step 60 s into its first period) or a change of the signal (which the
+    model without a step averages over the period, as the period's value should be:
+    0.35σ on a run with a 1e-9 m/s² step of ``a_Y``).  The values stay those of the
+    model without the step; their variance gains the between-model term of the two
+    with equal weights, ``d²/2`` (Hoeting et al. 1999, eq. 2, as above), ``d`` the
+    change of each base coefficient when the step is fitted with the final model.  A
+    note names the step and the largest change.
+    """
+    p = basis.p
+    b0 = fit.beta.reshape(-1, p)
+    for f in search.rejected:
+        why = f.verdict.reason or ""
+        if not (why.startswith(SIGNAL_STEP_REASON) and f.p_adj < search.alpha):
+            continue
+        ext = basis.extend(f.prop.columns[search.use])
+        b1 = ext.fit(search.y_u).beta.reshape(-1, p)
+        if b1.shape != b0.shape:
+            continue
+        d = np.where(np.isfinite(b1 - b0), b1 - b0, 0.0)
+        add_base_covariance(cov, basis, np.einsum("bp,bq->bpq", d, d) / 2.0)
+        search.note(
+            "bias_step",
+            None,
+            f"the bias step at {float(f.prop.params['epoch']):.1f} s (not removed: a change "
+            "of the signal explains it as well) is in the σ of the base coefficients it "
+            f"would move (by up to {np.abs(d).max():.3g} m/s²): their variance holds half "
+            "the square of that change",
+        )
 
 
 def _main_columns(f: Found) -> int:

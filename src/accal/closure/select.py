@@ -37,7 +37,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from accal.closure.aliasspread import add_alias_spread, add_signal_model_spread
+from accal.closure.aliasspread import (
+    add_alias_spread,
+    add_signal_model_spread,
+    add_signal_step_spread,
+)
 from accal.closure.basis import Basis
 from accal.closure.blockbase import BlockBase
 from accal.closure.channelfault import fault_notes
@@ -654,6 +658,7 @@ def _finish(
     widened_couplings(final, effects, cov, fit, len(jumps))
     add_alias_spread(search, final, effects, cov, basis, len(jumps))
     add_signal_model_spread(search, final, effects, cov, basis, fit, len(jumps))
+    add_signal_step_spread(search, cov, basis, fit)
     add_epoch_uncertainties(search, final, effects)
     unexplained = []
     if not floored:
