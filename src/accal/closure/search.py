@@ -223,6 +223,30 @@ class Search:
             self.grid, basis, lev, self.y_u, found[i].prop, self.use, self.n_families
         )
 
+    def p_final(self, i: int, found: Sequence[Found]) -> float:
+        """Corrected p of effect ``i`` of ``found`` (augmented: :func:`_final_effects`
+        of :mod:`accal.closure.select`) given the others; for a bias step with the
+        local columns of its ramp (:mod:`accal.closure.transition`), of the step
+        alone with those columns in the model.
+
+        The ramp's columns are the step's shape, not evidence of a step: tested with it,
+        they took a thruster firing's remnant at the epoch (a clean day of the QA
+        helper's generator, AR(1) noise and firings: a step of −5.2e-10 ± 5.4e-10 m/s²,
+        p 0 with its ramp, its epoch anywhere in the day, was removed).
+        """
+        f = found[i]
+        k = int(f.prop.params.get("jacobian") or 0)
+        ramp = f.prop.name == "bias_step" and f.prop.params.get("transition")
+        if not ramp or not 0 < k < f.prop.columns.shape[1]:
+            return self.p_without(i, found)
+        others = [g for j, g in enumerate(found) if j != i]
+        basis, _, _ = self.state(others)
+        basis = basis.extend(f.prop.columns[self.use][:, k:])
+        main = dataclasses.replace(f.prop, columns=f.prop.columns[:, :k], labels=f.prop.labels[:k])
+        return p_given_others(
+            self.grid, basis, self.leverage(basis), self.y_u, main, self.use, self.n_families
+        )
+
     def validate_args(self, tested: Tested) -> dict[str, Any]:
         """:func:`~accal.closure.validation.validate`'s test arguments for ``tested``
         (the other axes, the admitting test, its multiplicity, alpha)."""

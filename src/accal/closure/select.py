@@ -592,10 +592,14 @@ def _split(cols, chan_u, names):
 def _final_effects(search: Search) -> list[Found]:
     """The effects found as they enter the final fit (with their Jacobian columns); drop
     the least significant while one is no longer significant given the others' augmented
-    columns (an effect that had only taken up a held time constant's misfit)."""
+    columns (an effect that had only taken up a held time constant's misfit), and a
+    bias step that is not significant given its own ramp's columns
+    (:meth:`~accal.closure.search.Search.p_final`), also when it is the only effect."""
     final = [Found(f.model_prop, f.p_adj, f.verdict, f.stat) for f in search.found]
-    while len(final) > 1:
-        ps = [search.p_without(i, final) for i in range(len(final))]
+    while final:
+        if len(final) == 1 and not final[0].prop.params.get("transition"):
+            break  # a lone effect stays (the selection's), unless a step with its ramp
+        ps = [search.p_final(i, final) for i in range(len(final))]
         worst = int(np.argmax(ps))
         if ps[worst] < search.alpha:
             break
@@ -636,7 +640,7 @@ def _finish(
     bbase, basis0 = st["bbase"], st["basis0"]
     fit0 = basis0.fit(setup.y_all_given[use]) if jumps else st["fit0"]
     final, basis, fit = _final_fit(search, setup, st)
-    ps = [search.p_without(i, final) for i in range(len(final))] if final else []
+    ps = [search.p_final(i, final) for i in range(len(final))] if final else []
     lev = search.leverage(basis)
     cov = covariances(grid, basis, fit, lev, basis0, fit0, st["lev0"], noise_psd)
     jcols = jump_columns(t_all, tuple(jumps))
