@@ -814,3 +814,15 @@ def test_gracefo_header_without_platform_falls_back_to_the_records(samples, tmp_
     p.write_text(text.replace("platform: GRACE C", "platform: GRACE A"))
     with pytest.raises(FormatError, match="expected 'GRACE C' or 'GRACE D'"):
         read_grace_acc1b(p)
+
+
+def test_a_bad_value_in_loose_spacing_names_its_line(samples, tmp_path):
+    """QA: a 'nan' on one record re-written with single spaces (the others with JPL's
+    two before qualflg) was reported as "irregular spacing" on the first record."""
+    head, data = _data_lines(samples["grace_a"])
+    fields = data[6].split()
+    fields[2] = "nan"
+    data[6] = " ".join(fields) + "\n"
+    with pytest.raises(FormatError, match="lin_accl_x: non-finite value 'nan'") as e:
+        read_grace_acc1b(_write(tmp_path, "".join(head + data).encode()))
+    assert e.value.line == len(head) + 7

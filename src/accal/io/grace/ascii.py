@@ -248,6 +248,10 @@ def _parse_ascii(raw: bytes, start: int, first_line: int, path: Path) -> dict[st
     if table.num_rows == 0:  # only what pyarrow skips (e.g. a byte-order mark, blank lines)
         raise FormatError("header but no data records", path, first_line)
     out: dict[str, Any] = {}
+    # a bad value is looked for in the records as parsed: with the blanks collapsed when
+    # the loose layout was read (QA: a 'nan' on a record re-written with single spaces
+    # was reported as "irregular spacing" on the first record, line 31, not line 50000)
+    rows = _respaced(raw[start:]) if LOOSE_LAYOUT in notes else raw[start:]
     # the three linear accelerations go straight into the (n, 3) array of the series
     acc = np.empty((table.num_rows, 3))
     for name in COLUMNS[:11]:
@@ -255,7 +259,7 @@ def _parse_ascii(raw: bytes, start: int, first_line: int, path: Path) -> dict[st
             continue
         col = table.column(name)
         if col.null_count:
-            raise _locate_bad_line(raw[start:], first_line, len(names), path)
+            raise _locate_bad_line(rows, first_line, len(names), path)
         k = _LIN_ACCL.get(name)
         arr = arrow_to_numpy(col, None if k is None else acc[:, k])
         if name == "gps_time":
@@ -263,7 +267,7 @@ def _parse_ascii(raw: bytes, start: int, first_line: int, path: Path) -> dict[st
         else:  # finite and plausible; NaN makes min/max NaN, which fails too
             ok = arr.min() >= -MAX_ABS_ACCELERATION and arr.max() <= MAX_ABS_ACCELERATION
         if not ok:
-            raise _locate_bad_line(raw[start:], first_line, len(names), path)
+            raise _locate_bad_line(rows, first_line, len(names), path)
         out[name] = arr
     out["acc"] = acc
     line_of = row_to_line(raw, first_line, text_line=1)
