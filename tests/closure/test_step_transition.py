@@ -97,3 +97,21 @@ def test_without_the_option_the_step_is_an_edge():
     res = close_white(t, y, ["bias_step"])
     (e,) = [e for e in res.effects if e.name == "bias_step"]
     assert e.details["n_columns"] == 1
+
+
+@pytest.mark.parametrize("at_end", [False, True])
+def test_an_offset_of_the_record_s_first_samples_is_not_a_step(at_end):
+    """A level change closer to the record's end than its ramp's span (±40 s) is no
+    level: a step at a ``tests/indep`` day's 10th sample (4.2e-9 ± 8e-10 m/s², the
+    record's first samples off) was removed and moved the bias by 3.7σ.  With the
+    transition modelled a step needs 80 s on either side; an offset of the first (or
+    last) 30 samples, 6σ each (under the outlier screen's 10σ), is left alone."""
+    t, y = white_noise_day(21, 43200)
+    if at_end:
+        y[-30:] += 6e-10
+    else:
+        y[:30] += 6e-10
+    res = _close(t, y, True)
+    ends = (t[0] + 80.0, t[-1] - 80.0)
+    near = [e for e in res.effects if e.name == "bias_step" and not ends[0] <= e.epoch <= ends[1]]
+    assert not near, near
