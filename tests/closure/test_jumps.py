@@ -198,3 +198,25 @@ def test_unrelated_steps_of_one_size_are_all_removed(seed):
         lo, hi = e.details["epoch_interval"]
         assert lo <= epoch <= hi and hi - lo < 120.0, (epoch, lo, hi)
         assert abs(e.coefficient - size) < 2.5 * e.sigma, (e.coefficient, e.sigma)
+
+
+def test_an_effect_beside_a_jump_has_its_own_sigma():
+    """QA: a step found by the jump test and a coupling beside it were reported with
+    the same σ to every digit: the jumps' sizes come first in the final covariance and
+    the effects' σ were read from its first rows (the jump's)."""
+    t, y = red_day(21, step=(18_000.3, 1e-8))
+    rng = np.random.default_rng(24)
+    temp = 293.0 + 0.3 * np.sin(2 * np.pi * t / 86_400.0) + np.cumsum(rng.normal(0, 2e-3, t.size))
+    y = y + 3e-8 * (temp - temp.mean())
+    kw = {"base": "poly1", "orbit_period": P, "candidates": ("bias_step", "auxiliary"),
+          "alpha": 0.01, "aux": {"temp": temp}}  # fmt: skip
+    res = close_loop(t, y, **kw)
+    (step,) = [e for e in res.effects if e.name == "bias_step"]
+    (cpl,) = [e for e in res.effects if e.name == "auxiliary"]
+    assert "spectrum-weighted" in step.details["method"]
+    assert cpl.sigma != step.sigma
+    assert abs(cpl.coefficient - 3e-8) < 3 * cpl.sigma, (cpl.coefficient, cpl.sigma)
+    # the same day without the step: the coupling's σ is about the same
+    plain = close_loop(t, y - 1e-8 * (t >= 18_000.3), **kw)
+    (ref,) = [e for e in plain.effects if e.name == "auxiliary"]
+    assert 0.5 < cpl.sigma / ref.sigma < 2.0, (cpl.sigma, ref.sigma)

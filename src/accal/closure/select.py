@@ -652,7 +652,9 @@ def _finish(
     ]
     if basis.n_blocks > 1 and any(f.prop.name == "bias_step" for f in final):
         placebo_step_sigmas(search.context(final, basis, fit, lev), final, found, cov, fit)
-    effects = describe(found, fit.gamma, cov["v_ww"], st["span"], st["t0"], units)
+    # v_ww holds the jumps' sizes first (add_jump_covariance); the effects' block follows
+    nj = len(jumps)
+    effects = describe(found, fit.gamma, cov["v_ww"][nj:, nj:], st["span"], st["t0"], units)
     if setup.t_first is not None and setup.t_first < st["t0"]:
         # a search that left out the record's start fitted its exponentials from its own
         # first sample: their amplitudes are referred to the record's (QA: 4.9e-10 m/s²
