@@ -606,3 +606,15 @@ def test_parquet_required_columns_only_where_no_nulls_and_values_unchanged(tmp_p
     assert back["v"].to_pylist() == table["v"].to_pylist()
     np.testing.assert_array_equal(back["a"].to_numpy(), a)  # NaN where NaN
     assert pq.read_table(tmp_path / "r").num_rows == 2000
+
+
+def test_a_table_in_another_unit_gets_a_warning(tmp_path):
+    """QA: a table in µm/s² without units was read as m/s² without a word."""
+    p = tmp_path / "um.csv"
+    p.write_text("gps_time,lin_accl_x,lin_accl_y\n1,1.2136,-28.512\n2,1.2137,-28.513\n")
+    s = read_table_series(p)
+    assert [w for w in s.report.warnings if "lin_accl_y" in w and "another unit" in w]
+    assert [w for w in s.report.warnings if "lin_accl_x" in w and "another unit" in w]
+    ok = tmp_path / "si.csv"
+    ok.write_text("gps_time,lin_accl_x\n1,1.2136e-6\n2,1.2137e-6\n")
+    assert not [w for w in read_table_series(ok).report.warnings if "another unit" in w]

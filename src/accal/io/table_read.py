@@ -150,7 +150,7 @@ def read_table_series(path: str | Path, *, columns: dict[str, str] | None = None
     tname, time = _time_column(table, names, path, line_of)
     axes, acc_cols, acc = _acc_columns(table, names, columns, path, line_of)
 
-    warn: list[str] = []
+    warn: list[str] = _unit_warnings(acc, acc_cols)
     quality, valid, used = _quality_columns(table, names, path, first_line, line_of)
     # the other time columns are the same instants (an accal series carries time_utc
     # beside gps_time): not auxiliary channels, and not "non-numeric columns ignored"
@@ -271,6 +271,28 @@ def _acc_columns(
             i = int(big[0])
             raise _row_error(implausible_message(c, float(acc[i, j])), path, i, line_of)
     return axes, acc_cols, acc
+
+
+#: Median |acceleration| [m/s²] above which a table's column is taken to be in another
+#: unit: electrostatic accelerometers measure below ~1e-3 m/s² (GRACE ±5e-5 m/s²).
+UNIT_WARN_ACCELERATION = 1e-2
+
+
+def _unit_warnings(acc: np.ndarray, acc_cols: list[str]) -> list[str]:
+    """A warning for each acceleration column whose median magnitude is beyond
+    :data:`UNIT_WARN_ACCELERATION` (QA: a table in µm/s² without units was read as
+    m/s², and its bias reported as −10.69 m/s² without a word)."""
+    out = []
+    for j, c in enumerate(acc_cols):
+        x = np.abs(acc[:, j][np.isfinite(acc[:, j])])
+        med = float(np.median(x)) if x.size else 0.0
+        if med > UNIT_WARN_ACCELERATION:
+            out.append(
+                f"{c}: median |value| {med:.3g} m/s² is far beyond what an electrostatic "
+                f"accelerometer measures (< 1e-3 m/s²): a table's accelerations are read in "
+                "m/s²; is the column in another unit (µm/s², nm/s²)?"
+            )
+    return out
 
 
 def _quality_columns(
