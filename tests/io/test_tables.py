@@ -618,3 +618,18 @@ def test_a_table_in_another_unit_gets_a_warning(tmp_path):
     ok = tmp_path / "si.csv"
     ok.write_text("gps_time,lin_accl_x\n1,1.2136e-6\n2,1.2137e-6\n")
     assert not [w for w in read_table_series(ok).report.warnings if "another unit" in w]
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".parquet"])
+def test_a_time_column_of_utc_times_is_utc(tmp_path, suffix):
+    """QA: UTC times in a column named ``time`` were refused as "not numeric"."""
+    import pandas as pd
+
+    stamps = ["2003-09-14T00:00:00Z", "2003-09-14T00:00:01Z", "2003-09-14T00:00:02Z"]
+    df = pd.DataFrame({"time": stamps, "lin_accl_x": [1e-7, 2e-7, 3e-7]})
+    if suffix == ".parquet":
+        df["time"] = pd.to_datetime(df["time"]).dt.tz_localize(None)
+    p = tmp_path / f"t{suffix}"
+    df.to_csv(p, index=False) if suffix == ".csv" else df.to_parquet(p, index=False)
+    s = read_table_series(p)
+    assert s.time.tolist() == [116769613.0, 116769614.0, 116769615.0]  # GPS−UTC = 13 s

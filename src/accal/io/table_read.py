@@ -200,7 +200,8 @@ def _time_column(
 ) -> tuple[str, np.ndarray]:
     """The time column's name and its values [s GPS]: finite, 1980-01-06 ... 2100-01-01.
 
-    The first of :data:`TIME_COLUMNS` in ``names``; ``time_utc`` is converted by
+    The first of :data:`TIME_COLUMNS` in ``names``; ``time_utc``, and a ``time`` column
+    of timestamps or strings, are UTC, converted by
     :func:`accal.io.table_columns.utc_column_to_gps`.
 
     Raises
@@ -216,7 +217,9 @@ def _time_column(
             path,
         )
     tcol = table.column(tname)
-    if tname == "time_utc":
+    if tname == "time_utc" or (tname == "time" and _is_datetime_like(tcol)):
+        # a "time" column of UTC timestamps or ISO strings is UTC, like time_utc (QA:
+        # refused as "not numeric")
         time = utc_column_to_gps(tcol, tname, path, line_of)
     else:
         time = numeric_column(tcol, tname, path, line_of, locate=True).astype(np.float64)
@@ -225,6 +228,14 @@ def _time_column(
         raise _row_error(f"{tname}: missing or non-finite time", path, int(bad[0]), line_of)
     check_gps_time(time, path, line_of, name=tname, unit="row")
     return tname, time
+
+
+def _is_datetime_like(col: Any) -> bool:
+    """Whether an Arrow column holds timestamps or strings (UTC times, not seconds)."""
+    import pyarrow as pa
+
+    t = col.type
+    return bool(pa.types.is_timestamp(t) or pa.types.is_string(t) or pa.types.is_large_string(t))
 
 
 def _acc_columns(
