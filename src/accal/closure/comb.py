@@ -111,9 +111,7 @@ class Comb:
 
     def teeth(self, t0: float, t1: float) -> NDArray[np.float64]:
         """Its teeth within ``[t0, t1]`` [s]."""
-        k0 = np.ceil((t0 - self.anchor) / self.period)
-        k1 = np.floor((t1 - self.anchor) / self.period)
-        return self.anchor + np.arange(k0, k1 + 1) * self.period
+        return _teeth(self.anchor, self.period, t0, t1)
 
     def reason(self) -> str:
         """Why its jumps are not removed (the note of each)."""
@@ -185,7 +183,7 @@ def _pairs(sizes: NDArray, sigmas: NDArray) -> list[tuple[int, int]]:
 def _laid(epochs, sizes, sigmas, i, period, span, measure, var) -> Comb | None:
     """The comb through jump ``i`` with ``period``, when the data confirm it (``var``:
     the measure's z variance without an edge)."""
-    teeth = Comb(period, float(epochs[i]), (), 0.0, 0, 0, 1.0).teeth(*span)
+    teeth = _teeth(float(epochs[i]), period, *span)
     sign = np.sign(sizes[i])
     dist = np.abs(epochs[:, None] - teeth[None, :])
     on = (dist.min(axis=1) <= MEMBER) & (np.sign(sizes) == sign)
@@ -210,6 +208,13 @@ def _laid(epochs, sizes, sigmas, i, period, span, measure, var) -> Comb | None:
         return None
     members_t = tuple(int(m) for m in members)
     return Comb(float(period), float(epochs[i]), members_t, mean, n_checked, n_conf, p)
+
+
+def _teeth(anchor: float, period: float, t0: float, t1: float) -> NDArray[np.float64]:
+    """``anchor + k·period`` within ``[t0, t1]`` [s]."""
+    k0 = np.ceil((t0 - anchor) / period)
+    k1 = np.floor((t1 - anchor) / period)
+    return anchor + np.arange(k0, k1 + 1) * period
 
 
 def _better(a: Comb, b: Comb) -> bool:

@@ -661,9 +661,9 @@ def _finish(
         # reported for a 3e-9 decay 5400 s earlier)
         effects = refer_exponentials(effects, setup.t_first)
     add_lag_uncertainties(search, final, effects)
-    widened_couplings(final, effects, cov, fit, len(jumps))
-    add_alias_spread(search, final, effects, cov, basis, len(jumps))
-    add_signal_model_spread(search, final, effects, cov, basis, fit, len(jumps))
+    widened_couplings(final, effects, cov, fit, nj)
+    add_alias_spread(search, final, effects, cov, basis, nj)
+    add_signal_model_spread(search, final, effects, cov, basis, fit, nj)
     add_signal_step_spread(search, cov, basis, fit)
     add_epoch_uncertainties(search, final, effects)
     unexplained = []

@@ -611,11 +611,18 @@ def signal_extension_p(
     """
     if signal_basis is None or signal_basis is ctx.basis:
         return 0.0
-    zt = signal_basis.complement(prop.columns[ctx.use])
+    return _p_given(prop, ctx, signal_basis, factor)
+
+
+def _p_given(prop: Proposal, ctx: Context, ext: Basis, factor: float) -> float:
+    """Corrected p-value of ``prop`` on the model ``ext`` (the context's model extended:
+    nested, so its residual is ``(I − P_ext) r``): the admitting coloured-noise Wald
+    test times the multiplicity ``factor``; 1 when ``ext`` holds all of ``prop``."""
+    zt = ext.complement(prop.columns[ctx.use])
     if zt.shape[1] == 0:
         return 1.0
-    r = ctx.residual - signal_basis.project(ctx.residual)
-    w = wald_test(ctx.grid, r, zt, signal_basis.leverage(ctx.grid))
+    r = ctx.residual - ext.project(ctx.residual)
+    w = wald_test(ctx.grid, r, zt, ext.leverage(ctx.grid))
     return float(min(1.0, w.pvalue * max(factor, 1.0)))
 
 
@@ -647,13 +654,7 @@ def signal_step_p(prop: Proposal, ctx: Context, factor: float) -> float:
     for e in epochs:
         after = (ctx.t_all >= e).astype(np.float64)
         cols += [np.where(on_y, c, -s) * after, np.where(on_y, s, c) * after]
-    ext = ctx.basis.extend(np.column_stack(cols)[ctx.use])
-    zt = ext.complement(prop.columns[ctx.use])
-    if zt.shape[1] == 0:
-        return 1.0
-    r = ctx.residual - ext.project(ctx.residual)
-    w = wald_test(ctx.grid, r, zt, ext.leverage(ctx.grid))
-    return float(min(1.0, w.pvalue * max(factor, 1.0)))
+    return _p_given(prop, ctx, ctx.basis.extend(np.column_stack(cols)[ctx.use]), factor)
 
 
 def validate(
