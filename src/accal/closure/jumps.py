@@ -74,6 +74,7 @@ from scipy.special import log_ndtr
 
 from accal.closure.comb import WINDOW as COMB_WINDOW
 from accal.closure.comb import find_comb
+from accal.closure.crossaxis import OtherAxes
 from accal.closure.edgekernel import (
     TRANSITION,
     edge_measure,
@@ -222,6 +223,8 @@ def scan_jumps(
     level: float,
     max_jumps: int = 5,
     period: float | None = None,
+    proxies: NDArray[np.float64] | None = None,
+    proxy_names: tuple[str, ...] = (),
 ) -> JumpScan:
     """Bias jumps in the null residual ``r`` by the spectrum-weighted step test.
 
@@ -244,6 +247,10 @@ def scan_jumps(
     period : float, optional
         Orbit period [s]: a jump that recurs at the same orbital phase one or two
         orbits away is the signal's (:func:`_recurrence`).
+    proxies : ndarray, shape (n, q), optional
+        Series that carry the signal and not this axis' instrument (the other axes) on
+        the used samples, named ``proxy_names``: a jump they explain or that is seen on
+        them is the signal's (:class:`accal.closure.crossaxis.OtherAxes`).
 
     Returns
     -------
@@ -267,6 +274,9 @@ def scan_jumps(
     checks = 0
     stop = ""
     at: list[int] = []  # grid epochs of the jumps
+    others = None
+    if proxies is not None and proxies.size:
+        others = OtherAxes(grid, t, basis, leverage, proxies)
     for _ in range(max_jumps):
         kf, k0, psd, half, k2 = step_kernel(grid, r, leverage)
         half_s = half * grid.step
@@ -322,6 +332,9 @@ def scan_jumps(
                 rejected.append({**common, "reason": recur})
                 continue
             why = _not_persistent(size[i], wide, m * grid.step)
+            if why is None and others is not None:
+                why = others.explains(r, psd, e, pos, n_tests, log_level)
+                why = why or others.seen(common["epoch"], float(size[i]), proxy_names)
             if why is not None:
                 rejected.append({**common, "reason": why})
                 continue
@@ -658,7 +671,13 @@ def _recurrence(grid, t, r, basis, k0, psd, pos, score, ok, e, size, period) -> 
 JUMP_NOTES = 3
 
 
-def jumps_first(st: dict[str, Any], enabled: set[str], level: float, notes: dict) -> JumpScan:
+def jumps_first(
+    st: dict[str, Any],
+    enabled: set[str],
+    level: float,
+    notes: dict,
+    proxies: tuple[NDArray[np.float64], tuple[str, ...]] | None = None,
+) -> JumpScan:
     """Bias jumps before the search of :func:`accal.closure.select.close_loop`.
 
     ``st`` is its null fit (``template``, ``grid``, ``t_u``, ``fit0``, ``basis0``,
@@ -668,7 +687,8 @@ def jumps_first(st: dict[str, Any], enabled: set[str], level: float, notes: dict
     red, and the least-squares step scan weak) when ``bias_step`` is a candidate; at
     half the level of one family (``level``), beside the search's own step scan at a
     whole one: the step family's false-detection bound is 1.5 times the others'.
-    Jumps that failed their checks go to ``notes``.
+    Jumps that failed their checks go to ``notes``.  ``proxies``: the other axes on the
+    used samples and their names (:class:`accal.closure.crossaxis.OtherAxes`).
     """
     template = st["template"]
     if template is None or "bias_step" not in enabled:
@@ -676,8 +696,14 @@ def jumps_first(st: dict[str, Any], enabled: set[str], level: float, notes: dict
     scan = scan_jumps(
         st["grid"], st["t_u"], st["fit0"].resid, st["basis0"], st["lev0"],
         level=level, period=template.period,
+        proxies=None if proxies is None else proxies[0],
+        proxy_names=() if proxies is None else proxies[1],
     )  # fmt: skip
-    worst = sorted(scan.rejected, key=lambda d: -abs(d["size"]) / max(d["sigma"], 1e-300))
+    worst: list[dict[str, Any]] = []
+    for d in sorted(scan.rejected, key=lambda d: -abs(d["size"]) / max(d["sigma"], 1e-300)):
+        # one note per edge: the scan may meet it again a few samples away
+        if all(abs(d["epoch"] - w["epoch"]) > WIDE for w in worst):
+            worst.append(d)
     for d in worst[:JUMP_NOTES]:
         notes[("bias_step", None, "jump", d["epoch"])] = {
             "name": "bias_step",

@@ -323,8 +323,9 @@ def close_loop(
     opts = {**(options or {}), "channel_units": dict(channel_units or {})}
     fixed = bool(opts.get("orbit_period_fixed", False))
     setup = _Setup(t_all, y_all, base, chan_all, names, signal_model, orbit_period, fixed)
-    st, use, notes, families, jumps = _null_model(setup, use, aux_all, builders, alpha)
-    proxies = usable_proxies(proxies_all, use, notes) if st["template"] else None
+    st, use, notes, families, jumps, proxies = _null_model(
+        setup, use, aux_all, builders, alpha, proxies_all
+    )
     opts.update(_search_settings(st, builders, families, alpha))
 
     make = _search_maker(setup, builders, alpha, opts, aux_all, ref_all, proxies, notes)
@@ -360,15 +361,18 @@ def _search_settings(st, builders, families: int, alpha: float) -> dict[str, Any
     }
 
 
-def _null_model(setup: _Setup, use, aux_all, builders, alpha: float):
+def _null_model(setup: _Setup, use, aux_all, builders, alpha: float, proxies_all):
     """The null fit on the samples left after spikes and outliers, with the bias jumps
-    told by their edge taken out: ``(st, use, notes, families, jumps)``."""
+    told by their edge taken out: ``(st, use, notes, families, jumps, proxies)``
+    (``proxies``: the usable signal proxies, with an orbit template only)."""
     use, n_spikes = _spikes_out(setup.t_all, setup.y_all, setup.chan_all, use)
     st = setup.build(use)
     st, use, notes = _leave_out_outliers(setup, st, use, aux_all, n_spikes)
     families = _families(builders, setup.orbit_period, st["template"] is not None)
-    st, jumps = _take_out_jumps(setup, st, use, builders, alpha / (2.0 * families), notes)
-    return st, use, notes, families, jumps
+    proxies = usable_proxies(proxies_all, use, notes) if st["template"] else None
+    level = alpha / (2.0 * families)
+    st, jumps = _take_out_jumps(setup, st, use, builders, level, notes, proxies)
+    return st, use, notes, families, jumps, proxies
 
 
 def _select(make, st, use, setup: _Setup, max_effects: int, stop) -> tuple[Search, dict]:
@@ -428,11 +432,12 @@ def _effects_sum(search: Search, setup: _Setup, st, jumps) -> NDArray[np.float64
     return out
 
 
-def _take_out_jumps(setup: _Setup, st, use, builders, level: float, notes: dict):
+def _take_out_jumps(setup: _Setup, st, use, builders, level: float, notes: dict, proxies):
     """Bias jumps told by their edge (:func:`~accal.closure.jumps.jumps_first`), taken
     out of ``setup.y_all`` (the rest of the search runs on that) with the null fit
     rebuilt: ``(st, scan)``."""
-    scan = jumps_first(st, {name for name, _ in builders}, level, notes)
+    given = None if proxies is None else (proxies.columns[use], proxies.names)
+    scan = jumps_first(st, {name for name, _ in builders}, level, notes, given)
     if scan.jumps:
         sizes = np.array([j.size for j in scan.jumps])
         setup.y_all = setup.y_all_given - jump_columns(setup.t_all, scan.jumps) @ sizes

@@ -56,6 +56,7 @@ from accal.closure.basis import Basis
 from accal.closure.candidates import Context, Proposal
 from accal.closure.epochprofile import EPOCH_DELTA_W, epoch_uncertainty
 from accal.closure.kinds import EFFECT_NAMES, IDENT_MIN, channel_class, kind_of, plausible
+from accal.closure.noise_psd import held_or_more
 from accal.closure.periodic import _line_background, line_threshold
 from accal.closure.platform import PlatformInfo
 from accal.closure.residual import WaldResult, wald_test
@@ -208,6 +209,12 @@ def _test_given(
     that admitted the candidate (``wald``) are held: a re-estimated PSD would be
     lowered by what ``cols`` explain and make every candidate more significant.
     ``p_adj`` is the p-value times ``factor`` (the admitting test's multiplicity).
+
+    Where the added columns carry noise of their own (the other axes, each scaled by
+    its coefficient: a cross-track series at 3 % of the drag enters with ×33 its noise)
+    the residual with them fitted is noisier than the held PSD says, so the PSD is the
+    larger of the held one and that of the residual with them and the candidate fitted,
+    bin by bin (:func:`accal.closure.noise_psd.held_or_more`).
     """
     if q_p.shape[1] == 0 or wald.psd is None:
         return {"stat": float(wald.stat), "p_adj": float(min(1.0, wald.pvalue * factor))}
@@ -218,7 +225,9 @@ def _test_given(
     keep = sv > 1e-8 * max(float(sv[0]) if sv.size else 0.0, 1e-300)
     if not keep.any():
         return {"stat": 0.0, "p_adj": 1.0}
-    w = wald_test(ctx.grid, r_p, u[:, keep], ctx.leverage, psd=wald.psd, psd_dof=wald.dof)
+    u = u[:, keep]
+    psd = held_or_more(ctx.grid, r_p - u @ (u.T @ r_p), ctx.leverage, wald.psd)
+    w = wald_test(ctx.grid, r_p, u, ctx.leverage, psd=psd, psd_dof=wald.dof)
     return {"stat": float(w.stat), "p_adj": float(min(1.0, w.pvalue * factor))}
 
 
