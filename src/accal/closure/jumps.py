@@ -249,8 +249,8 @@ def scan_jumps(
         orbits away is the signal's (:func:`_recurrence`).
     proxies : ndarray, shape (n, q), optional
         Series that carry the signal and not this axis' instrument (the other axes) on
-        the used samples, named ``proxy_names``: a jump they explain or that is seen on
-        them is the signal's (:class:`accal.closure.crossaxis.OtherAxes`).
+        the used samples, named ``proxy_names``: a jump seen on them is the signal's
+        (:class:`accal.closure.crossaxis.OtherAxes`).
 
     Returns
     -------
@@ -333,8 +333,7 @@ def scan_jumps(
                 continue
             why = _not_persistent(size[i], wide, m * grid.step)
             if why is None and others is not None:
-                why = others.explains(r, psd, e, pos, n_tests, log_level)
-                why = why or others.seen(common["epoch"], float(size[i]), proxy_names)
+                why = others.seen(common["epoch"], float(size[i]), proxy_names)
             if why is not None:
                 rejected.append({**common, "reason": why})
                 continue

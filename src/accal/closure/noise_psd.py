@@ -395,20 +395,3 @@ def projection_bias(
         new[:, 0] = 1.0
         beta = new
     return beta
-
-
-def held_or_more(
-    grid: Grid, r: NDArray[np.float64], lev: NDArray, held: NDArray[np.float64]
-) -> NDArray[np.float64]:
-    """The larger of the PSD ``held`` and that of ``r`` (:func:`estimate_psd` with the
-    leverage ``lev``), bin by bin.
-
-    ``r`` is a residual with noisy regressors added to a model (signal proxies): their
-    noise, times their coefficients, is in it and not in ``held``; ``held`` stays the
-    floor because what the regressors explain of the signal would lower a re-estimated
-    PSD and make every candidate more significant (a 1/f wander became a 5σ step on a
-    quiet day).  A storm-onset day drawn in tests/closure/test_signal_proxies.py: the
-    onset's "step" had corrected p 0.009 given the other axes on the held PSD alone.
-    """
-    new = estimate_psd(grid, r, lev).psd
-    return np.maximum(np.asarray(held, dtype=np.float64), new)

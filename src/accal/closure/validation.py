@@ -29,8 +29,9 @@ added to the model (and, for an instrument effect, removed from the data):
 3. **Physically plausible** (:func:`accal.closure.kinds.plausible`).
 
 Without a reference, an instrument effect must also not be a change of the signal
-seen on the other axes (:func:`signal_proxy_test`, with ``proxies``), and a coupling
-must explain more than lines at its channel's own periods do
+seen on the other axes (:func:`signal_proxy_test`, with ``proxies``; a bias step
+must not be at an edge of another axis, :class:`accal.closure.crossaxis.OtherAxes`),
+and a coupling must explain more than lines at its channel's own periods do
 (:func:`competing_line_test`, without a reference), and a coupling to an angular
 acceleration must hold outside the channel's bursts (:func:`firing_test`).  On a
 demodulation base a coupling must stay significant with the signal's slope within a
@@ -54,9 +55,9 @@ from scipy.ndimage import median_filter
 
 from accal.closure.basis import Basis
 from accal.closure.candidates import Context, Proposal
+from accal.closure.crossaxis import OtherAxes
 from accal.closure.epochprofile import EPOCH_DELTA_W, epoch_uncertainty
 from accal.closure.kinds import EFFECT_NAMES, IDENT_MIN, channel_class, kind_of, plausible
-from accal.closure.noise_psd import held_or_more
 from accal.closure.periodic import _line_background, line_threshold
 from accal.closure.platform import PlatformInfo
 from accal.closure.residual import WaldResult, wald_test
@@ -209,12 +210,6 @@ def _test_given(
     that admitted the candidate (``wald``) are held: a re-estimated PSD would be
     lowered by what ``cols`` explain and make every candidate more significant.
     ``p_adj`` is the p-value times ``factor`` (the admitting test's multiplicity).
-
-    Where the added columns carry noise of their own (the other axes, each scaled by
-    its coefficient: a cross-track series at 3 % of the drag enters with ×33 its noise)
-    the residual with them fitted is noisier than the held PSD says, so the PSD is the
-    larger of the held one and that of the residual with them and the candidate fitted,
-    bin by bin (:func:`accal.closure.noise_psd.held_or_more`).
     """
     if q_p.shape[1] == 0 or wald.psd is None:
         return {"stat": float(wald.stat), "p_adj": float(min(1.0, wald.pvalue * factor))}
@@ -225,9 +220,7 @@ def _test_given(
     keep = sv > 1e-8 * max(float(sv[0]) if sv.size else 0.0, 1e-300)
     if not keep.any():
         return {"stat": 0.0, "p_adj": 1.0}
-    u = u[:, keep]
-    psd = held_or_more(ctx.grid, r_p - u @ (u.T @ r_p), ctx.leverage, wald.psd)
-    w = wald_test(ctx.grid, r_p, u, ctx.leverage, psd=psd, psd_dof=wald.dof)
+    w = wald_test(ctx.grid, r_p, u[:, keep], ctx.leverage, psd=wald.psd, psd_dof=wald.dof)
     return {"stat": float(w.stat), "p_adj": float(min(1.0, w.pvalue * factor))}
 
 
@@ -666,6 +659,18 @@ def signal_step_p(prop: Proposal, ctx: Context, factor: float) -> float:
     return _p_given(prop, ctx, ctx.basis.extend(np.column_stack(cols)[ctx.use]), factor)
 
 
+def _seen_on_other_axes(
+    prop: Proposal, ctx: Context, proxies: SignalProxies, size: float
+) -> str | None:
+    """Why a bias step is seen on the other axes at its epoch (None when it is not):
+    :meth:`accal.closure.crossaxis.OtherAxes.seen` on the model in ``ctx``."""
+    epoch = prop.params.get("epoch")
+    if epoch is None:
+        return None
+    others = OtherAxes(ctx.grid, ctx.t, ctx.basis, ctx.leverage, proxies.columns[ctx.use])
+    return others.seen(float(epoch), size, proxies.names)
+
+
 def validate(
     prop: Proposal,
     ctx: Context,
@@ -732,6 +737,10 @@ def validate(
                 f"({', '.join(proxies.names)}) explains it as well (corrected p "
                 f"{proxy['p_adj']:.2g} given them, needs < {alpha:g})"
             )
+    if proxies is not None and wald is not None and prop.name == "bias_step":
+        seen = _seen_on_other_axes(prop, ctx, proxies, coef)
+        if seen:
+            return verdict(seen)
     if wald is not None and prop.name == "auxiliary" and ctx.reference is None:
         lines = competing_line_test(prop, ctx, wald, factor)
         if not lines["score"] > 0 and not lines["p_adj_given_lines"] < alpha:
