@@ -246,11 +246,41 @@ def test_leakage_of_the_signal_is_told(tmp_path):
     t, my, mz, th, (ty, tz) = rev
     r = demodulate(t, my, mz, th, tau=TAU, mask=TM, noise="data")
     lk = signal_leakage(r)
-    rms_err = np.sqrt(np.mean((r.a_Y - ty) ** 2 - r.sigma_Y**2))  # leakage part of the error
+    # σ holds each period's significant leakage (with_signal_leak): take it out here
+    noise = np.sqrt(
+        r.sigma_Y**2 - np.where(r.signal_leak_in_sigma[:, 0], r.signal_leak[:, 0], 0) ** 2
+    )
+    rms_err = np.sqrt(np.mean((r.a_Y - ty) ** 2 - noise**2))  # leakage part of the error
     assert lk.rms[0] == pytest.approx(rms_err, rel=0.3)
+    z = (r.a_Y - ty) / r.sigma_Y  # and the σ with it covers the error
+    assert np.sqrt(np.mean(z**2)) < 1.3
     path, _, _ = _write(tmp_path, "rev", rev)
     res = CliRunner().invoke(
         _cli(), ["demod", str(path), "--tau", "600", "--mask", "200", "--out", str(tmp_path / "o")]
     )
     assert res.exit_code == 0
     assert "leaks into a_Y/a_Z" in res.stderr and "curvature" in res.stderr
+
+
+@pytest.mark.parametrize("model", ["mean", "affine"])
+def test_a_period_cut_by_a_gap_has_its_leakage_in_sigma(model):
+    """QA (issue 20): a period that lost its last third to a 3,000 s gap was 167σ off
+    under the ``mean`` model, with no warning; its σ now holds the leakage of the
+    signal's slope estimated from the periods before it."""
+    run = make_run(
+        48, white(1e-11), 11, lambda t: (1e-8 * np.sin(2 * np.pi * t / 86400), 5e-9 * np.cos(2 * np.pi * t / 43200))
+    )  # fmt: skip
+    t, my, mz, th, (ty, tz) = run
+    cut = 20  # the gap takes the last 200 s of period 20 and the next four periods
+    valid = ~((t >= (cut + 1) * TAU - 200.0) & (t < (cut + 5) * TAU))
+    r = demodulate(t, my, mz, th, tau=TAU, mask=TM, noise="data", valid=valid, signal_model=model)
+    k = r.period_index
+    assert cut in k and cut + 1 not in k
+    z = np.concatenate([(r.a_Y - ty[k]) / r.sigma_Y, (r.a_Z - tz[k]) / r.sigma_Z])
+    assert np.abs(z).max() < 4.5
+    assert np.sqrt(np.mean(z**2)) < 1.3
+    j = int(np.flatnonzero(k == cut)[0])
+    if model == "mean":  # the slope's leak, far beyond the noise, and in sigma
+        assert abs(r.signal_leak[j, 0]) > 20.0 * np.median(r.sigma_Y)
+        assert r.signal_leak_in_sigma[j, 0]
+        assert abs(r.a_Y[j] - ty[cut]) < 2.0 * r.sigma_Y[j]

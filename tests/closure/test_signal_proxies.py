@@ -137,7 +137,11 @@ def closure_x(t, data, proxies: bool):
 
 @pytest.mark.parametrize(
     ("seed", "walk", "method"),
-    [(0, 1e-2, "spectrum-weighted jump"), (1, 1e-3, "least squares"), (5, 3e-4, "spectrum-weighted jump")],
+    [
+        (0, 1e-2, "spectrum-weighted jump"),
+        (1, 1e-3, "least squares"),
+        (5, 3e-4, "spectrum-weighted jump"),
+    ],
 )
 def test_an_abrupt_change_of_the_drag_is_not_a_step_of_its_axis(seed, walk, method):
     """Seen on an outside QA storm day: a 3.4e-8 m/s² along-track "step" at the onset

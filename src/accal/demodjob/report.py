@@ -148,6 +148,22 @@ def _noise_warnings(summary: dict[str, Any]) -> list[str]:
             f"the signal's variation within a period leaks into a_Y/a_Z at {worst:.2g} sigma "
             f"(RMS over periods, --signal-model {lk.get('signal_model')}), not in sigma; {hint}"
         )
+    cut = lk.get("in_sigma") or {}
+    over = cut.get("periods_over_sigma") or []
+    if over:
+        some = ", ".join(str(k) for k in over[:8])
+        more = f" and {len(over) - 8} more" if len(over) > 8 else ""
+        hint = (
+            "; --signal-model affine removes the slope's part"
+            if lk.get("signal_model") == "mean"
+            else ""
+        )
+        w.append(
+            f"period(s) {some}{more}: the signal's change within the period leaks into "
+            f"a_Y/a_Z by up to {cut['max_z']:.3g} sigma of the noise (a layout lopsided "
+            "about t_mid, e.g. a period cut by a gap or the run's end); their sigma_Y/"
+            f"sigma_Z include it (columns signal_leak_Y/Z){hint}"
+        )
     return w
 
 

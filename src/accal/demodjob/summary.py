@@ -252,9 +252,32 @@ def leakage_summary(res: Any) -> dict[str, Any]:
         "m/s^2 (rms: RMS over periods of the estimated leakage of the signal's in-period "
         "slope and curvature into a_Y, a_Z, noise removed; ratio: rms / RMS sigma; "
         "ratio_slope: the slope's part (removed by --signal-model affine); max: "
-        "largest |estimate|, noise included)"
+        "largest |estimate|, noise included; in_sigma: how many periods have their "
+        "significant leakage in sigma, those where it exceeds the noise sigma, and the "
+        "largest leakage / noise sigma)"
     )
+    out["in_sigma"] = _leak_in_sigma(res)
     return out
+
+
+def _leak_in_sigma(res: Any) -> dict[str, Any]:
+    """The periods whose σ includes their leakage (:func:`accal.estimators.demod.
+    with_signal_leak`) and the largest leakage in noise σ of those."""
+    big = np.asarray(getattr(res, "signal_leak_in_sigma", np.empty((0, 2))), dtype=bool)
+    leak = np.asarray(getattr(res, "signal_leak", np.empty((0, 2))), dtype=np.float64)
+    n = np.asarray(res.a_Y).size
+    if big.shape != (n, 2) or not big.any():
+        return {"n_periods": 0, "periods_over_sigma": [], "max_z": 0.0}
+    sig = np.column_stack([res.sigma_Y, res.sigma_Z]).astype(np.float64)
+    noise = np.sqrt(np.maximum(sig**2 - np.where(big, leak, 0.0) ** 2, 0.0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = np.where(big, np.abs(leak) / noise, 0.0)
+    rows = np.flatnonzero((z > 1.0).any(axis=1))
+    return {
+        "n_periods": int(big.any(axis=1).sum()),
+        "periods_over_sigma": [int(k) for k in np.asarray(res.period_index)[rows]],
+        "max_z": float(np.nanmax(z)),
+    }
 
 
 def summary_of_extended(summary: dict[str, Any], rows: Mapping[str, Any], model: str) -> None:

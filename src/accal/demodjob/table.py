@@ -23,8 +23,13 @@ PERIOD_UNITS = {
     "t_mid": "s (mean sample time of the period: the epoch a_Y, a_Z and the bias refer to)",
     "a_Y": "m/s^2 (period mean of the acceleration along Y, bias removed)",
     "a_Z": "m/s^2 (period mean of the acceleration along Z, bias removed)",
-    "sigma_Y": "m/s^2 (1 sigma of a_Y from the noise PSD)",
-    "sigma_Z": "m/s^2 (1 sigma of a_Z from the noise PSD)",
+    "sigma_Y": "m/s^2 (1 sigma of a_Y from the noise PSD; with signal_leak_Y in "
+    "quadrature where that is significant)",
+    "sigma_Z": "m/s^2 (1 sigma of a_Z from the noise PSD; with signal_leak_Z in "
+    "quadrature where that is significant)",
+    "signal_leak_Y": "m/s^2 (estimated leakage of the signal's in-period slope and "
+    "curvature into a_Y, from the neighbouring periods; NaN: not estimable)",
+    "signal_leak_Z": "m/s^2 (the same for a_Z)",
     "slope_Y": "m/s^3 (slope of a_Y within the period; affine signal model)",
     "slope_Z": "m/s^3 (slope of a_Z within the period; affine signal model)",
     "sigma_slope_Y": "m/s^3 (1 sigma)",
@@ -67,6 +72,10 @@ def period_rows(
                 col = f"bias_{ax}_{name}"
                 units[col] = f"m/s^2 per {units_of.get(name, 'unit')} of {name} (m_{ax})"
             data[col] = np.ascontiguousarray(b[:, j])
+    leak = np.asarray(getattr(res, "signal_leak", np.empty((0, 2))))
+    if leak.shape == (n, 2):
+        data["signal_leak_Y"], data["signal_leak_Z"] = leak[:, 0].copy(), leak[:, 1].copy()
+        units.update({k: PERIOD_UNITS[k] for k in ("signal_leak_Y", "signal_leak_Z")})
     data["n_used"] = res.n_used.astype(np.int64)
     data["masked_time"] = res.masked_time
     data["leakage"] = res.leakage

@@ -78,7 +78,15 @@ from .records import DemodChunk, DemodResult, NoiseReport
 from .residual import MAX_PSD_LAYOUTS as MAX_PSD_LAYOUTS
 from .residual import MIN_PERIODS_DATA_PSD
 from .residual import _ResidualSpectra as _ResidualSpectra
-from .series import SignalLeakage, SinusoidFit, fit_sinusoid, sigma_mean, signal_leakage
+from .series import (
+    SignalLeakage,
+    SinusoidFit,
+    fit_sinusoid,
+    period_leakage,
+    sigma_mean,
+    signal_leakage,
+    with_signal_leak,
+)
 from .stream import REQUIRED_COLUMNS, demodulate, demodulate_stream, demodulate_table
 from .uncertainty import BudgetResult, budget, tau_scan
 
@@ -96,6 +104,8 @@ __all__ = [
     "sigma_mean",
     "fit_sinusoid",
     "signal_leakage",
+    "period_leakage",
+    "with_signal_leak",
     "SignalLeakage",
     "REQUIRED_COLUMNS",
     "MIN_PERIODS_DATA_PSD",

@@ -136,6 +136,11 @@ class DemodResult:
         on the same axis, minus the shape's mean over the period (which the true
         per-period mean holds), with ``u`` the time in periods from ``t_mid``: the
         leakage of a signal's slope and curvature (:func:`signal_leakage`).
+    signal_leak : ndarray, shape (n, 2)
+        Each period's estimated leakage into ``(a_Y, a_Z)`` [m s⁻²]
+        (:func:`period_leakage`; NaN where not estimable).
+    signal_leak_in_sigma : ndarray of bool, shape (n, 2)
+        Where it is significant and included in ``sigma_Y``/``sigma_Z``.
     """
 
     period_index: NDArray[np.int64]
@@ -171,6 +176,10 @@ class DemodResult:
     rotation_shift_steady: bool = False
     noise: NoiseReport | None = None
     shape_gain: _F64 = field(default_factory=lambda: np.empty((0, 2, 2)))
+    signal_leak: _F64 = field(default_factory=lambda: np.empty((0, 2)))
+    signal_leak_in_sigma: NDArray[np.bool_] = field(
+        default_factory=lambda: np.empty((0, 2), dtype=bool)
+    )
 
     @property
     def max_leakage(self) -> float:

@@ -21,6 +21,7 @@ from .layout import _pattern_of_shifts
 from .passes import _Estimates, _first_pass, _new_setup, _noise_kernels, _Scan, _second_pass
 from .records import DemodChunk, DemodResult, NoiseReport
 from .residual import MIN_PERIODS_DATA_PSD, _noise_report, _with_sigma_ratio
+from .series import with_signal_leak
 
 #: Columns :func:`demodulate_table` needs.
 REQUIRED_COLUMNS = ("time", "m_y", "m_z", "theta")
@@ -122,7 +123,8 @@ def demodulate_stream(
     acc = _second_pass(
         source, st, used, _Checker(aux_names, tau, mask, st.fs), rest_tol=rest_tol, settle=settle
     )
-    return _result(st, scan, acc, used, layout, report)
+    # a period's leakage of the signal's in-period variation, in its σ where significant
+    return with_signal_leak(_result(st, scan, acc, used, layout, report))
 
 
 def _solver_used(
