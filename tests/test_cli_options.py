@@ -355,3 +355,18 @@ def test_table_valid_columns_still_work(grace_out):
     code, stdout, err, _ = invoke("table", grace_out, "--columns", "axis, bias,")
     assert code == 0, err
     assert stdout.split()[:2] == ["axis", "bias"]
+
+
+def test_column_names_the_time_column(tmp_path):
+    """``--column time=t`` reads a table timed by a column ``t``; ``--column when=t``
+    is a usage error naming the keys."""
+    t = np.arange(0.0, 4000.0)
+    rng = np.random.default_rng(3)
+    table = pd.DataFrame({"t": t, "lin_accl_x": 1e-7 + 1e-9 * rng.standard_normal(t.size)})
+    path = tmp_path / "run.csv"
+    table.to_csv(path, index=False)
+    code, _, err, exc = invoke("grace-bias", path, "--column", "time=t", "--out", tmp_path / "o")
+    assert code == 0 and exc is None, err
+    assert (tmp_path / "o" / "bias_drift.parquet").exists()
+    line = usage_error("grace-bias", path, "--column", "when=t", "--out", tmp_path / "p")
+    assert "x|y|z|time" in line

@@ -633,3 +633,23 @@ def test_a_time_column_of_utc_times_is_utc(tmp_path, suffix):
     df.to_csv(p, index=False) if suffix == ".csv" else df.to_parquet(p, index=False)
     s = read_table_series(p)
     assert s.time.tolist() == [116769613.0, 116769614.0, 116769615.0]  # GPS−UTC = 13 s
+
+
+def test_a_time_column_of_any_name(tmp_path):
+    """``columns={"time": NAME}`` (the CLI's ``--column time=NAME``): a column ``t`` of
+    GPS seconds, or ``epoch`` of UTC strings, is the time (QA: ``t`` was refused)."""
+    p = tmp_path / "t.csv"
+    p.write_text("t,lin_accl_x,temp\n100,2e-7,20\n101,3e-7,21\n")
+    s = read_table_series(p, columns={"time": "t"})
+    assert list(s.time) == [100.0, 101.0] and list(s.aux) == ["temp"]
+    with pytest.raises(FormatError, match="no time column .* --column time=NAME"):
+        read_table_series(p)
+    with pytest.raises(FormatError, match=r"no column 'tt' for the time \(--column time=tt\)"):
+        read_table_series(p, columns={"time": "tt"})
+    with pytest.raises(ValidationError, match="columns key"):
+        read_table_series(p, columns={"when": "t"})
+    u = tmp_path / "u.csv"
+    u.write_text("epoch,lin_accl_x\n2000-01-01T12:00:00Z,2e-7\n2000-01-01T12:00:01Z,3e-7\n")
+    s = read_table_series(u, columns={"time": "epoch"})
+    # UTC 2000-01-01 12:00:00 is GPS 12:00:13 (GPS − UTC = 13 s then)
+    assert list(s.time) == [13.0, 14.0]

@@ -63,19 +63,21 @@ def parse_column_map(items: tuple[str, ...]) -> dict[str, str]:
     Returns
     -------
     dict
-        Axis (``x``, ``y``, ``z``) to table column; a later item for an axis wins.
+        Axis (``x``, ``y``, ``z``), or ``time``, to table column; a later item for an
+        axis wins.
 
     Raises
     ------
     click.BadParameter
-        An item that is not ``AXIS=COLUMN`` with AXIS in x|y|z.
+        An item that is not ``AXIS=COLUMN`` with AXIS in x|y|z|time.
     """
     colmap = {}
     for item in items:
         ax, sep, col = item.partition("=")
-        if not sep or ax not in ("x", "y", "z") or not col:
+        if not sep or ax not in ("x", "y", "z", "time") or not col:
             raise click.BadParameter(
-                f"expected AXIS=COLUMN with AXIS in x|y|z, got {item!r}", param_hint="--column"
+                f"expected AXIS=COLUMN with AXIS in x|y|z|time, got {item!r}",
+                param_hint="--column",
             )
         colmap[ax] = col
     return colmap
@@ -170,7 +172,8 @@ _OPTIONS: list[Callable[[Any], Any]] = [
         "columns",
         multiple=True,
         metavar="AXIS=COLUMN",
-        help="Map a table column to an axis, e.g. --column x=a_cal_x (repeatable).",
+        help="Map a table column to an axis, e.g. --column x=a_cal_x, or name the time "
+        "column, --column time=t (repeatable).",
     ),
     click.option(
         "--input-format",

@@ -106,6 +106,8 @@ def read_table_series(path: str | Path, *, columns: dict[str, str] | None = None
     columns : dict of str to str, optional
         Map an axis (``"x"``, ``"y"``, ``"z"``) to a source column, e.g.
         ``{"x": "a_cal_x"}``; unmapped axes use ``lin_accl_<axis>`` if present.
+        ``"time"`` names the time column (GPS seconds, or UTC timestamps or strings),
+        e.g. ``{"time": "t"}``; else the first of :data:`TIME_COLUMNS`.
 
     Returns
     -------
@@ -125,12 +127,13 @@ def read_table_series(path: str | Path, *, columns: dict[str, str] | None = None
         dtypes or would change a value).  The message gives the CSV line, or the
         Parquet row, of the first bad value.
     ValidationError
-        A ``columns`` key that is not an axis.
+        A ``columns`` key that is not an axis or ``"time"``.
     """
     path = Path(path)
     columns = dict(columns or {})
     for key in columns:
-        check_option("columns key", key, tuple(AXIS_COLUMNS))
+        check_option("columns key", key, (*AXIS_COLUMNS, "time"))
+    time_name = columns.pop("time", None)
     raw = read_bytes(path)
     if raw.startswith(PARQUET_MAGIC):
         table, units, fmeta, first_line = read_parquet_table(raw, path)
@@ -147,7 +150,7 @@ def read_table_series(path: str | Path, *, columns: dict[str, str] | None = None
     # Parquet rows have no line
     line_of = row_to_line(raw, first_line, text_line=1) if first_line else None
 
-    tname, time = _time_column(table, names, path, line_of)
+    tname, time = _time_column(table, names, path, line_of, time_name)
     axes, acc_cols, acc = _acc_columns(table, names, columns, path, line_of)
 
     warn: list[str] = _unit_warnings(acc, acc_cols)
@@ -196,13 +199,18 @@ def read_table_series(path: str | Path, *, columns: dict[str, str] | None = None
 
 
 def _time_column(
-    table: Any, names: list[str], path: Path, line_of: Callable[[int], int] | None
+    table: Any,
+    names: list[str],
+    path: Path,
+    line_of: Callable[[int], int] | None,
+    name: str | None = None,
 ) -> tuple[str, np.ndarray]:
     """The time column's name and its values [s GPS]: finite, 1980-01-06 ... 2100-01-01.
 
-    The first of :data:`TIME_COLUMNS` in ``names``; ``time_utc``, and a ``time`` column
-    of timestamps or strings, are UTC, converted by
-    :func:`accal.io.table_columns.utc_column_to_gps`.
+    ``name`` (``columns={"time": NAME}``, the CLI's ``--column time=NAME``), else the
+    first of :data:`TIME_COLUMNS` in ``names``; ``time_utc``, and a time column of
+    timestamps or strings, are UTC, converted by
+    :func:`accal.io.table_columns.utc_column_to_gps`; numbers are GPS seconds.
 
     Raises
     ------
@@ -210,14 +218,21 @@ def _time_column(
         No time column, a value that is not a number or not a UTC time, a missing
         or non-finite time, a time outside the accepted range.
     """
-    tname = next((c for c in TIME_COLUMNS if c in names), None)
+    if name is not None and name not in names:
+        raise FormatError(
+            f"no column {name!r} for the time (--column time={name}); columns are "
+            f"{column_list(names)}",
+            path,
+        )
+    tname = name or next((c for c in TIME_COLUMNS if c in names), None)
     if tname is None:
         raise FormatError(
-            f"no time column (one of {', '.join(TIME_COLUMNS)}); columns are {column_list(names)}",
+            f"no time column (one of {', '.join(TIME_COLUMNS)}, or name one with --column "
+            f"time=NAME); columns are {column_list(names)}",
             path,
         )
     tcol = table.column(tname)
-    if tname == "time_utc" or (tname == "time" and _is_datetime_like(tcol)):
+    if tname == "time_utc" or (tname != "gps_time" and _is_datetime_like(tcol)):
         # a "time" column of UTC timestamps or ISO strings is UTC, like time_utc (QA:
         # refused as "not numeric")
         time = utc_column_to_gps(tcol, tname, path, line_of)
