@@ -299,7 +299,7 @@ def _poly_proposal(ctx: Context, name: str, powers: tuple[int, ...]) -> list[Pro
             cols,
             labs,
             1.0,
-            {"powers": missing, "scale": ctx.span},
+            {"powers": missing, "scale": ctx.span, "t0": ctx.t0},
             axes=axes,
         )
     ]
@@ -381,7 +381,7 @@ def exponential_drift(ctx: Context) -> list[Proposal]:
             cols,
             labs,
             float(taus.size),
-            {"tau": tau},
+            {"tau": tau, "t0": ctx.t0},
             axes=axes,
         )
     ]

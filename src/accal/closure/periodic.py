@@ -325,7 +325,7 @@ def _orbit_proposal(
         cols,
         labs,
         m,
-        {"frequency": f, "harmonics": tuple(harm), "local_psd": True},
+        {"frequency": f, "harmonics": tuple(harm), "local_psd": True, "t0": ctx.t0},
         axes,
     )
 
@@ -427,7 +427,7 @@ def periodic(ctx: Context) -> list[Proposal]:
                     "line",
                     np.zeros((tau_all.size, 0)),
                     (),
-                    params={"frequency": f},
+                    params={"frequency": f, "t0": ctx.t0},
                     note=f"structure at {f:.6g} Hz ({1.0 / f:.6g} s) is modulated like the "
                     "signal (it explains more modulated by θ than as a bias term): the "
                     "signal's own variation within its periods, not a candidate",
@@ -442,7 +442,7 @@ def periodic(ctx: Context) -> list[Proposal]:
                 cols,
                 labs,
                 float(band.sum()),
-                {"frequency": f, "harmonics": (1,), "local_psd": True},
+                {"frequency": f, "harmonics": (1,), "local_psd": True, "t0": ctx.t0},
                 axes,
             ),
         )
