@@ -264,14 +264,14 @@ def _leak_in_sigma(res: Any) -> dict[str, Any]:
     """The periods whose σ includes their leakage (:func:`accal.estimators.demod.
     with_signal_leak`) and the largest leakage in noise σ of those."""
     big = np.asarray(getattr(res, "signal_leak_in_sigma", np.empty((0, 2))), dtype=bool)
-    leak = np.asarray(getattr(res, "signal_leak", np.empty((0, 2))), dtype=np.float64)
+    added = np.asarray(getattr(res, "signal_leak_added", np.empty((0, 2))), dtype=np.float64)
     n = np.asarray(res.a_Y).size
-    if big.shape != (n, 2) or not big.any():
+    if big.shape != (n, 2) or added.shape != (n, 2) or not big.any():
         return {"n_periods": 0, "periods_over_sigma": [], "max_z": 0.0}
     sig = np.column_stack([res.sigma_Y, res.sigma_Z]).astype(np.float64)
-    noise = np.sqrt(np.maximum(sig**2 - np.where(big, leak, 0.0) ** 2, 0.0))
+    noise = np.sqrt(np.maximum(sig**2 - added**2, 0.0))
     with np.errstate(divide="ignore", invalid="ignore"):
-        z = np.where(big, np.abs(leak) / noise, 0.0)
+        z = np.where(big, added / noise, 0.0)
     rows = np.flatnonzero((z > 1.0).any(axis=1))
     return {
         "n_periods": int(big.any(axis=1).sum()),

@@ -136,11 +136,17 @@ class DemodResult:
         on the same axis, minus the shape's mean over the period (which the true
         per-period mean holds), with ``u`` the time in periods from ``t_mid``: the
         leakage of a signal's slope and curvature (:func:`signal_leakage`).
+    cross_gain : ndarray, shape (n, 2, 2)
+        The same response of ``(a_Y, a_Z)`` to the other axis' in-period signal (0 with
+        rests at two opposite angles; not with four under the mean model).
     signal_leak : ndarray, shape (n, 2)
         Each period's estimated leakage into ``(a_Y, a_Z)`` [m s⁻²]
         (:func:`period_leakage`; NaN where not estimable).
     signal_leak_in_sigma : ndarray of bool, shape (n, 2)
         Where it is significant and included in ``sigma_Y``/``sigma_Z``.
+    signal_leak_added : ndarray, shape (n, 2)
+        What was added to them in quadrature there (the leakage with the uncertainty
+        of its extrapolation) [m s⁻²]; 0 elsewhere.
     """
 
     period_index: NDArray[np.int64]
@@ -176,10 +182,12 @@ class DemodResult:
     rotation_shift_steady: bool = False
     noise: NoiseReport | None = None
     shape_gain: _F64 = field(default_factory=lambda: np.empty((0, 2, 2)))
+    cross_gain: _F64 = field(default_factory=lambda: np.empty((0, 2, 2)))
     signal_leak: _F64 = field(default_factory=lambda: np.empty((0, 2)))
     signal_leak_in_sigma: NDArray[np.bool_] = field(
         default_factory=lambda: np.empty((0, 2), dtype=bool)
     )
+    signal_leak_added: _F64 = field(default_factory=lambda: np.empty((0, 2)))
 
     @property
     def max_leakage(self) -> float:

@@ -134,18 +134,130 @@ class SignalLeakage:
     n: int
 
 
+def _gains(res: DemodResult) -> NDArray[np.float64] | None:
+    """(n, 2, 2, 2): the response of the estimate of axis ``e`` to the in-period shape
+    ``k`` (slope ``u``, curvature ``u² − ⟨u²⟩``) of the signal on axis ``s``, as
+    ``[period, e, s, k]`` (``shape_gain`` on the diagonal, ``cross_gain`` off it; None
+    without ``shape_gain``)."""
+    n = np.asarray(res.period_index).size
+    same = np.asarray(res.shape_gain)
+    if same.shape != (n, 2, 2):
+        return None
+    g = np.zeros((n, 2, 2, 2))
+    cross = np.asarray(getattr(res, "cross_gain", np.empty((0, 2, 2))))
+    for e in (0, 1):
+        g[:, e, e] = same[:, e]
+        if cross.shape == (n, 2, 2):
+            g[:, e, 1 - e] = cross[:, e]
+    return g
+
+
+def _noise_sigma(res: DemodResult) -> NDArray[np.float64]:
+    """(n, 2): the σ of ``(a_Y, a_Z)`` without the leakage :func:`with_signal_leak`
+    put in them."""
+    sig = np.column_stack([res.sigma_Y, res.sigma_Z]).astype(np.float64)
+    added = np.asarray(getattr(res, "signal_leak_added", np.empty((0, 2))), dtype=np.float64)
+    if added.shape != sig.shape:
+        return sig
+    return np.sqrt(np.maximum(sig**2 - added**2, 0.0))
+
+
+def _leak_estimates(res: DemodResult, central_only: bool = False) -> dict[str, NDArray]:
+    """Each period's leakage estimate and its noise variance (module notes of
+    :func:`signal_leakage` and :func:`period_leakage`).
+
+    Returns ``leak``, ``var`` (n, 2), the slope's part ``leak_b``, ``var_b`` (n, 2),
+    ``model`` (n, 2: where extrapolated from three periods on one side, the difference
+    to the line through the two nearest, the extrapolation's own uncertainty; else 0)
+    and ``central`` (n,): NaN where not estimable.  The slope ``b`` and curvature ``c`` of
+    each axis' signal are differences of its values in the neighbouring periods
+    (weights ``bw``, ``cw`` on the rows ``R``); ``L_e = Σ_s g_b[e, s] b_s + g_c[e, s] c_s``
+    over both axes ``s`` (:func:`_gains`: with four rest angles the mean model's
+    value of one axis follows the other's slope, QA: 54σ RMS on a clean run).
+    """
+    g = _gains(res)
+    n = np.asarray(res.period_index).size
+    a_raw = np.column_stack([res.a_Y, res.a_Z]).astype(np.float64)
+    sg = _noise_sigma(res)
+    out = _leak_pass(res.period_index, a_raw, sg, g, central_only)
+    if g is None or n < 3:
+        return out
+    for _ in range(LEAK_PASSES - 1):
+        # the neighbours' values hold their own leakage (a run that starts mid-pattern:
+        # every period lopsided, and the first period's, extrapolated from the next
+        # three, was 2.7e-13 for an error of 6.4e-12): take it out and estimate again
+        a = a_raw - np.nan_to_num(out["leak"])
+        out = _leak_pass(res.period_index, a, sg, g, central_only)
+    return out
+
+
+#: Passes of :func:`_leak_estimates` (each with the values less the last one's leakage).
+LEAK_PASSES = 4
+
+
+def _leak_pass(period_index, a, sg, g, central_only: bool) -> dict[str, NDArray]:
+    """One pass of :func:`_leak_estimates` on the values ``a`` (n, 2) with noise σ ``sg``."""
+    idx = np.asarray(period_index)
+    n = idx.size
+    out = {k: np.full((n, 2), np.nan) for k in ("leak", "var", "leak_b", "var_b")}
+    out["model"] = np.zeros((n, 2))
+    out["central"] = np.zeros(n, dtype=bool)
+    if n < 3 or g is None:
+        return out
+    where = {int(k): j for j, k in enumerate(idx)}
+
+    def at(j: int, d: int) -> int:
+        return where.get(int(idx[j]) + d, -1)
+
+    for j in range(n):
+        p1, m1 = at(j, 1), at(j, -1)
+        if p1 >= 0 and m1 >= 0:
+            rows = [m1, j, p1]
+            bw, cw = np.array([-0.5, 0.0, 0.5]), np.array([0.5, -1.0, 0.5])
+            out["central"][j] = True
+        elif central_only:
+            continue
+        else:
+            side = -1 if m1 >= 0 else 1  # the neighbours' side: before or after
+            near = [at(j, side * d) for d in (1, 2, 3)]
+            if near[1] < 0:
+                continue
+            if near[2] >= 0:  # a quadratic through the three, at this period
+                rows, bw, cw = near, np.array([2.5, -4.0, 1.5]), np.array([0.5, -1.0, 0.5])
+            else:  # a line through the two
+                rows, bw, cw = near[:2], np.array([1.0, -1.0]), np.zeros(2)
+            bw = -side * bw  # u → −u turns the slope's sign
+        for e in (0, 1):
+            # weights on the rows' values of each source axis s: (2, len(rows))
+            wb = g[j, e, :, 0][:, None] * bw[None, :]
+            w = wb + g[j, e, :, 1][:, None] * cw[None, :]
+            vals, sig = a[rows].T, sg[rows].T
+            out["leak"][j, e] = float(np.sum(w * vals))
+            out["var"][j, e] = float(np.sum((w * sig) ** 2))
+            out["leak_b"][j, e] = float(np.sum(wb * vals))
+            out["var_b"][j, e] = float(np.sum((wb * sig) ** 2))
+            if len(rows) == 3 and not out["central"][j]:
+                # extrapolated: the line through the two nearest is the other guess
+                lin = g[j, e, :, 0] @ (-side * (vals[:, 0] - vals[:, 1]))
+                out["model"][j, e] = abs(out["leak"][j, e] - float(lin))
+    return out
+
+
 def signal_leakage(res: DemodResult) -> SignalLeakage:
     """Leakage of the signal's in-period slope and curvature into each period's value.
 
     Within period ``i`` the signal is ``a(u) ≈ ā + b u + c (u² − ⟨u²⟩)`` (``u`` in
     periods from ``t_mid``); the estimator returns ``ā + g_b b + g_c c``
     (``res.shape_gain``; 0 for a layout symmetric about ``t_mid`` and an exact
-    model, eqs. 18–19).  ``b`` and ``c`` are estimated from the neighbouring
-    periods' values, ``b = (a_{i+1} − a_{i−1})/2``, ``c = (a_{i+1} − 2a_i + a_{i−1})/2``
-    (central differences: exact for a quadratic signal), so the leakage estimate
-    ``L_i = g_b b + g_c c`` carries noise of variance ``Σ_j w_j² σ_j²``
-    (``w`` its weights on the three values, independent periods, eq. 23 with
-    Rd[1] ≈ 0), which is removed from the mean square.
+    model, eqs. 18–19), plus the same of the other axis' signal through
+    ``res.cross_gain`` (not 0 with four rest angles under the mean model).  ``b`` and
+    ``c`` are estimated from the neighbouring periods' values,
+    ``b = (a_{i+1} − a_{i−1})/2``, ``c = (a_{i+1} − 2a_i + a_{i−1})/2`` (central
+    differences: exact for a quadratic signal), so the leakage estimate ``L_i``
+    carries noise of variance ``Σ_j w_j² σ_j²`` (``w`` its weights on the values,
+    independent periods, eq. 23 with Rd[1] ≈ 0), which is removed from the mean
+    square.  The σ are the noise's (without the leakage :func:`with_signal_leak`
+    adds).
 
     Parameters
     ----------
@@ -156,35 +268,19 @@ def signal_leakage(res: DemodResult) -> SignalLeakage:
     -------
     SignalLeakage
     """
-    idx = np.asarray(res.period_index)
-    gain = np.asarray(res.shape_gain)
-    n = idx.size
     out = {k: np.full(2, np.nan) for k in ("rms", "rms_sigma", "ratio", "ratio_slope", "max")}
-    if n < 3 or gain.shape != (n, 2, 2):
+    est = _leak_estimates(res, central_only=True)
+    i = np.flatnonzero(est["central"])
+    if not i.size:
         return SignalLeakage(n=0, **out)
-    mid = np.flatnonzero(idx[2:] - idx[:-2] == 2)  # i-1, i, i+1 all kept
-    i = mid + 1
-    for ax, (a, sg) in enumerate(((res.a_Y, res.sigma_Y), (res.a_Z, res.sigma_Z))):
-        a, sg = np.asarray(a, float), np.asarray(sg, float)
-        if not i.size:
-            continue
-        gb, gc = gain[i, ax, 0], gain[i, ax, 1]
-        b = 0.5 * (a[i + 1] - a[i - 1])
-        c = 0.5 * (a[i + 1] - 2.0 * a[i] + a[i - 1])
-        leak = gb * b + gc * c
-        var = (
-            (0.5 * (gc - gb) * sg[i - 1]) ** 2
-            + (gc * sg[i]) ** 2
-            + (0.5 * (gc + gb) * sg[i + 1]) ** 2
-        )
-        ms = float(np.mean(leak**2) - np.mean(var))
-        out["rms"][ax] = np.sqrt(max(ms, 0.0))
-        out["rms_sigma"][ax] = float(np.sqrt(np.mean(sg[i] ** 2)))
+    sg = _noise_sigma(res)
+    for ax in (0, 1):
+        leak, var = est["leak"][i, ax], est["var"][i, ax]
+        out["rms"][ax] = np.sqrt(max(float(np.mean(leak**2) - np.mean(var)), 0.0))
+        out["rms_sigma"][ax] = float(np.sqrt(np.mean(sg[i, ax] ** 2)))
         out["ratio"][ax] = out["rms"][ax] / out["rms_sigma"][ax]
         out["max"][ax] = float(np.max(np.abs(leak)))
-        ms_b = float(
-            np.mean((gb * b) ** 2) - np.mean((0.5 * gb) ** 2 * (sg[i - 1] ** 2 + sg[i + 1] ** 2))
-        )
+        ms_b = float(np.mean(est["leak_b"][i, ax] ** 2) - np.mean(est["var_b"][i, ax]))
         out["ratio_slope"][ax] = np.sqrt(max(ms_b, 0.0)) / out["rms_sigma"][ax]
     return SignalLeakage(n=int(i.size), **out)
 
@@ -197,16 +293,16 @@ LEAK_SIGNIFICANT = 3.0
 def period_leakage(res: DemodResult) -> tuple[_F64, _F64]:
     """Each period's leakage of the signal's in-period slope and curvature, and its σ.
 
-    As :func:`signal_leakage` (``L_i = g_b b + g_c c``, ``g`` the period's
-    ``shape_gain``), period by period, and also where a neighbour is missing: a
-    period cut by a gap or by the run's end has its samples on one side of ``t_mid``,
-    so its ``g_b`` is large (QA: a period that lost its last third to a 3,000 s gap was
-    167σ off under the ``mean`` model, the signal falling by 4.4e-10 m/s² per period).
-    With both neighbours kept, central differences (exact for a quadratic signal);
-    with neighbours on one side only, the quadratic through the three nearest there
-    (``b = a₋₁ − a₋₂ + 3c``, ``c = (a₋₁ − 2a₋₂ + a₋₃)/2`` before it, mirrored after
-    it), or the line through two; else NaN.  The σ is that of the estimate from the neighbours' noise (independent
-    periods, eq. 23 with Rd[1] ≈ 0).
+    As :func:`signal_leakage` (both axes' signal), period by period, and also where a
+    neighbour is missing: a period cut by a gap or by the run's end has its samples
+    on one side of ``t_mid``, so its ``g_b`` is large (QA: a period that lost its last
+    third to a 3,000 s gap was 167σ off under the ``mean`` model, the signal falling
+    by 4.4e-10 m/s² per period).  With both neighbours kept, central differences
+    (exact for a quadratic signal); with neighbours on one side only, the quadratic
+    through the three nearest there (``b = a₋₁ − a₋₂ + 3c``,
+    ``c = (a₋₁ − 2a₋₂ + a₋₃)/2`` before it, mirrored after it), or the line through
+    two; else NaN.  The σ is that of the estimate from the neighbours' noise
+    (independent periods, eq. 23 with Rd[1] ≈ 0).
 
     Parameters
     ----------
@@ -218,59 +314,34 @@ def period_leakage(res: DemodResult) -> tuple[_F64, _F64]:
     leak, sd : ndarray, shape (n, 2)
         The estimate for ``(a_Y, a_Z)`` [m s⁻²] and its σ (NaN where not estimable).
     """
-    idx = np.asarray(res.period_index)
-    gain = np.asarray(res.shape_gain)
-    n = idx.size
-    leak, sd = np.full((n, 2), np.nan), np.full((n, 2), np.nan)
-    if n < 3 or gain.shape != (n, 2, 2):
-        return leak, sd
-    where = {int(k): j for j, k in enumerate(idx)}
-
-    def at(j: int, d: int) -> int:
-        return where.get(int(idx[j]) + d, -1)
-
-    for ax, (a, sg) in enumerate(((res.a_Y, res.sigma_Y), (res.a_Z, res.sigma_Z))):
-        a, sg = np.asarray(a, float), np.asarray(sg, float)
-        for j in range(n):
-            gb, gc = gain[j, ax, 0], gain[j, ax, 1]
-            p1, m1 = at(j, 1), at(j, -1)
-            if p1 >= 0 and m1 >= 0:
-                b = 0.5 * (a[p1] - a[m1])
-                c = 0.5 * (a[p1] - 2.0 * a[j] + a[m1])
-                var = (
-                    (0.5 * (gc - gb) * sg[m1]) ** 2
-                    + (gc * sg[j]) ** 2
-                    + (0.5 * (gc + gb) * sg[p1]) ** 2
-                )
-                leak[j, ax], sd[j, ax] = gb * b + gc * c, np.sqrt(var)
-                continue
-            side = -1 if m1 >= 0 else 1  # the neighbours' side: before or after
-            near = [at(j, side * d) for d in (1, 2, 3)]
-            if near[1] < 0:
-                continue
-            if near[2] >= 0:  # a quadratic through the three, at this period
-                bw, cw, rows = np.array([2.5, -4.0, 1.5]), np.array([0.5, -1.0, 0.5]), near
-            else:  # a line through the two
-                bw, cw, rows = np.array([1.0, -1.0]), np.zeros(2), near[:2]
-            w = -side * gb * bw + gc * cw  # u → −u turns the slope's sign
-            leak[j, ax] = float(w @ a[rows])
-            sd[j, ax] = float(np.sqrt(np.sum((w * sg[rows]) ** 2)))
-    return leak, sd
+    est = _leak_estimates(res)
+    return est["leak"], np.sqrt(est["var"])
 
 
 def with_signal_leak(res: DemodResult) -> DemodResult:
     """``res`` with each period's leakage (:func:`period_leakage`) as ``signal_leak``,
-    and in ``sigma_Y``/``sigma_Z`` (added in quadrature) where it exceeds
-    :data:`LEAK_SIGNIFICANT` σ of its estimate: the σ of a period then covers the
-    difference between the period's mean and what the signal model returns for it.
+    and in ``sigma_Y``/``sigma_Z`` (added in quadrature, with the uncertainty of its
+    extrapolation where it was extrapolated) where the two together exceed
+    :data:`LEAK_SIGNIFICANT` σ of its estimate: the σ of a period then covers the difference between the
+    period's mean and what the signal model returns for it (QA: a run starting
+    mid-pattern, its first period 10.6σ off with the leakage of the quadratic through
+    the next three alone).
     """
-    leak, sd = period_leakage(res)
+    est = _leak_estimates(res)
+    leak = est["leak"]
+    size = np.hypot(leak, est["model"])  # the leakage and its extrapolation's doubt
     with np.errstate(invalid="ignore"):
-        big = np.abs(leak) > LEAK_SIGNIFICANT * sd
+        big = size > LEAK_SIGNIFICANT * np.sqrt(est["var"])
     sig = np.column_stack([res.sigma_Y, res.sigma_Z]).astype(np.float64)
-    sig = np.where(big, np.hypot(sig, np.where(big, leak, 0.0)), sig)
+    add = np.where(big, size, 0.0)
+    sig = np.where(big, np.hypot(sig, add), sig)
     return replace(
-        res, sigma_Y=sig[:, 0], sigma_Z=sig[:, 1], signal_leak=leak, signal_leak_in_sigma=big
+        res,
+        sigma_Y=sig[:, 0],
+        sigma_Z=sig[:, 1],
+        signal_leak=leak,
+        signal_leak_in_sigma=big,
+        signal_leak_added=add,
     )
 
 

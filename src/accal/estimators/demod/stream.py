@@ -199,6 +199,7 @@ def _result(
         rotation_shift_steady=steady,
         noise=_with_sigma_ratio(report, acc.rd_sum[0], acc.rd_other),
         shape_gain=cat["gain"],
+        cross_gain=cat["xgain"],
     )
 
 
