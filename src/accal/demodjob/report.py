@@ -144,13 +144,20 @@ def _noise_warnings(summary: dict[str, Any]) -> list[str]:
             if lk.get("signal_model") == "mean" and slope > 0.5 * worst
             else "it is the signal's curvature: a shorter --tau reduces it"
         )
+        cut = lk.get("in_sigma") or {}
+        held = (
+            f"each period's sigma holds its own where significant ({cut['n_periods']} "
+            "periods, columns signal_leak_Y/Z)"
+            if cut.get("n_periods")
+            else "not in sigma"
+        )
         w.append(
             f"the signal's variation within a period leaks into a_Y/a_Z at {worst:.2g} sigma "
-            f"(RMS over periods, --signal-model {lk.get('signal_model')}), not in sigma; {hint}"
+            f"(RMS over periods, --signal-model {lk.get('signal_model')}); {held}; {hint}"
         )
     cut = lk.get("in_sigma") or {}
     over = cut.get("periods_over_sigma") or []
-    if over:
+    if over and not (np.isfinite(worst) and worst > LEAKAGE_WARN and len(over) > 8):
         some = ", ".join(str(k) for k in over[:8])
         more = f" and {len(over) - 8} more" if len(over) > 8 else ""
         hint = (
@@ -160,9 +167,10 @@ def _noise_warnings(summary: dict[str, Any]) -> list[str]:
         )
         w.append(
             f"period(s) {some}{more}: the signal's change within the period leaks into "
-            f"a_Y/a_Z by up to {cut['max_z']:.3g} sigma of the noise (a layout lopsided "
-            "about t_mid, e.g. a period cut by a gap or the run's end); their sigma_Y/"
-            f"sigma_Z include it (columns signal_leak_Y/Z){hint}"
+            f"a_Y/a_Z by up to {cut['max_z']:.3g} sigma of the noise (a rest layout lopsided "
+            "about t_mid: a period cut by a gap or the run's end, or a run that does not "
+            "start where its pattern does); their sigma_Y/sigma_Z include it (columns "
+            f"signal_leak_Y/Z){hint}"
         )
     return w
 
