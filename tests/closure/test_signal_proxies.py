@@ -185,3 +185,21 @@ def test_a_proxy_of_the_wrong_length_is_a_clear_error():
     y = np.zeros_like(t)
     with pytest.raises(ValidationError, match="signal proxy 'x' must have shape"):
         close_loop(t, y, orbit_period=PERIOD, signal_proxies={"x": np.zeros(10)})
+
+
+def test_an_onset_hidden_on_an_axis_by_that_axis_own_step_is_still_seen():
+    """QA (2026-11-29): a real 1e-8 m/s² step an hour after a storm's onset on the
+    cross-track axis raised that axis' PSD so much that its own onset edge was not
+    significant, and the onset was removed from the along-track axis as a bias step
+    (3 of 18 storm days).  The other axes' own jumps are taken out before their edges
+    are measured (``crossaxis._own_jumps``)."""
+    t, data = abrupt_day(0, 1e-2, onset=True)
+    rng = np.random.default_rng(100)
+    cross = data[:, 1] + 1e-8 * (t >= ABRUPT + 3600)  # its own, unrelated step
+    quiet = 1e-10 * rng.standard_normal(t.size)  # no signal: cannot tell
+    res = close_loop(
+        t, data[:, 0], base="poly1", orbit_period=PERIOD, candidates=("bias_step",),
+        signal_proxies={"y": cross, "z": quiet},
+    )  # fmt: skip
+    assert removed(res) == []
+    assert any("the other axis y has an edge" in n["note"] for n in res.notes), res.notes
