@@ -766,3 +766,20 @@ def test_lagged_coupling_to_a_declared_channel_is_searched(tmp_path):
     )
     z = (rows["a_Y"] - rows["a_Y_true"]) / rows["sigma_Y"]
     assert float(np.std(z)) < 1.5
+
+
+def test_dropped_periods_are_named(tmp_path):
+    """A hole of two and a half periods drops them, and the warning says which (QA: the
+    count alone, the list only in summary.json)."""
+    data = small_run()
+    data = data.drop(index=range(300, 450)).reset_index(drop=True)  # 300 .. 449 s
+    bad = tmp_path / "hole.csv"
+    write_table(data, bad)
+    code, _, err = invoke(
+        "demod", bad, "--tau", 60, "--mask", 20, "--out", tmp_path / "o", "--resample"
+    )
+    assert code == 0, err
+    s = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert s["dropped"] >= 2
+    first, last = s["dropped_periods"][0], s["dropped_periods"][-1]
+    assert f"periods dropped ({first}–{last})" in err, err

@@ -36,7 +36,11 @@ def summary_warnings(summary: dict[str, Any]) -> tuple[str, ...]:
             f"--mask {m['nominal']:g} s by more than {100 * m['tolerance']:g} %"
         )
     if summary["dropped"]:
-        w.append(f"{summary['dropped']} of {summary['n_periods']} periods dropped")
+        which = _ranges(summary.get("dropped_periods") or [], limit=8)
+        w.append(
+            f"{summary['dropped']} of {summary['n_periods']} periods dropped"
+            + (f" ({which})" if which else "")
+        )
     # samples after the last whole period are not used (QA: a 900 s run said "1/1
     # periods" with its last 300 s silently left out)
     fs = summary["input"]["fs"]
