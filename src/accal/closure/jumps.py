@@ -306,34 +306,11 @@ def scan_jumps(
                 break
             checks += 1
             e = int(cand[i])
-            g_e = edge_weights(k0, grid, basis, [e])[:, 0]
-            wide = _wide(grid, r, basis, psd, e, m, k2, g_e / kernel_norm(g_e, grid, e))
-            common = {
-                "epoch": _midpoint(grid, t, r, e, float(size[i])),
-                "size": float(size[i]),
-                "sigma": float(sd[i]),
-                "size_wider_transition": wide["size"] if wide else float("nan"),
-                "sigma_wider_transition": wide["sigma"] if wide else float("nan"),
-            }
             taken[max(0, e - m) : e + m] = True
-            # other edges are judged given this one (its kernel reaches its neighbours,
-            # and the orbit template spreads it to the same phase in other orbits)
-            step_col = (t >= common["epoch"]).astype(np.float64)
-            r_given = r - size[i] * (step_col - basis.project(step_col))
-            s_given = edge_scores(grid, r_given, kf)
-            # any used sample may hold the other edge, also beside a left-out stretch
-            args = (grid, t, r_given, basis, k0, psd, pos, s_given, used, e, size[i])
-            recur = _image(jumps, common["epoch"], float(size[i]), period)
-            if recur is None:
-                recur = _recurrence(*args, period)
-            if recur is None:
-                recur = _neighbour(*args, m)
-            if recur is not None:
-                rejected.append({**common, "reason": recur})
-                continue
-            why = _not_persistent(size[i], wide, m * grid.step)
-            if why is None and others is not None:
-                why = others.seen(common["epoch"], float(size[i]), proxy_names)
+            common, wide, r_given, why = _examine(
+                grid, t, r, basis, (kf, k0, k2, psd), pos, used, e, float(size[i]), float(sd[i]),
+                m, jumps, period, others, proxy_names,
+            )  # fmt: skip
             if why is not None:
                 rejected.append({**common, "reason": why})
                 continue
@@ -369,6 +346,41 @@ def scan_jumps(
         rejected.extend(off)
     jumps = _remeasured(grid, t, r, basis, leverage, jumps, at, pos)
     return JumpScan(tuple(jumps), tuple(rejected), half_s, n_tests, note=note)
+
+
+def _examine(grid, t, r, basis, kernels, pos, used, e, size, sd, m, jumps, period, others, names):
+    """The checks of a significant edge at grid epoch ``e`` (module notes: persistence,
+    a box's other edge, the same edge an orbit away, an image of an accepted jump, an
+    edge of the other axes): ``(common, wide, r_given, why)``, its report fields, the
+    size with twice the transition left out (:func:`_wide`), the residual with it taken
+    out, and why it is not a bias jump (None when it is)."""
+    kf, k0, k2, psd = kernels
+    g_e = edge_weights(k0, grid, basis, [e])[:, 0]
+    wide = _wide(grid, r, basis, psd, e, m, k2, g_e / kernel_norm(g_e, grid, e))
+    common = {
+        "epoch": _midpoint(grid, t, r, e, size),
+        "size": size,
+        "sigma": sd,
+        "size_wider_transition": wide["size"] if wide else float("nan"),
+        "sigma_wider_transition": wide["sigma"] if wide else float("nan"),
+    }
+    # other edges are judged given this one (its kernel reaches its neighbours, and the
+    # orbit template spreads it to the same phase in other orbits)
+    step_col = (t >= common["epoch"]).astype(np.float64)
+    r_given = r - size * (step_col - basis.project(step_col))
+    s_given = edge_scores(grid, r_given, kf)
+    # any used sample may hold the other edge, also beside a left-out stretch
+    args = (grid, t, r_given, basis, k0, psd, pos, s_given, used, e, size)
+    why = _image(jumps, common["epoch"], size, period)
+    if why is None:
+        why = _recurrence(*args, period)
+    if why is None:
+        why = _neighbour(*args, m)
+    if why is None:
+        why = _not_persistent(size, wide, m * grid.step)
+    if why is None and others is not None:
+        why = others.seen(common["epoch"], size, names)
+    return common, wide, r_given, why
 
 
 def _off_comb(grid, t, r, basis, leverage, jumps, at, ok):

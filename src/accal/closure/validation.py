@@ -667,8 +667,12 @@ def _seen_on_other_axes(
     epoch = prop.params.get("epoch")
     if epoch is None:
         return None
-    others = OtherAxes(ctx.grid, ctx.t, ctx.basis, ctx.leverage, proxies.columns[ctx.use])
-    return others.seen(float(epoch), size, proxies.names)
+    # one per model: its other axes' own jumps and kernels serve every step checked on it
+    held = ctx.cache.get("crossaxis")
+    if held is None or held[0] is not ctx.basis:
+        others = OtherAxes(ctx.grid, ctx.t, ctx.basis, ctx.leverage, proxies.columns[ctx.use])
+        held = ctx.cache["crossaxis"] = (ctx.basis, others)
+    return held[1].seen(float(epoch), size, proxies.names)
 
 
 def validate(
