@@ -150,3 +150,34 @@ def test_fault_note_on_a_gps_time_scale_says_how_far_into_the_record():
     text = f.note()["note"]
     assert "740064722-740065562 s (5522-6362 s into the record)" in text
     assert "740064122-740064962 s (4922-5762 s into the record)" in text
+
+
+def test_a_coupling_resting_on_its_faulty_stretch_is_not_removed(monkeypatch):
+    """The channel varies only over one stretch, and that stretch is taken as the
+    channel's fault: without it nothing is left to tell the coupling, so it is reported,
+    not removed (it used to stay "unconfirmed" as a search's first coupling; a QA
+    thruster day's z coupling to ``ang_accl_y`` moved the bias 1.4σ so, 2026-11-29)."""
+    rng = np.random.default_rng(5)
+    t = DT * np.arange(N)
+    w0, w1 = 30000.0, 45000.0
+    event = np.where((t >= w0) & (t < w1), np.sin(np.pi * (t - w0) / (w1 - w0)) ** 2, 0.0)
+    temp = 293.0 + 2.0 * event + rng.normal(0.0, 1e-4, N)
+    # noisier than the other days: a channel that explains the data to 1e-4 is taken
+    # for a copy of the target and not offered
+    y = 1e-7 + COEF * (temp - 293.0) + rng.normal(0.0, 1e-9, N)
+    calls = []
+
+    def fault_once(search, f):
+        calls.append(f)
+        if len(calls) > 1:
+            return None
+        return Fault(
+            "temperature", w0, w1, float(f.prop.params.get("lag", 0.0)), (-1.0,), 1e-9, 720
+        )
+
+    monkeypatch.setattr("accal.closure.channelfault.find_fault", fault_once)
+    res = _run(t, y, temp)
+    assert calls, "the fault check was not reached"
+    assert "auxiliary" not in [e.name for e in res.effects], res.effects
+    why = [e.details.get("reason", "") for e in res.rejected if e.name == "auxiliary"]
+    assert any("not confirmed" in w for w in why), why

@@ -63,3 +63,18 @@ def test_a_lever_arm_outside_the_firings_is_found():
     (c,) = [e for e in res.effects if e.name == "auxiliary"]
     assert c.channel == "ang_accl_z" and abs(c.coefficient - 0.05) < 1e-3 * 0.05
     assert c.details["events"]["applicable"] and c.details["events"]["p_adj"] < 0.01
+
+
+def test_a_lever_arm_does_not_move_the_bias_by_the_angular_offset():
+    """Level-1B angular accelerations carry an offset of their own (the real GRACE-A
+    2003 sample: 3.3e-4 rad/s² on x, a day's spin-up of 29 rad/s if it were real): a
+    5 cm lever arm removed with it would put 1.7e-5 m/s² into the bias."""
+    t, lin, ang = firing_day(3, lever=0.05)
+    res = _run(t, lin, ang + 3.3e-4)
+    (c,) = [e for e in res.effects if e.name == "auxiliary"]
+    assert abs(c.coefficient - 0.05) < 1e-3 * 0.05
+    assert not c.tau  # instantaneous: no low-pass is fitted to an angular channel
+    (bias,) = [b for b in res.base if b.name == "bias"]
+    # the data's level: -3e-7 plus the lever arm times the angular channel's own mean
+    truth = -3e-7 + 0.05 * float(np.mean(ang))
+    assert abs(bias.after - truth) < 3 * bias.sigma_after + 1e-12, (bias.after, truth)

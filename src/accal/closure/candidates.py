@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from accal.closure.basis import Basis
-from accal.closure.edgekernel import TRANSITION
+from accal.closure.edgekernel import END_CLEAR, TRANSITION
 from accal.closure.multiplicity import scan_factor, scan_length
 
 if TYPE_CHECKING:
@@ -468,10 +468,12 @@ def bias_step(ctx: Context) -> list[Proposal]:
     if ctx.options.get("step_transition") and n > 1:
         # low-passed data: a step is a ramp of ±TRANSITION s, which must lie inside the
         # record (a "step" at a tests/indep day's 10th sample, 4.2e-9 ± 8e-10 m/s², was
-        # removed and moved the bias by 3.7σ: ten samples at the start are no level)
+        # removed and moved the bias by 3.7σ: ten samples at the start are no level),
+        # and at least END_CLEAR from the ends
         dt = float(np.median(np.diff(t)))
         if dt > 0:
-            min_seg = max(min_seg, int(np.ceil(2.0 * TRANSITION / dt)) * len(masks))
+            clear = max(2.0 * TRANSITION, END_CLEAR)
+            min_seg = max(min_seg, int(np.ceil(clear / dt)) * len(masks))
     if n < 2 * min_seg + 2:
         return []
     r = ctx.residual

@@ -56,6 +56,7 @@ __all__ = [
     "MAX_FAULTS",
     "Fault",
     "fault_notes",
+    "faulted",
     "find_fault",
     "mark_faults",
 ]
@@ -130,6 +131,11 @@ class Fault:
             "stretches_tried": self.n_windows,
         }
         return {"name": "auxiliary", "channel": self.channel, "note": text, "details": details}
+
+
+def faulted(options: dict[str, Any], channel: str | None) -> bool:
+    """Whether a fault of ``channel`` is recorded in ``options`` (:data:`OPTION_KEY`)."""
+    return any(f.channel == channel for f in options.get(OPTION_KEY, ()))
 
 
 def fault_notes(options: dict[str, Any]) -> list[dict[str, Any]]:

@@ -389,15 +389,25 @@ def _used_rows(ctx: Context, name: str, x, tc: float, lags) -> NDArray[np.float6
     return rows
 
 
+def _taus(ctx: Context, name: str) -> tuple[float, ...]:
+    """The first-order time constants searched for ``name`` [s]: :data:`AUX_TAUS` (or
+    ``options["aux_taus"]``); none for an angular acceleration, whose lever-arm coupling
+    is instantaneous (the linear and angular channels share their filters)."""
+    if channel_class(ctx.options, name) == "angular":
+        return (0.0,)
+    return tuple(ctx.options.get("aux_taus", AUX_TAUS))
+
+
 def _refine(ctx: Context, name: str, x, lag: float, tc: float, lag_step: float, top: float):
-    """(lag, τ, power) refined: lag continuous near the grid's best, then lag and τ together."""
+    """(lag, τ, power) refined: lag continuous near the grid's best, then lag and τ
+    together within the channel's time constants (:func:`_taus`)."""
     p0 = _power_at(ctx, name, x, tc, lag)
     lo, hi = max(0.0, lag - lag_step), min(top, lag + lag_step)
     if hi > lo:
         best, power = _best_lag_in(ctx, name, x, tc, lo, hi)
         if power > p0:
             lag, p0 = best, power
-    grid = sorted(AUX_TAUS)
+    grid = sorted(_taus(ctx, name))
     if tc not in grid or len(grid) < 2:
         return lag, tc, p0
     k = grid.index(tc)
@@ -627,7 +637,7 @@ def auxiliary(ctx: Context) -> list[Proposal]:
             continue
         angular = channel_class(ctx.options, name) == "angular"
         top = min(top_all, ANGULAR_MAX_LAG) if angular else top_all
-        taus = (0.0,) if angular else tuple(ctx.options.get("aux_taus", AUX_TAUS))
+        taus = _taus(ctx, name)
         n_l = int(ctx.options.get("n_lags", N_LAGS))
         lags = np.unique(np.rint(np.linspace(0.0, top, n_l) / step).astype(np.int64))
         big = int(lags.max())

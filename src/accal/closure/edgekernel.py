@@ -20,6 +20,7 @@ from scipy import linalg
 from accal.closure.noise_psd import Grid, estimate_psd, two_sided_weights
 
 __all__ = [
+    "END_CLEAR",
     "ENERGY",
     "EdgeMeasure",
     "EXACT_CHUNK",
@@ -43,6 +44,14 @@ __all__ = [
 #: span ±35 s).  A test of the step's *edge* found the unfiltered steps of the earlier
 #: generators and not one filtered like the data (1e-8 m/s², x axis).
 TRANSITION = 40.0
+#: Least time [s] between a least-squares step of low-passed data and the record's
+#: ends (:func:`accal.closure.candidates.bias_step`), as the edge scan needs its widest
+#: kernel's half-width (:data:`accal.closure.jumps.HALF_MAX`) of data on either side.
+#: The signal model is extrapolated at the ends, and a firing's bump screened next to
+#: the start leaves slivers of samples whose level is no bias: a QA thruster day
+#: (2026-11-29) had "steps" of −3.2e-8 and −1.7e-8 m/s² removed 82 s and 133 s into
+#: the record, between firings at 0, 120 and 162 s (the z bias moved 9σ and 5σ).
+END_CLEAR = 600.0
 #: Energy share that defines the kernel's half-width.
 ENERGY = 0.999
 #: Candidate epochs per chunk in :func:`edge_sizes`.

@@ -15,10 +15,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from accal.closure.blockbase import BlockBase
+from accal.closure.kinds import unit_class
 from accal.closure.validation import SignalProxies
 from accal.errors import ValidationError, check_option
 
 __all__ = [
+    "angular_about_offset",
     "MIN_COVERAGE",
     "MIN_SAMPLES",
     "SELF_CORRELATION",
@@ -151,6 +153,32 @@ def screen_channels(
         kept[name] = x
         report.append({"channel": name, "status": "considered", "reason": ""})
     return kept, report
+
+
+def angular_about_offset(
+    aux: dict[str, NDArray[np.float64]], use: NDArray[np.bool_], units: dict[str, str]
+) -> dict[str, NDArray[np.float64]]:
+    """``aux`` with each angular acceleration less its mean over the used samples.
+
+    A coupling ``c·x`` enters as given (the bias is the one at channel value 0), but
+    an angular-acceleration channel's value 0 is not zero angular acceleration: the
+    Level-1B ``ang_accl`` of the real GRACE-A 2003-09-14 sample average 3.3e-4,
+    −3.9e-5 and −2.9e-4 rad/s², which over a day would spin the satellite up by tens of
+    rad/s.  That mean is the angular channel's own offset; the true mean angular
+    acceleration of a day is ``Δω/T`` ≈ 0.  Referred to it, a lever-arm coupling (real
+    or not) leaves the bias alone instead of moving it by ``c`` times the offset (a QA
+    thruster day: a false coupling of 4e-4 m per rad/s² moved the z bias 5.5σ, 1.2e-7
+    m/s², 2026-11-29).  Other channels are left as given.
+    """
+    out = dict(aux)
+    for name, x in aux.items():
+        if unit_class(units.get(name, "")) != "angular":
+            continue
+        x = np.asarray(x, dtype=np.float64)
+        ok = use & np.isfinite(x)
+        if ok.any():
+            out[name] = x - float(np.mean(x[ok]))
+    return out
 
 
 def check_inputs(t, y, valid, reference, aux, channel, channel_names):

@@ -44,11 +44,12 @@ from accal.closure.aliasspread import (
 )
 from accal.closure.basis import Basis
 from accal.closure.blockbase import BlockBase
-from accal.closure.channelfault import fault_notes
+from accal.closure.channelfault import fault_notes, faulted
 from accal.closure.epochprofile import add_epoch_uncertainties
 from accal.closure.final import covariances, describe, refer_exponentials
 from accal.closure.inputs import (
     MIN_SAMPLES,
+    angular_about_offset,
     base_design,
     check_inputs,
     check_proxies,
@@ -321,6 +322,7 @@ def close_loop(
         signal_model = "orbit" if ref_all is None and orbit_period else "none"
     builders = _resolve(candidates)
     opts = {**(options or {}), "channel_units": dict(channel_units or {})}
+    aux_all = angular_about_offset(aux_all, use, opts["channel_units"])
     fixed = bool(opts.get("orbit_period_fixed", False))
     setup = _Setup(t_all, y_all, base, chan_all, names, signal_model, orbit_period, fixed)
     st, use, notes, families, jumps, proxies = _null_model(
@@ -384,7 +386,11 @@ def _select(make, st, use, setup: _Setup, max_effects: int, stop) -> tuple[Searc
     one would be wasted); else this one goes on with it, pausing again at the next
     such coupling, which is rejected unless found again without every coupling's
     made-up samples (at most :data:`~accal.closure.unknownhistory.UNKNOWN_DEPTH`
-    times).
+    times).  A coupling whose channel the data do not follow over a stretch
+    (:mod:`accal.closure.channelfault`) is rejected when not found again without it,
+    first or not: on a QA thruster day (2026-11-29) a z coupling to a 50 s low-pass of
+    ``ang_accl_y`` whose coefficient reversed over 5.5 h was not significant on the
+    other 77 % of the record, was kept unconfirmed, and moved the z bias 1.4σ.
     """
     search = make(st, use)
     kept: set = set()  # couplings kept unconfirmed (the first search's first ones)
@@ -401,11 +407,17 @@ def _select(make, st, use, setup: _Setup, max_effects: int, stop) -> tuple[Searc
         if again is not None:
             return again
         # not found without the made-up samples: the first coupling stays (unconfirmed),
-        # a later one is rejected; the selection goes on, pausing at the next one
+        # a later one is rejected; the selection goes on, pausing at the next one.  A
+        # coupling whose channel the data do not follow over a stretch is rejected even
+        # when first: the stretch is its own misfit, not a history nobody could know
         if kept:
             reject_unconfirmed(search, skip)
         else:
-            kept.update(new_unknown(search, skip))
+            first = new_unknown(search, skip)
+            fault = [f for f in first if faulted(search.options, f.prop.channel)]
+            if fault:
+                reject_unconfirmed(search, skip | {f for f in first if f not in fault})
+            kept.update(f for f in first if f not in fault)
         run(search, max_effects, stop, until=pause)
     if search.paused:
         run(search, max_effects, stop)

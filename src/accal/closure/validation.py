@@ -57,6 +57,7 @@ from accal.closure.basis import Basis
 from accal.closure.candidates import Context, Proposal
 from accal.closure.crossaxis import OtherAxes
 from accal.closure.epochprofile import EPOCH_DELTA_W, epoch_uncertainty
+from accal.closure.hac import hac_wald
 from accal.closure.kinds import EFFECT_NAMES, IDENT_MIN, channel_class, kind_of, plausible
 from accal.closure.periodic import _line_background, line_threshold
 from accal.closure.platform import PlatformInfo
@@ -272,13 +273,29 @@ def firing_test(prop: Proposal, ctx: Context, wald: WaldResult, factor: float) -
     (:func:`accal.closure.residual.wald_test`); ``p_adj`` is its p-value times
     ``factor``.  Not made (``applicable`` False) without bursts or when they cover
     over :data:`BURST_MAX_SHARE` of the samples.
+
+    Firings too small to stand out of the channel stay in, and so do their linear
+    bumps under the spike screen: on a QA thruster day (2026-11-29, ~150 firings with
+    independent linear and angular sizes) couplings of z to ``ang_accl_y`` and
+    ``ang_accl_z`` at 7-8 s lags passed this test at p 4e-17 and 1e-7 and one moved
+    the z bias 5.5σ.  So the coupling, on every sample, is also referred to the
+    Newey-West covariance (:func:`accal.closure.hac.hac_wald`): ``hac_p_adj``, its
+    p-value times ``factor`` (there t = −2.0 and −2.3; a 5 cm lever arm: t ≫ 100).
     """
     z = np.asarray(prop.columns[ctx.use], dtype=np.float64)
     # the channel's running median: the burst threshold's centre, and what replaces them
     smooth = median_filter(z, size=(BURST_WINDOW, 1), mode="nearest")
     ev = _bursts(z[:, 0], smooth[:, 0], ctx.grid.step)
     n_ev = int(ev.sum())
-    out: dict[str, Any] = {"samples": n_ev, "applicable": False}
+    # every sample, with a σ that does not take the residual as stationary
+    zt = np.linalg.svd(ctx.basis.complement(z), False)[0]
+    hac_stat, hac_p = hac_wald(zt, ctx.residual)
+    out: dict[str, Any] = {
+        "samples": n_ev,
+        "applicable": False,
+        "hac_stat": hac_stat,
+        "hac_p_adj": float(min(1.0, hac_p * factor)),
+    }
     if n_ev == 0 or n_ev > BURST_MAX_SHARE * ev.size or wald.psd is None:
         return out
     # the bursts replaced by the running median: the column's slow part stays whole (a
@@ -764,6 +781,14 @@ def validate(
                 "channel's bursts (thruster firings move linear and angular accelerations "
                 f"at once): without them it is not significant (corrected p "
                 f"{events['p_adj']:.2g}, needs < {alpha:g})"
+            )
+        if not events["hac_p_adj"] < alpha:
+            return verdict(
+                "not identifiable: carried by a few coincident bumps of the data and its "
+                "channel (thruster firings move linear and angular accelerations at "
+                "once): with a σ that does not take the residual as stationary "
+                f"(Newey-West) it is not significant (corrected p {events['hac_p_adj']:.2g}, "
+                f"needs < {alpha:g})"
             )
     if wald is not None:
         why = epoch_reason(prop, ctx, wald)
