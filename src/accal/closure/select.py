@@ -31,6 +31,7 @@ and makes the final fit (:mod:`accal.closure.final`):
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -44,6 +45,7 @@ from accal.closure.aliasspread import (
 )
 from accal.closure.basis import Basis
 from accal.closure.blockbase import BlockBase
+from accal.closure.boxes import box_reasons, step_sizes
 from accal.closure.channelfault import fault_notes, faulted
 from accal.closure.epochprofile import add_epoch_uncertainties
 from accal.closure.final import covariances, describe, refer_exponentials
@@ -333,6 +335,7 @@ def close_loop(
     make = _search_maker(setup, builders, alpha, opts, aux_all, ref_all, proxies, notes)
     stop = _floor_stop(resolution)
     search, st = _select(make, st, use, setup, max_effects, stop)
+    _reject_boxes(search, setup, st)
     floored = stop is not None and stop(search)
     noise_psd = _updated_psd(search, setup, st, jumps.jumps, use, noise_psd, psd_update)
     return _finish(
@@ -604,6 +607,19 @@ def _split(cols, chan_u, names):
     if not names:
         return cols
     return np.column_stack([cols * (chan_u == c)[:, None] for c in range(len(names))])
+
+
+def _reject_boxes(search: Search, setup: _Setup, st) -> None:
+    """Move the bias steps of the final model that make boxes
+    (:func:`accal.closure.boxes.box_reasons`) to the rejected ones."""
+    final, _, fit = _final_fit(search, setup, st)
+    steps = step_sizes([f.prop for f in final], fit.gamma)
+    why = box_reasons(steps)
+    size = {i: s for _, s, i in steps}
+    for i in sorted(why, reverse=True):
+        f = search.found.pop(i)
+        verdict = dataclasses.replace(f.verdict, ok=False, reason=why[i], coefficient=size[i])
+        search.rejected.append(dataclasses.replace(f, verdict=verdict))
 
 
 def _final_effects(search: Search) -> list[Found]:
