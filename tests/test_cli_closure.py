@@ -636,3 +636,23 @@ def test_no_effect_is_kept_above_the_level_once_its_pair_partner_is_gone(tmp_pat
     assert set(axes) >= {"x", "y", "z"}
     kept = [(ax, e["name"], e["significance"]) for ax, r in axes.items() for e in r["effects"]]
     assert all(p < 0.01 for _, _, p in kept), kept
+
+
+def test_thruster_firings_of_the_thr1b_file_reach_the_closure(tmp_path):
+    """A Level-1B day's THR1B file (written beside it by ``accal simulate --thrusters``)
+    gives the closure the firings; without it a coupling to an angular acceleration
+    can only be reported, and the report says why."""
+    day = tmp_path / "ACC1B_2005-01-01_A_02.asc"
+    code, _, err = invoke(
+        "simulate", "grace", "--out", day, "--duration", 21600, "--thrusters", "--seed", 3
+    )
+    assert code == 0, err
+    (thr,) = tmp_path.glob("THR1B_*")
+    code, _, err = invoke("grace-bias", day, "--close-loop", "--out", tmp_path / "o1", "-q")
+    assert code == 0, err
+    report = (tmp_path / "o1" / "closure.md").read_text()
+    assert f"Thrusters: {thr.name}: " in report and "within ±40 s of a thruster firing" in report
+    thr.unlink()
+    code, _, err = invoke("grace-bias", day, "--close-loop", "--out", tmp_path / "o2", "-q")
+    assert code == 0, err
+    assert "no THR1B file beside the input" in (tmp_path / "o2" / "closure.md").read_text()

@@ -233,6 +233,9 @@ BURST_WINDOW = 241
 BURST_MARGIN = 40.0
 #: Largest share of the samples that may be bursts for :func:`firing_test` to be made.
 BURST_MAX_SHARE = 0.2
+#: The same with the firings of a THR1B file (``options["firings"]``): the real
+#: 2003 and 2023 samples fire 26-39 times an hour, ±40 s of each is 32-45 % of a day.
+FIRING_MAX_SHARE = 0.7
 
 
 def _angular(prop: Proposal, ctx: Context) -> bool:
@@ -254,6 +257,18 @@ def _bursts(x: NDArray[np.float64], median: NDArray[np.float64], step: float) ->
     return np.convolve(dev > BURST_SIGMAS * sig, np.ones(2 * m + 1), mode="same") > 0
 
 
+def _bridged(z: NDArray[np.float64], ev: NDArray[np.bool_]) -> NDArray[np.float64]:
+    """``z`` (columns) with the samples ``ev`` interpolated linearly from the others
+    (by sample index; held beyond the first and last kept samples)."""
+    if not ev.any() or ev.all():
+        return z
+    idx = np.arange(ev.size)
+    out = z.copy()
+    for j in range(z.shape[1]):
+        out[ev, j] = np.interp(idx[ev], idx[~ev], z[~ev, j])
+    return out
+
+
 def firing_test(prop: Proposal, ctx: Context, wald: WaldResult, factor: float) -> dict[str, Any]:
     """A coupling to an angular acceleration tested with the channel's bursts left out.
 
@@ -266,13 +281,17 @@ def firing_test(prop: Proposal, ctx: Context, wald: WaldResult, factor: float) -
     rad/s², was removed on a `tests.indep` storm day with thrusters (seed 4010) and
     moved the y bias 17σ; a heteroskedasticity- and autocorrelation-consistent σ
     (Newey & West 1987, Econometrica 55, 703; Bartlett weights, 300 lags) gave 2.2σ.
-    A lever arm acts between firings too.  So the columns are replaced on the bursts
-    (:func:`_bursts`) by their running median, orthogonalised against the model and
+    A lever arm acts between firings too.  So the columns are bridged over the bursts
+    (:func:`_bursts`) by straight lines (:func:`_bridged`), orthogonalised against the model and
     tested on the same
     residual with the admitting test's PSD and degrees of freedom
     (:func:`accal.closure.residual.wald_test`); ``p_adj`` is its p-value times
     ``factor``.  Not made (``applicable`` False) without bursts or when they cover
     over :data:`BURST_MAX_SHARE` of the samples.
+
+    With ``ctx.options["firings"]`` (the samples a THR1B file's firings reach,
+    :func:`accal.pipeline_closure.closure_firings`) those are bursts too, up to
+    :data:`FIRING_MAX_SHARE` of the samples.
 
     Firings too small to stand out of the channel stay in, and so do their linear
     bumps under the spike screen: on a QA thruster day (2026-11-29, ~150 firings with
@@ -286,6 +305,11 @@ def firing_test(prop: Proposal, ctx: Context, wald: WaldResult, factor: float) -
     # the channel's running median: the burst threshold's centre, and what replaces them
     smooth = median_filter(z, size=(BURST_WINDOW, 1), mode="nearest")
     ev = _bursts(z[:, 0], smooth[:, 0], ctx.grid.step)
+    share = BURST_MAX_SHARE
+    firings = ctx.options.get("firings")
+    if firings is not None:  # the THR1B file's firings, spread by the filter
+        ev |= np.asarray(firings, dtype=bool)[ctx.use]
+        share = FIRING_MAX_SHARE
     n_ev = int(ev.sum())
     # every sample, with a σ that does not take the residual as stationary
     zt = np.linalg.svd(ctx.basis.complement(z), False)[0]
@@ -296,11 +320,13 @@ def firing_test(prop: Proposal, ctx: Context, wald: WaldResult, factor: float) -
         "hac_stat": hac_stat,
         "hac_p_adj": float(min(1.0, hac_p * factor)),
     }
-    if n_ev == 0 or n_ev > BURST_MAX_SHARE * ev.size or wald.psd is None:
+    if n_ev == 0 or n_ev > share * ev.size or wald.psd is None:
         return out
-    # the bursts replaced by the running median: the column's slow part stays whole (a
-    # column with holes in its orbital cycle would be tested on the holes' pattern)
-    u, sv, _ = np.linalg.svd(ctx.basis.complement(np.where(ev[:, None], smooth, z)), False)
+    # the bursts bridged by straight lines between their neighbours: the column's slow
+    # part stays whole (a column with holes in its orbital cycle would be tested on the
+    # holes' pattern); the running median, which these used to be replaced by, holds the
+    # bumps' level where firings fill half the window (THR1B days: p 1e-20 without them)
+    u, sv, _ = np.linalg.svd(ctx.basis.complement(_bridged(z, ev)), False)
     keep = sv > 1e-8 * max(float(sv[0]) if sv.size else 0.0, 1e-300)
     if not keep.any():
         return {**out, "applicable": True, "stat": 0.0, "p_adj": 1.0}
@@ -773,6 +799,12 @@ def validate(
                 f"and it adds nothing significant to them (corrected p "
                 f"{lines['p_adj_given_lines']:.2g}, needs < {alpha:g})"
             )
+    if prop.name == "auxiliary" and _angular(prop, ctx) and ctx.options.get("firings_unknown"):
+        return verdict(
+            "not identifiable: a thruster's force and torque move the linear and the angular "
+            "accelerations together, and this Level-1B day's firings are unknown (no THR1B "
+            "file: give --thrusters)"
+        )
     if wald is not None and prop.name == "auxiliary" and _angular(prop, ctx):
         events = firing_test(prop, ctx, wald, factor)
         if events["applicable"] and not events["p_adj"] < alpha:
