@@ -132,3 +132,13 @@ def test_a_lever_arm_is_found_with_the_firings_known():
     t, lin, ang, firing = thruster_day(3, lever=0.05)
     (c,) = [e for e in _run_with(t, lin, ang, firing).effects if e.name == "auxiliary"]
     assert abs(c.coefficient - 0.05) < 0.03 * 0.05
+
+
+def test_firings_everywhere_leave_no_lever_arm_to_tell():
+    """Firings known to reach 80 % of the samples (200 an hour): not removed, and why."""
+    t, lin, ang, firing = thruster_day(1)
+    firing = firing | (np.arange(N) % 5 != 0)
+    res = _run_with(t, lin, ang, firing)
+    assert not res.effects, res.effects
+    (rej,) = [e for e in res.rejected if e.name == "auxiliary"]
+    assert "too few are left" in rej.details["reason"]

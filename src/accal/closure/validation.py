@@ -320,6 +320,9 @@ def firing_test(prop: Proposal, ctx: Context, wald: WaldResult, factor: float) -
         "hac_stat": hac_stat,
         "hac_p_adj": float(min(1.0, hac_p * factor)),
     }
+    if firings is not None and n_ev > share * ev.size:
+        # the known firings leave too little: nothing tells a lever arm from them
+        return {**out, "applicable": True, "stat": 0.0, "p_adj": 1.0, "too_many": True}
     if n_ev == 0 or n_ev > share * ev.size or wald.psd is None:
         return out
     # the bursts bridged by straight lines between their neighbours: the column's slow
@@ -807,6 +810,12 @@ def validate(
         )
     if wald is not None and prop.name == "auxiliary" and _angular(prop, ctx):
         events = firing_test(prop, ctx, wald, factor)
+        if events.get("too_many"):
+            return verdict(
+                f"not identifiable: the thruster firings reach {events['samples']} of the "
+                f"{ctx.residual.size} samples (over {FIRING_MAX_SHARE:.0%}): too few are left "
+                "to tell a lever arm from the firings' own forces and torques"
+            )
         if events["applicable"] and not events["p_adj"] < alpha:
             return verdict(
                 f"not identifiable: carried by the {events['samples']} samples around its "
