@@ -9,8 +9,10 @@ the same low-pass as Level-1B data (seven 11-sample moving averages: ±35 s bump
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from accal.closure import close_loop
+from accal.errors import ValidationError
 
 P = 5600.0  # orbit period [s]
 N = 86_400  # one day at 1 Hz
@@ -142,3 +144,9 @@ def test_firings_everywhere_leave_no_lever_arm_to_tell():
     assert not res.effects, res.effects
     (rej,) = [e for e in res.rejected if e.name == "auxiliary"]
     assert "too few are left" in rej.details["reason"]
+
+
+def test_a_firing_mask_of_another_shape_is_refused():
+    t, lin, ang, firing = thruster_day(0)
+    with pytest.raises(ValidationError, match="firings"):
+        _run_with(t, lin, ang, firing[:-1])

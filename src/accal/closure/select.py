@@ -259,7 +259,11 @@ def close_loop(
     options : dict, optional
         Search settings passed to the builders (see :class:`Context`);
         ``{"step_transition": True}`` for low-passed data (``grace-bias`` sets it for
-        Level-1B files): bias steps fitted as ramps (:mod:`accal.closure.transition`).
+        Level-1B files): bias steps fitted as ramps (:mod:`accal.closure.transition`);
+        ``{"firings": mask}`` (bool, the shape of ``t``: samples a thruster firing
+        reaches) for the firing test of couplings to an angular acceleration, or
+        ``{"firings_unknown": True}`` to report such couplings and never remove them
+        (:func:`accal.closure.validation.firing_test`).
     channel, channel_names : optional
         Several data channels on one time grid (e.g. the platform's y and z axes,
         interleaved in time); noises independent with a common PSD; every generic
@@ -325,6 +329,10 @@ def close_loop(
     builders = _resolve(candidates)
     opts = {**(options or {}), "channel_units": dict(channel_units or {})}
     aux_all = angular_about_offset(aux_all, use, opts["channel_units"])
+    if opts.get("firings") is not None and np.shape(opts["firings"]) != t_all.shape:
+        raise ValidationError(
+            f"options['firings'] must have shape {t_all.shape}, got {np.shape(opts['firings'])}"
+        )
     fixed = bool(opts.get("orbit_period_fixed", False))
     setup = _Setup(t_all, y_all, base, chan_all, names, signal_model, orbit_period, fixed)
     st, use, notes, families, jumps, proxies = _null_model(

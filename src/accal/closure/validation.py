@@ -302,7 +302,7 @@ def firing_test(prop: Proposal, ctx: Context, wald: WaldResult, factor: float) -
     p-value times ``factor`` (there t = −2.0 and −2.3; a 5 cm lever arm: t ≫ 100).
     """
     z = np.asarray(prop.columns[ctx.use], dtype=np.float64)
-    # the channel's running median: the burst threshold's centre, and what replaces them
+    # the channel's running median: the burst threshold's centre
     smooth = median_filter(z, size=(BURST_WINDOW, 1), mode="nearest")
     ev = _bursts(z[:, 0], smooth[:, 0], ctx.grid.step)
     share = BURST_MAX_SHARE
