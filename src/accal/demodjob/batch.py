@@ -97,7 +97,7 @@ def compute_run(path: Path, out_dir: Path, opts: DemodOptions, psd: Any) -> RunO
         step = info.step if info.resample is not None else None
         used = res.noise.used if getattr(res, "noise", None) is not None else psd
         closure, extended, plots = close_run(path, opts, out_dir, step=step, psd=used)
-        rows, units = apply_closure(rows, units, extended)
+        rows, units = apply_closure(rows, units, extended, getattr(res, "signal_leak_added", None))
         summary["closure"] = closure_summary(closure)
         summary_of_extended(summary, rows, closure["model"])
     history = []
