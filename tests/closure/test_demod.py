@@ -139,6 +139,28 @@ def test_a_step_of_the_signal_is_not_a_bias_step(platform, into_period):
     assert why and why[0].startswith(SIGNAL_STEP_REASON), why
 
 
+def test_a_step_of_the_signal_within_a_rest_is_not_a_bias_step(platform):
+    """QA (2026-11-29): a +1e-10 m/s² step of a_Z 98 s into a rest at θ = 0 came out as
+    a bias step of −1.48e-10 on z at the rest's start (the signal's step tried only at
+    the bias step's own epoch), and its period's a_Z went from 3.6σ to 25.4σ off.  The
+    signal's step is now tried within ±200 s of it."""
+    d = platform(3)
+    t, th = d["t"], d["theta"]
+    k = 7
+    inp = (t >= k * 600 + t[0]) & (t < (k + 1) * 600 + t[0])
+    rest = inp & (np.abs(np.cos(th) - 1.0) < 1e-9)  # θ = 0 in period 7
+    idx = np.flatnonzero(rest)
+    runs = np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1)
+    longest = max(runs, key=len)
+    assert len(longest) >= 60
+    epoch = float(t[longest[len(longest) * 2 // 3]])
+    after = t >= epoch
+    c, s = np.cos(th), np.sin(th)
+    d["m"] = d["m"] + 1e-9 * np.column_stack([s * after, c * after])  # Δa_Z, eq. 4
+    res, per = _run(d)
+    assert not [e for e in res.effects if e.name == "bias_step"], res.effects
+
+
 @pytest.mark.parametrize("from_end", [False, True])
 def test_bias_step_seconds_from_the_run_ends(platform, from_end):
     """QA: a step 10-60 s from either end of a run was outside the epochs scanned (0.5 %

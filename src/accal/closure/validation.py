@@ -674,6 +674,12 @@ def _p_given(prop: Proposal, ctx: Context, ext: Basis, factor: float) -> float:
     return float(min(1.0, w.pvalue * max(factor, 1.0)))
 
 
+#: Reach [s] and stride [s] of the signal-step epochs tried by :func:`signal_step_p`:
+#: the longest rest of the paper's pattern is 132 s, a rotation 50 s.
+SIGNAL_STEP_REACH = 200.0
+SIGNAL_STEP_STRIDE = 20.0
+
+
 def signal_step_p(prop: Proposal, ctx: Context, factor: float) -> float:
     """Corrected p-value of a bias step with a step of the signal at its epoch in the
     model (0 off the rotating platform: ``ctx.options["platform"]``).
@@ -688,21 +694,40 @@ def signal_step_p(prop: Proposal, ctx: Context, factor: float) -> float:
     period, tells the two apart.  Same test as the admitting one (the coloured-noise
     Wald test of :func:`accal.closure.residual.wald_test`) on the model extended by the
     signal step's two columns, times the multiplicity ``factor``.
+
+    The signal's step need not be at the bias step's epoch: a +1e-10 m/s² step of
+    ``a_Z`` 98 s into a rest at θ = 0 came out as a bias step of −1.48e-10 on z at the
+    rest's start, and its period's ``a_Z`` went from 3.6σ to 25.4σ off (QA,
+    2026-11-29).  The signal's step is put at the bias step's epoch and every
+    :data:`SIGNAL_STEP_STRIDE` s within ±:data:`SIGNAL_STEP_REACH` s of it, and the
+    largest p-value counts (a pair: each of its signal steps moved in turn; the
+    signal's alternative is searched, which can only make the bias step harder to
+    accept).
     """
     info = ctx.options.get("platform")
     if prop.name != "bias_step" or not isinstance(info, PlatformInfo):
         return 0.0
+    c, s = np.cos(info.theta), np.sin(info.theta)
+    on_y = info.axis_index == 0
+
+    def p_at(epochs: list[float]) -> float:
+        cols = []
+        for e in epochs:
+            after = (ctx.t_all >= e).astype(np.float64)
+            cols += [np.where(on_y, c, -s) * after, np.where(on_y, s, c) * after]
+        return _p_given(prop, ctx, ctx.basis.extend(np.column_stack(cols)[ctx.use]), factor)
+
     if prop.params.get("pair"):
         epochs = [float(d["epoch"]) for _, d in prop.params["parts"]]
     else:
         epochs = [float(prop.params["epoch"])]
-    c, s = np.cos(info.theta), np.sin(info.theta)
-    on_y = info.axis_index == 0
-    cols = []
-    for e in epochs:
-        after = (ctx.t_all >= e).astype(np.float64)
-        cols += [np.where(on_y, c, -s) * after, np.where(on_y, s, c) * after]
-    return _p_given(prop, ctx, ctx.basis.extend(np.column_stack(cols)[ctx.use]), factor)
+    shifts = np.arange(-SIGNAL_STEP_REACH, SIGNAL_STEP_REACH + 1.0, SIGNAL_STEP_STRIDE)
+    # one signal step moved at a time (a pair: each of its two in turn)
+    return max(
+        p_at([e + float(d) * (j == i) for j, e in enumerate(epochs)])
+        for i in range(len(epochs))
+        for d in shifts
+    )
 
 
 def _seen_on_other_axes(
