@@ -287,6 +287,7 @@ def demodulate(
         close_run,
         closure_summary,
         estimate,
+        leak_of,
         load_psd,
         period_rows,
         summarise,
@@ -305,7 +306,7 @@ def demodulate(
         step = info.step if info.resample is not None else None
         used = res.noise.used if getattr(res, "noise", None) is not None else noise
         entry, extended, _ = close_run(path, opts, path.parent, step=step, psd=used)
-        rows, units = apply_closure(rows, units, extended, getattr(res, "signal_leak_added", None))
+        rows, units = apply_closure(rows, units, extended, leak_of(res, opts))
         summary["closure"] = closure_summary(entry)
         summary_of_extended(summary, rows, entry["model"])  # the mean of the extended model
         closure = Closure({path.name: entry}, gps_time=False)

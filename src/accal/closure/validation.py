@@ -641,6 +641,16 @@ def epoch_reason(prop: Proposal, ctx: Context, wald: WaldResult) -> str:
     )
 
 
+#: Kinds that must stay significant with the signal's in-period slope in the model
+#: (:func:`signal_extension_p`): couplings, and drifts, whose curvature within a
+#: period also fits the "mean" signal model's leak (QA, 2026-11-29: two clean runs
+#: starting 60 s into the pattern with a daily 1e-9 m/s² signal had an exponential
+#: drift of 9.3e-8 m/s², τ 8,400 s removed at p 0.005, every period's σ ×2.5).
+SIGNAL_EXTENSION_KINDS = frozenset(
+    {"auxiliary", "quadratic_drift", "cubic_drift", "exponential_drift"}
+)
+
+
 def signal_extension_p(
     prop: Proposal, ctx: Context, signal_basis: Basis | None, factor: float
 ) -> float:
@@ -788,7 +798,7 @@ def validate(
             f"not identifiable: only {100 * ident:.2g} % of it lies outside the signal model "
             f"(needs {100 * ident_min:.2g} %): it cannot be told from the signal"
         )
-    if wald is not None and prop.name == "auxiliary":
+    if wald is not None and prop.name in SIGNAL_EXTENSION_KINDS:
         p_ext = signal_extension_p(prop, ctx, signal_basis, factor)
         if not p_ext < alpha:
             return verdict(

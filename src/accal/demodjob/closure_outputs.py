@@ -13,6 +13,15 @@ from accal.demodjob.outputs import json_text
 from accal.io.writers import atomic_path
 
 
+def leak_of(res: Any, opts: Any) -> Any:
+    """The signal's leakage in the σ of the declared demodulation ``res``
+    (``signal_leak_added``) for :func:`apply_closure`, or None with ``--method gls``,
+    whose values after the closure come from a demodulation again (with its own)."""
+    if str(getattr(opts, "method", "")).lower() == "gls":
+        return None
+    return getattr(res, "signal_leak_added", None)
+
+
 def apply_closure(
     rows: dict[str, Any], units: dict[str, str], periods: Any, leak_added: Any = None
 ) -> tuple[dict[str, Any], dict[str, str]]:
