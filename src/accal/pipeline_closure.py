@@ -284,7 +284,7 @@ def closure_firings(
     The THR1B file (``opts.thrusters`` or beside ``path``; none with
     ``--thruster-margins off``) gives the firings; the CRN filter spreads each over
     ±:data:`accal.closure.edgekernel.TRANSITION` s of the data (the reference fit's
-    margins are for the firing itself).  :func:`accal.closure.validation.firing_test`
+    margins are for the firing itself).  :func:`accal.closure.firings.firing_test`
     then asks a coupling to an angular acceleration to hold on the other samples: a
     thruster's force and torque move the linear and the angular accelerations together
     at a fixed ratio per thruster, a real acceleration and no lever arm (QA thruster

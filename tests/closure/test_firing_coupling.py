@@ -1,4 +1,4 @@
-"""Couplings to an angular acceleration and thruster firings (validation.firing_test).
+"""Couplings to an angular acceleration and thruster firings (closure.firings.firing_test).
 
 Data drawn here (numpy only, not ``accal simulate`` nor ``tests.indep``): an
 orbit-periodic signal, white noise, and thruster firings that move the linear and the

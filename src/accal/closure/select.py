@@ -263,7 +263,7 @@ def close_loop(
         ``{"firings": mask}`` (bool, the shape of ``t``: samples a thruster firing
         reaches) for the firing test of couplings to an angular acceleration, or
         ``{"firings_unknown": True}`` to report such couplings and never remove them
-        (:func:`accal.closure.validation.firing_test`).
+        (:func:`accal.closure.firings.firing_test`).
     channel, channel_names : optional
         Several data channels on one time grid (e.g. the platform's y and z axes,
         interleaved in time); noises independent with a common PSD; every generic
