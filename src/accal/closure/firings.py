@@ -98,7 +98,7 @@ def firing_test(prop: Proposal, ctx: Context, wald: WaldResult, factor: float) -
     over :data:`BURST_MAX_SHARE` of the samples.
 
     With ``ctx.options["firings"]`` (the samples a THR1B file's firings reach,
-    :func:`accal.pipeline_closure.closure_firings`) those are bursts too, up to
+    :func:`accal.gracejob.firings.closure_firings`) those are bursts too, up to
     :data:`FIRING_MAX_SHARE` of the samples.
 
     Firings too small to stand out of the channel stay in, and so do their linear
