@@ -345,3 +345,22 @@ def test_the_closure_keeps_a_cut_period_s_leakage_in_sigma(tmp_path):
     k = d.period.to_numpy()
     z = np.concatenate([(d.a_Y - ty[k]) / d.sigma_Y, (d.a_Z - tz[k]) / d.sigma_Z])
     assert np.abs(z).max() < 4.5
+
+
+def test_one_period_s_misfit_does_not_set_every_period_s_sigma():
+    """QA (2026-11-29): a 1e-9 m/s² step of the signal inside a rotation made every
+    period's σ 7.7× its true error (the run's noise estimate took that period's
+    residual for noise).  Such a period is left out of the estimate and its own σ is
+    scaled by its misfit: the others' σ holds their scatter, and it covers its error."""
+    rot = np.flatnonzero(np.abs(np.diff(THETA)) > 0)
+    at = 20 * Q + rot[len(rot) // 4]  # inside a rotation of period 20
+    t, my, mz, th, (ty, tz) = make_run(48, white(1e-11), 23, lambda t: (1e-9 * (t >= at), 0.0 * t))
+    r = demodulate(t, my, mz, th, tau=TAU, mask=TM, noise="data")
+    assert set(r.noise.misfit) == {20}
+    k = r.period_index
+    others = k != 20
+    err_y = r.a_Y - ty[k]
+    ratio = np.std(err_y[others]) / np.sqrt(np.mean(r.sigma_Y[others] ** 2))
+    assert 0.75 < ratio < 1.3
+    j = int(np.flatnonzero(k == 20)[0])
+    assert abs(err_y[j]) < 3.0 * r.sigma_Y[j]

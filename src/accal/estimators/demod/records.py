@@ -51,6 +51,11 @@ class NoiseReport:
         (eq. 26, Fig. 3).
     n_periods : int
         Periods the residual spectrum rests on.
+    misfit : dict of int to float
+        Periods left out of the noise estimate because their residual power near
+        ``2/τ`` is over :data:`~accal.estimators.demod.residual.MISFIT_POWER` times the
+        median period's (a feature the model lacks, not noise): period index → the
+        square root of that ratio, by which their σ is scaled.
     """
 
     source: str
@@ -63,6 +68,7 @@ class NoiseReport:
     check_scatter: float = float("nan")
     band: tuple[float, float] = (float("nan"), float("nan"))
     n_periods: int = 0
+    misfit: dict[int, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

@@ -8,6 +8,7 @@ it and the a-priori PSD (:func:`_noise_report`), and the σ ratio of the two
 
 from __future__ import annotations
 
+import heapq
 from collections import OrderedDict
 from dataclasses import replace
 from typing import Any
@@ -27,6 +28,17 @@ MIN_PERIODS_DATA_PSD = 24
 #: Distinct rest-mask layouts whose residual kernels are computed for the PSD estimate;
 #: the periods of further layouts (gaps, jitter) are left out of it.
 MAX_PSD_LAYOUTS = 24
+#: A period whose residual power in the first four bins (``1/τ … 4/τ``, where σ is
+#: set) is over this many times the median period's is left out of the noise estimate
+#: (a feature of the data the model lacks: a 1e-9 m/s² step of the signal inside a
+#: rotation made every period's σ 7.7× its true error, QA 2026-11-29), and its σ is
+#: scaled by the root of its ratio.  For Gaussian noise the ratio is a χ² of 4-16
+#: degrees of freedom over its median: above 25 with probability < 1e-16.
+MISFIT_POWER = 25.0
+#: Most periods left out so (the largest kept for it), and their largest share: a run
+#: with more is not stationary, and its noise estimate keeps them all.
+MISFIT_MAX = 256
+MISFIT_SHARE = 0.05
 #: Bytes of residual kernels kept (:func:`_layout_kernel`): a closure run demodulates
 #: the same run again with its effects removed (same layouts, same kernels).
 KERNEL_CACHE_BYTES = 64 * 2**20
@@ -88,6 +100,10 @@ class _ResidualSpectra:
         self.bins = np.unique(np.concatenate([low, high]))
         self.groups: dict[bytes, list[Any]] = {}
         self.skipped = 0
+        self.low = self.bins <= 4  # 1/τ … 4/τ
+        self.band_power: list[float] = []  # every period added
+        self.top: list[tuple[float, int, bytes, NDArray]] = []  # the largest (heap)
+        self.misfit: dict[int, float] = {}
 
     def add(self, st: _Setup, blk: _Block, keep: NDArray) -> None:
         m, c, s, _, vb, _ = _block_basis(st, blk)
@@ -121,12 +137,44 @@ class _ResidualSpectra:
                 g = self.groups[key] = [0, np.zeros(self.bins.size), x[i], m[i]]
             g[0] += 1
             g[1] += power[i]
+            self._note(float(power[i][self.low].sum()), blk.p0 + int(i), key, power[i])
+
+    def _note(self, band: float, period: int, key: bytes, power: NDArray) -> None:
+        """Keep a period's band power, and its power while among the largest."""
+        self.band_power.append(band)
+        item = (band, period, key, power.copy())
+        if len(self.top) < MISFIT_MAX:
+            heapq.heappush(self.top, item)
+        elif band > self.top[0][0]:
+            heapq.heapreplace(self.top, item)
+
+    def _drop_misfits(self) -> None:
+        """Take the periods of :data:`MISFIT_POWER` times the median band power out of
+        the groups (``self.misfit``: period → root of the ratio), unless there are more
+        than :data:`MISFIT_MAX` or :data:`MISFIT_SHARE` of the periods."""
+        if self.misfit or len(self.band_power) < 8:
+            return
+        med = float(np.median(self.band_power))
+        if not med > 0:
+            return
+        big = [it for it in self.top if it[0] > MISFIT_POWER * med]
+        n_big = sum(b > MISFIT_POWER * med for b in self.band_power)
+        if not big or n_big > len(big) or n_big > MISFIT_SHARE * len(self.band_power):
+            return
+        for band, period, key, power in big:
+            g = self.groups[key]
+            g[0] -= 1
+            g[1] = g[1] - power
+            if g[0] == 0:
+                del self.groups[key]
+            self.misfit[period] = float(np.sqrt(band / med))
 
     @property
     def n_periods(self) -> int:
         return sum(g[0] for g in self.groups.values())
 
     def spectrum(self) -> ResidualSpectrum | None:
+        self._drop_misfits()
         if not self.groups:
             return None
         f_grid, kern, power = None, 0.0, 0.0
@@ -184,6 +232,7 @@ def _noise_report(
         check_scatter=scatter,
         band=band,
         n_periods=n,
+        misfit=dict(spectra.misfit),
     )
 
 

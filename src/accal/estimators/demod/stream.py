@@ -8,6 +8,7 @@ their uncertainties (:class:`DemodResult`), by the two passes of
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import replace
 from functools import partial
 
 import numpy as np
@@ -124,7 +125,20 @@ def demodulate_stream(
         source, st, used, _Checker(aux_names, tau, mask, st.fs), rest_tol=rest_tol, settle=settle
     )
     # a period's leakage of the signal's in-period variation, in its σ where significant
-    return with_signal_leak(_result(st, scan, acc, used, layout, report))
+    return with_signal_leak(_with_misfit(_result(st, scan, acc, used, layout, report)))
+
+
+def _with_misfit(res: DemodResult) -> DemodResult:
+    """``res`` with the σ of the periods left out of the data's noise estimate for their
+    misfit (``res.noise.misfit``, :data:`accal.estimators.demod.residual.MISFIT_POWER`)
+    scaled by the root of their power ratio: their residual is not the noise the PSD
+    describes, and their values hold what made it (QA, a 1e-9 m/s² signal step inside
+    a rotation: that period's error 1.6e-11 m/s², 32 times the noise σ)."""
+    rep = res.noise
+    if rep is None or not rep.misfit or rep.source != "data":
+        return res
+    f = np.array([rep.misfit.get(int(k), 1.0) for k in res.period_index], dtype=np.float64)
+    return replace(res, sigma_Y=res.sigma_Y * f, sigma_Z=res.sigma_Z * f)
 
 
 def _solver_used(
