@@ -364,3 +364,18 @@ def test_one_period_s_misfit_does_not_set_every_period_s_sigma():
     assert 0.75 < ratio < 1.3
     j = int(np.flatnonzero(k == 20)[0])
     assert abs(err_y[j]) < 3.0 * r.sigma_Y[j]
+
+
+def test_cli_names_a_misfit_period(tmp_path):
+    rot = np.flatnonzero(np.abs(np.diff(THETA)) > 0)
+    at = 20 * Q + rot[len(rot) // 4]
+    path, _, _ = _write(
+        tmp_path, "step", make_run(48, white(1e-11), 23, lambda t: (1e-9 * (t >= at), 0.0 * t))
+    )
+    res = CliRunner().invoke(
+        _cli(), ["demod", str(path), "--tau", "600", "--mask", "200", "--out", str(tmp_path / "o")]
+    )
+    assert res.exit_code == 0, res.output
+    assert "1 period(s) (20) have a residual up to" in res.stderr
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert list(summary["noise"]["misfit_periods"]) == ["20"]

@@ -35,6 +35,15 @@ def summary_warnings(summary: dict[str, Any]) -> tuple[str, ...]:
             f"measured masked time {m['measured_median']:g} s per period differs from "
             f"--mask {m['nominal']:g} s by more than {100 * m['tolerance']:g} %"
         )
+    misfit = (summary.get("noise") or {}).get("misfit_periods") or {}
+    if misfit:
+        which = _ranges([int(k) for k in misfit], limit=8)
+        top = max(misfit.values())
+        w.append(
+            f"{len(misfit)} period(s) ({which}) have a residual up to {top:.0f}x the others' "
+            "(a feature of the data the model lacks): left out of the noise estimate, their "
+            "sigma scaled by it"
+        )
     if summary["dropped"]:
         which = _ranges(summary.get("dropped_periods") or [], limit=8)
         w.append(

@@ -209,12 +209,15 @@ def noise_summary(res: Any, opts: DemodOptions) -> dict[str, Any]:
         "level_apriori": float(np.sqrt(rep.apriori(f2))),
         "level_data": float(np.sqrt(fit.psd(f2))) if fit is not None else None,
         "sigma_ratio": rep.sigma_ratio if fit is not None else None,
+        "misfit_periods": {str(k): v for k, v in sorted(getattr(rep, "misfit", {}).items())},
         "psd_data": (
             {"f": fit.nodes.tolist(), "S": fit.values.tolist()} if fit is not None else None
         ),
         "units": "levels m/s^2/sqrt(Hz) at f_level [Hz] = 2/tau (two-sided PSD); sigma_ratio: "
         "sigma from the a-priori PSD / sigma from the data's PSD, same estimator; psd_data: "
-        "the PSD estimated from the residual, f [Hz], S [m^2/s^4/Hz] (usable as --psd FILE)",
+        "the PSD estimated from the residual, f [Hz], S [m^2/s^4/Hz] (usable as --psd FILE); "
+        "misfit_periods: period -> root of its residual power near 2/tau over the median "
+        "period's, left out of the noise estimate, its sigma scaled by that factor",
     }
 
 
