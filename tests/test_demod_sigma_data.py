@@ -10,6 +10,7 @@ are generated in this file (θ pattern from the independent generator of
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -379,3 +380,37 @@ def test_cli_names_a_misfit_period(tmp_path):
     assert "1 period(s) (20) have a residual up to" in res.stderr
     summary = json.loads((tmp_path / "o" / "summary.json").read_text())
     assert list(summary["noise"]["misfit_periods"]) == ["20"]
+
+
+def test_the_closure_keeps_a_misfit_period_s_sigma(tmp_path, monkeypatch):
+    """With ``--close-loop`` the σ after the closure come from its fit, under the run's
+    PSD without the misfit period: that period's σ stays at least the declared one
+    (checked with the closure's own σ for it held at the noise's)."""
+    import accal.demodjob.closure_outputs as co
+
+    rot = np.flatnonzero(np.abs(np.diff(THETA)) > 0)
+    at = 20 * Q + rot[len(rot) // 4]
+    path, ty, _ = _write(
+        tmp_path, "step", make_run(48, white(1e-11), 23, lambda t: (1e-9 * (t >= at), 0.0 * t))
+    )
+    orig = co.apply_closure
+
+    def noise_only(rows, units, periods, leak_added=None, misfit=None):
+        # the closure's σ of the misfit period as the other periods' (nothing of its own)
+        for ax in ("Y", "Z"):
+            s = np.array(getattr(periods, f"sigma_{ax}_after"), dtype=np.float64)
+            k = np.flatnonzero(np.asarray(periods.period_index) == 20)
+            s[k] = np.median(s)
+            periods = dataclasses.replace(periods, **{f"sigma_{ax}_after": s})
+        return orig(rows, units, periods, leak_added, misfit)
+
+    monkeypatch.setattr("accal.demodjob.batch.apply_closure", noise_only)
+    out = tmp_path / "o"
+    res = CliRunner().invoke(
+        _cli(), ["demod", str(path), "--tau", "600", "--mask", "200", "--close-loop", "--out", str(out)]
+    )  # fmt: skip
+    assert res.exit_code == 0, res.output
+    d = pd.read_parquet(out / "periods.parquet")
+    row = d[d.period == 20].iloc[0]
+    assert row.sigma_Y >= row.sigma_Y_before > 10 * np.median(d.sigma_Y_before)
+    assert abs(row.a_Y - ty[20]) < 3 * row.sigma_Y

@@ -17,7 +17,12 @@ from __future__ import annotations
 
 from accal.demodjob.batch import process_run, run_demod
 from accal.demodjob.closure import change_statistics, close_run, closure_summary
-from accal.demodjob.closure_outputs import apply_closure, leak_of, write_demod_closure
+from accal.demodjob.closure_outputs import (
+    apply_closure,
+    leak_of,
+    misfit_of,
+    write_demod_closure,
+)
 from accal.demodjob.diagnose import current_summaries, diagnose_demod_dir
 from accal.demodjob.options import (
     CHUNK_ROWS,
@@ -75,6 +80,7 @@ __all__ = [
     "RunOutcome",
     "apply_closure",
     "leak_of",
+    "misfit_of",
     "budget_report",
     "change_statistics",
     "check_distinct_runs",

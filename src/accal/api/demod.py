@@ -289,6 +289,7 @@ def demodulate(
         estimate,
         leak_of,
         load_psd,
+        misfit_of,
         period_rows,
         summarise,
     )
@@ -306,7 +307,7 @@ def demodulate(
         step = info.step if info.resample is not None else None
         used = res.noise.used if getattr(res, "noise", None) is not None else noise
         entry, extended, _ = close_run(path, opts, path.parent, step=step, psd=used)
-        rows, units = apply_closure(rows, units, extended, leak_of(res, opts))
+        rows, units = apply_closure(rows, units, extended, leak_of(res, opts), misfit_of(res))
         summary["closure"] = closure_summary(entry)
         summary_of_extended(summary, rows, entry["model"])  # the mean of the extended model
         closure = Closure({path.name: entry}, gps_time=False)

@@ -57,7 +57,12 @@ from accal.batch import (
 from accal.batch_runner import BatchJob, run_batch, scheduler_name
 from accal.batch_summary import peak_rss_mb, reset_peak_rss
 from accal.demodjob.closure import close_run, closure_summary
-from accal.demodjob.closure_outputs import apply_closure, leak_of, write_demod_closure
+from accal.demodjob.closure_outputs import (
+    apply_closure,
+    leak_of,
+    misfit_of,
+    write_demod_closure,
+)
 from accal.demodjob.options import DemodOptions, DemodResult, DemodRunSummary, RunOutcome
 from accal.demodjob.outputs import (
     check_output_format,
@@ -97,7 +102,7 @@ def compute_run(path: Path, out_dir: Path, opts: DemodOptions, psd: Any) -> RunO
         step = info.step if info.resample is not None else None
         used = res.noise.used if getattr(res, "noise", None) is not None else psd
         closure, extended, plots = close_run(path, opts, out_dir, step=step, psd=used)
-        rows, units = apply_closure(rows, units, extended, leak_of(res, opts))
+        rows, units = apply_closure(rows, units, extended, leak_of(res, opts), misfit_of(res))
         summary["closure"] = closure_summary(closure)
         summary_of_extended(summary, rows, closure["model"])
     history = []

@@ -22,8 +22,23 @@ def leak_of(res: Any, opts: Any) -> Any:
     return getattr(res, "signal_leak_added", None)
 
 
+def misfit_of(res: Any) -> Any:
+    """Per row of the declared demodulation ``res``: the factor its σ was scaled by for
+    its misfit (``NoiseReport.misfit``, 1 elsewhere), for :func:`apply_closure`; None
+    without one."""
+    rep = getattr(res, "noise", None)
+    misfit = getattr(rep, "misfit", None)
+    if not misfit or getattr(rep, "source", "") != "data":
+        return None
+    return np.array([misfit.get(int(k), 1.0) for k in res.period_index], dtype=np.float64)
+
+
 def apply_closure(
-    rows: dict[str, Any], units: dict[str, str], periods: Any, leak_added: Any = None
+    rows: dict[str, Any],
+    units: dict[str, str],
+    periods: Any,
+    leak_added: Any = None,
+    misfit: Any = None,
 ) -> tuple[dict[str, Any], dict[str, str]]:
     """Periods rows with the extended model's ``a_Y``/``a_Z`` (declared ones as ``*_before``).
 
@@ -34,7 +49,10 @@ def apply_closure(
     noise's, and its instrument effects do not change the signal's leakage, so it is
     added to them in quadrature too (QA, 2026-11-29: a period cut by a gap had σ_Y
     8.96e-12 before the closure and 7.24e-13 after with nothing removed, its error
-    −9.6e-12 going from −1.1σ to −13.2σ).
+    −9.6e-12 going from −1.1σ to −13.2σ).  ``misfit`` (n,): the factor each row's σ
+    was scaled by in the declared demodulation for its misfit (:func:`misfit_of`):
+    where over 1, the σ after the closure is at least the declared one (its noise
+    model is the run's PSD without those periods).
     """
     idx = {int(k): i for i, k in enumerate(periods.period_index)}
     where = np.array([idx.get(int(k), -1) for k in rows["period"]], dtype=np.int64)
@@ -51,6 +69,13 @@ def apply_closure(
         rows[f"sigma_{ax}_before"] = rows[f"sigma_{ax}"]
         rows[f"a_{ax}"] = take(getattr(periods, f"a_{ax}_after"))
         rows[f"sigma_{ax}"] = take(getattr(periods, f"sigma_{ax}_after"))
+        if misfit is not None and np.shape(misfit) == (where.size,):
+            # not below the declared σ, which holds the misfit; the closure's own σ may
+            # hold it already (a signal step it reports, in the period's σ)
+            big = np.asarray(misfit, dtype=np.float64) > 1.0
+            rows[f"sigma_{ax}"] = np.where(
+                big, np.fmax(rows[f"sigma_{ax}"], rows[f"sigma_{ax}_before"]), rows[f"sigma_{ax}"]
+            )
         if leak_added is not None and np.shape(leak_added) == (where.size, 2):
             add = np.asarray(leak_added, dtype=np.float64)[:, "YZ".index(ax)]
             rows[f"sigma_{ax}"] = np.hypot(rows[f"sigma_{ax}"], add)
