@@ -52,7 +52,8 @@ def apply_closure(
     −9.6e-12 going from −1.1σ to −13.2σ).  ``misfit`` (n,): the factor each row's σ
     was scaled by in the declared demodulation for its misfit (:func:`misfit_of`):
     where over 1, the σ after the closure is at least the declared one (its noise
-    model is the run's PSD without those periods).
+    model is the run's PSD without those periods), unless the closure moved the
+    period's value by more than the declared σ.
     """
     idx = {int(k): i for i, k in enumerate(periods.period_index)}
     where = np.array([idx.get(int(k), -1) for k in rows["period"]], dtype=np.int64)
@@ -70,9 +71,11 @@ def apply_closure(
         rows[f"a_{ax}"] = take(getattr(periods, f"a_{ax}_after"))
         rows[f"sigma_{ax}"] = take(getattr(periods, f"sigma_{ax}_after"))
         if misfit is not None and np.shape(misfit) == (where.size,):
-            # not below the declared σ, which holds the misfit; the closure's own σ may
-            # hold it already (a signal step it reports, in the period's σ)
-            big = np.asarray(misfit, dtype=np.float64) > 1.0
+            # not below the declared σ, which holds the misfit, unless the closure moved
+            # the period's value by more than it (an effect it removed explains the
+            # misfit); the closure's own σ may hold it already (a signal step it reports)
+            moved = np.abs(rows[f"a_{ax}"] - rows[f"a_{ax}_before"]) > rows[f"sigma_{ax}_before"]
+            big = (np.asarray(misfit, dtype=np.float64) > 1.0) & ~moved
             rows[f"sigma_{ax}"] = np.where(
                 big, np.fmax(rows[f"sigma_{ax}"], rows[f"sigma_{ax}_before"]), rows[f"sigma_{ax}"]
             )
