@@ -18,12 +18,13 @@ data channel (a demodulation's two axes) are left to their own checks.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["BOX_MAX", "BOX_SHARE", "box_reasons", "step_sizes"]
+__all__ = ["BOX_MAX", "BOX_SHARE", "box_reasons", "reject_boxes", "step_sizes"]
 
 #: Longest box [s]: a level that returns within it did not change.
 BOX_MAX = 3600.0
@@ -61,3 +62,16 @@ def box_reasons(steps: list[tuple[float, float, int]]) -> dict[int, str]:
                 "manoeuvre, not a lasting change of the instrument)",
             )
     return out
+
+
+def reject_boxes(search, final, fit) -> None:
+    """Move the bias steps of ``search``'s final model (``final``: its effects in
+    order, ``fit``: their fit, as :func:`accal.closure.select` makes them) that make
+    boxes (:func:`box_reasons`) from ``search.found`` to ``search.rejected``."""
+    steps = step_sizes([f.prop for f in final], fit.gamma)
+    why = box_reasons(steps)
+    size = {i: s for _, s, i in steps}
+    for i in sorted(why, reverse=True):
+        f = search.found.pop(i)
+        verdict = dataclasses.replace(f.verdict, ok=False, reason=why[i], coefficient=size[i])
+        search.rejected.append(dataclasses.replace(f, verdict=verdict))

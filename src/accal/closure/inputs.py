@@ -28,6 +28,7 @@ __all__ = [
     "check_channels",
     "check_inputs",
     "check_proxies",
+    "prepared_inputs",
     "screen_channels",
     "usable_proxies",
     "with_caller_notes",
@@ -256,3 +257,28 @@ def with_caller_notes(
         else d
         for d in considered
     ]
+
+
+def prepared_inputs(
+    t, y, valid, reference, aux, channel, channel_names, signal_proxies, screened, opts
+) -> tuple:
+    """``close_loop``'s inputs checked and prepared: ``(t, y, channel, names, use,
+    reference, aux, proxies, considered)`` on all samples (:func:`check_inputs`,
+    :func:`check_proxies`; the channels screened, :func:`screen_channels`, with the
+    caller's notes; angular accelerations about their offset,
+    :func:`angular_about_offset`).  ``opts``: the search options, whose
+    ``"channel_units"`` type the channels and whose ``"firings"`` mask (if any) must
+    have ``t``'s shape."""
+    t_all, y_all, chan_all, names, use, ref_all, aux_all = check_inputs(
+        t, y, valid, reference, aux, channel, channel_names
+    )
+    proxies_all = check_proxies(signal_proxies, t_all)
+    aux_all, considered = screen_channels(aux_all, y_all, use, ref_all)
+    considered = with_caller_notes(screened, considered)
+    aux_all = angular_about_offset(aux_all, use, opts.get("channel_units", {}))
+    firings = opts.get("firings")
+    if firings is not None and np.shape(firings) != t_all.shape:
+        raise ValidationError(
+            f"options['firings'] must have shape {t_all.shape}, got {np.shape(firings)}"
+        )
+    return t_all, y_all, chan_all, names, use, ref_all, aux_all, proxies_all, considered

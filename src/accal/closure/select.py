@@ -31,7 +31,6 @@ and makes the final fit (:mod:`accal.closure.final`):
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -45,19 +44,16 @@ from accal.closure.aliasspread import (
 )
 from accal.closure.basis import Basis
 from accal.closure.blockbase import BlockBase
-from accal.closure.boxes import box_reasons, step_sizes
+from accal.closure.boxes import reject_boxes
 from accal.closure.channelfault import fault_notes, faulted
 from accal.closure.epochprofile import add_epoch_uncertainties
 from accal.closure.final import covariances, describe, refer_exponentials
 from accal.closure.inputs import (
     MIN_SAMPLES,
-    angular_about_offset,
     base_design,
-    check_inputs,
-    check_proxies,
+    prepared_inputs,
     screen_channels,
     usable_proxies,
-    with_caller_notes,
 )
 from accal.closure.jumpfit import add_jump_covariance, jump_columns, jump_effects
 from accal.closure.jumps import jumps_first
@@ -318,21 +314,14 @@ def close_loop(
     check_option("signal_model", signal_model, ("auto", "orbit", "none"))
     if not 0 < alpha < 1:
         raise ValidationError(f"alpha must be in (0, 1), got {alpha}")
-    t_all, y_all, chan_all, names, use, ref_all, aux_all = check_inputs(
-        t, y, valid, reference, aux, channel, channel_names
+    opts = {**(options or {}), "channel_units": dict(channel_units or {})}
+    inp = prepared_inputs(
+        t, y, valid, reference, aux, channel, channel_names, signal_proxies, screened, opts
     )
-    proxies_all = check_proxies(signal_proxies, t_all)
-    aux_all, considered = screen_channels(aux_all, y_all, use, ref_all)
-    considered = with_caller_notes(screened, considered)
+    t_all, y_all, chan_all, names, use, ref_all, aux_all, proxies_all, considered = inp
     if signal_model == "auto":
         signal_model = "orbit" if ref_all is None and orbit_period else "none"
     builders = _resolve(candidates)
-    opts = {**(options or {}), "channel_units": dict(channel_units or {})}
-    aux_all = angular_about_offset(aux_all, use, opts["channel_units"])
-    if opts.get("firings") is not None and np.shape(opts["firings"]) != t_all.shape:
-        raise ValidationError(
-            f"options['firings'] must have shape {t_all.shape}, got {np.shape(opts['firings'])}"
-        )
     fixed = bool(opts.get("orbit_period_fixed", False))
     setup = _Setup(t_all, y_all, base, chan_all, names, signal_model, orbit_period, fixed)
     st, use, notes, families, jumps, proxies = _null_model(
@@ -343,7 +332,7 @@ def close_loop(
     make = _search_maker(setup, builders, alpha, opts, aux_all, ref_all, proxies, notes)
     stop = _floor_stop(resolution)
     search, st = _select(make, st, use, setup, max_effects, stop)
-    _reject_boxes(search, setup, st)
+    reject_boxes(search, *_final_fit(search, setup, st)[::2])
     floored = stop is not None and stop(search)
     noise_psd = _updated_psd(search, setup, st, jumps.jumps, use, noise_psd, psd_update)
     return _finish(
@@ -615,19 +604,6 @@ def _split(cols, chan_u, names):
     if not names:
         return cols
     return np.column_stack([cols * (chan_u == c)[:, None] for c in range(len(names))])
-
-
-def _reject_boxes(search: Search, setup: _Setup, st) -> None:
-    """Move the bias steps of the final model that make boxes
-    (:func:`accal.closure.boxes.box_reasons`) to the rejected ones."""
-    final, _, fit = _final_fit(search, setup, st)
-    steps = step_sizes([f.prop for f in final], fit.gamma)
-    why = box_reasons(steps)
-    size = {i: s for _, s, i in steps}
-    for i in sorted(why, reverse=True):
-        f = search.found.pop(i)
-        verdict = dataclasses.replace(f.verdict, ok=False, reason=why[i], coefficient=size[i])
-        search.rejected.append(dataclasses.replace(f, verdict=verdict))
 
 
 def _final_effects(search: Search) -> list[Found]:
