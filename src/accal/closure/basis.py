@@ -45,7 +45,7 @@ _RANK_TOL = 1e-9
 #: Attributes of :class:`Basis` set by its ``_build_blocks``.
 _BLOCK_ATTRS = frozenset(
     ("seg_start", "seg_stop", "seg_block", "sample_seg", "q", "rinv", "ident", "rank")
-    + ("_q_lev", "_pad", "_qp", "_qpt", "_tiled")
+    + ("_q_lev", "_pad", "_gather", "_qp", "_qpt", "_tiled")
 )
 
 
@@ -237,7 +237,12 @@ class Basis:
             pos = np.arange(n) - self.seg_start[self.sample_seg]
             # one flat index into the padded rows: a scatter/gather by one index array
             # is ~30 % faster than by two (a platform day's 301 single-column calls)
-            self._pad = (self.sample_seg * lmax + pos, lmax)
+            flat = self.sample_seg * lmax + pos
+            self._pad = (flat, lmax)
+            # the same layout as a gather: padded row -> sample (n: a zero row), ~2x
+            # faster than the scatter for two columns
+            self._gather = np.full(ns * lmax, n, dtype=np.int64)
+            self._gather[flat] = np.arange(n)
             if ns * lmax == n:  # tiled: a view of q
                 qp = q.reshape(ns, lmax, p)
             else:
@@ -357,9 +362,8 @@ class Basis:
             if self._tiled:
                 zp = z.reshape(ns, lmax, z.shape[1])
             else:
-                zp = np.zeros((ns * lmax, z.shape[1]))
-                zp[flat] = z
-                zp = zp.reshape(ns, lmax, z.shape[1])
+                ze = np.concatenate([z, np.zeros((1, z.shape[1]))])
+                zp = np.take(ze, self._gather, axis=0).reshape(ns, lmax, z.shape[1])
             return np.matmul(self._qpt, zp)
         out = np.empty((self.seg_start.size, self.p, z.shape[1]))
         for j in range(self.p):
