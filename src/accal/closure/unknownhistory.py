@@ -23,10 +23,11 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from accal.closure.candidates import SQUARED
 from accal.closure.channelfault import mark_faults
 from accal.closure.final import with_jacobian
 from accal.closure.inputs import MIN_SAMPLES
-from accal.closure.madeup import made_up
+from accal.closure.madeup import firing_samples, made_up
 from accal.closure.search import Found, run, swap_smooth
 
 if TYPE_CHECKING:  # annotations only
@@ -155,15 +156,42 @@ def without_unknown_history(
     kept = {f.prop.channel for f in again.found if f.prop.name == "auxiliary"}
     if not coupled <= kept:
         return None
+    fire = _firing_mask(search, skip) & use
+    n_hole = int((use & unknown.mask & ~fire).sum())
+    why = []
+    if n_hole:
+        why.append(
+            f"{n_hole} where the lagged and filtered values reach before the channel's "
+            f"start or a hole (the first {lead:.0f} s and after holes): unknown there"
+        )
+    if fire.any():
+        why.append(
+            f"{int(fire.sum())} within the known thruster firings, where each thruster "
+            "moves the linear and angular accelerations at its own ratio (no lever arm)"
+        )
     again.note(
         "auxiliary",
         None,
-        f"{int((use & unknown.mask).sum())} samples left out of the analysis: the "
-        f"first {lead:.0f} s, and those whose lagged and filtered values reach a hole, "
-        f"of the coupled channel(s) {', '.join(sorted(coupled))}: unknown there",
-        {"left_out": lead},
+        f"{int((use & unknown.mask).sum())} samples left out of the analysis for the "
+        f"coupled channel(s) {', '.join(sorted(coupled))}: {'; '.join(why)}",
+        {"left_out": lead, "left_out_firings": int(fire.sum())},
     )
     return again, st2
+
+
+def _firing_mask(search: Search, skip) -> NDArray[np.bool_]:
+    """The samples the known thruster firings take from the accepted couplings (not in
+    ``skip``) to an angular acceleration (:func:`accal.closure.madeup.firing_samples`)."""
+    out = np.zeros(search.t_all.size, dtype=bool)
+    for f in search.found:
+        if f.prop.name != "auxiliary" or f in skip:
+            continue
+        lag, tc = f.prop.path
+        name = str(f.prop.channel).removesuffix(SQUARED)
+        hit = firing_samples(search.options, name, search.t_all, lag, tc)
+        if hit is not None:
+            out |= hit
+    return out
 
 
 def _continue_from(again: Search, search: Search, coupled: set) -> bool:
@@ -221,7 +249,8 @@ def reject_unconfirmed(search: Search, skip=frozenset()) -> None:
             continue
         why = (
             f"not confirmed without the {out[id(f)]} samples where its lagged and filtered "
-            "channel is unknown (the search without them did not find it)"
+            "channel is unknown or a known thruster firing reaches it (the search "
+            "without them did not find it)"
         )
         verdict = dataclasses.replace(f.verdict, ok=False, reason=why)
         search.rejected.append(dataclasses.replace(f, verdict=verdict))
