@@ -119,3 +119,34 @@ def test_an_offset_of_the_record_s_first_samples_is_not_a_step(at_end, length):
     ends = (t[0] + END_CLEAR, t[-1] - END_CLEAR)
     near = [e for e in res.effects if e.name == "bias_step" and not ends[0] <= e.epoch <= ends[1]]
     assert not near, near
+
+
+def _linear_ramp_day(seed: int, size: float, duration: float):
+    """A white-noise day with a bias change of ``size`` spread linearly over ``duration``
+    seconds, then through seven 10 s boxcars (the Level-1B filter's stand-in)."""
+    t, y = white_noise_day(seed, 43200)
+    rng = np.random.default_rng([seed, 7])
+    epoch = WHITE_T0 + float(rng.uniform(0.3, 0.7)) * 43200
+    lin = np.clip((t - epoch) / duration + 0.5, 0.0, 1.0)
+    k = np.array([1.0])
+    for _ in range(7):
+        k = np.convolve(k, np.ones(10) / 10)
+    ramp = np.convolve(np.r_[np.zeros(k.size), lin, np.ones(k.size)], k, "same")[k.size : -k.size]
+    return t, y + size * ramp, epoch
+
+
+@pytest.mark.parametrize("duration", [300.0, 600.0])
+def test_a_bias_change_over_minutes_is_fitted_as_a_ramp(duration):
+    """A bias change over 5 or 10 min (QA of 2026-11-29: 5e-9 m/s² over 5 min came out
+    3.83e-9 ± 3.2e-10, z −3.6): the data ask for a ramp (``closure.softstep``) of about
+    its duration, and the size is within 3σ; a filtered sharp step of the same size
+    stays an edge."""
+    for seed in (31, 32):
+        t, y, epoch = _linear_ramp_day(seed, 2e-9, duration)
+        (e,) = [e for e in _close(t, y, True).effects if e.name == "bias_step"]
+        assert abs(e.epoch - epoch) < 0.5 * duration
+        assert 0.5 * duration <= e.details["ramp_duration"] <= 2.0 * duration
+        assert abs(e.coefficient - 2e-9) < 3.0 * e.sigma, (e.coefficient, e.sigma)
+        t, y, epoch = _ramp_day(seed, 2e-9)
+        (e,) = [e for e in _close(t, y, True).effects if e.name == "bias_step"]
+        assert "ramp_duration" not in e.details

@@ -313,6 +313,10 @@ def describe(
             details["t0"] = float(prop.params.get("t0", t0))
         elif prop.name == "intra_period_shape":
             details["tau_searched"] = prop.params["tau"]
+        elif prop.name == "bias_step" and prop.params.get("ramp_duration"):
+            # a ramp over minutes (accal.closure.softstep): its duration [s] and test
+            details["ramp_duration"] = float(prop.params["ramp_duration"])
+            details["ramp_p"] = float(prop.params["ramp_p"])
         elif prop.name not in ("bias_step", "auxiliary", "scale"):
             details.update({k: v for k, v in prop.params.items() if k != "jacobian"})
         if prop.params.get("jacobian"):

@@ -37,6 +37,7 @@ from accal.closure.final import with_jacobian
 from accal.closure.kinds import EFFECT_NAMES, kind_of
 from accal.closure.residual import Grid
 from accal.closure.significance import Tested, p_given_others, test_proposal
+from accal.closure.softstep import with_wide_ramp
 from accal.closure.validation import SignalProxies, Verdict, epoch_reason, validate
 
 __all__ = ["MAX_REJECTED", "Found", "Search", "run"]
@@ -374,7 +375,9 @@ def run(
                     # test_lag_and_low_pass_on_half_a_day_with_gaps_keep_the_coupling)
                     member = len(parts) > 1 and part.name == "bias_step"
                     f = Found(part, t.p_adj, verdict, t.wald.stat, member=member)
-                    f.aug = with_jacobian(part, s.t_all, s.t0, s.use, basis)
+                    f.aug = with_wide_ramp(
+                        with_jacobian(part, s.t_all, s.t0, s.use, basis), s, basis
+                    )
                     s.found.append(f)
                 added = True
                 break
