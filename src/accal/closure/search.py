@@ -40,7 +40,7 @@ from accal.closure.significance import Tested, p_given_others, test_proposal
 from accal.closure.softstep import with_wide_ramp
 from accal.closure.validation import SignalProxies, Verdict, epoch_reason, validate
 
-__all__ = ["MAX_REJECTED", "Found", "Search", "run"]
+__all__ = ["MAX_REJECTED", "Found", "Search", "augmented", "run"]
 
 #: Most significant candidates rejected (reported, not added) in one search.
 MAX_REJECTED = 6
@@ -308,6 +308,13 @@ class Search:
         return False
 
 
+def augmented(prop: Proposal, s: Search, basis: Basis) -> Proposal:
+    """``prop`` as it enters the model given ``basis``: with its Jacobian or transition
+    columns (:func:`accal.closure.final.with_jacobian`), a bias step over minutes as a
+    ramp (:func:`accal.closure.softstep.with_wide_ramp`)."""
+    return with_wide_ramp(with_jacobian(prop, s.t_all, s.t0, s.use, basis), s, basis)
+
+
 def run(
     s: Search,
     max_effects: int,
@@ -375,9 +382,7 @@ def run(
                     # test_lag_and_low_pass_on_half_a_day_with_gaps_keep_the_coupling)
                     member = len(parts) > 1 and part.name == "bias_step"
                     f = Found(part, t.p_adj, verdict, t.wald.stat, member=member)
-                    f.aug = with_wide_ramp(
-                        with_jacobian(part, s.t_all, s.t0, s.use, basis), s, basis
-                    )
+                    f.aug = augmented(part, s, basis)
                     s.found.append(f)
                 added = True
                 break

@@ -25,10 +25,9 @@ from numpy.typing import NDArray
 
 from accal.closure.candidates import SQUARED
 from accal.closure.channelfault import mark_faults
-from accal.closure.final import with_jacobian
 from accal.closure.inputs import MIN_SAMPLES
 from accal.closure.madeup import firing_samples, made_up
-from accal.closure.search import Found, run, swap_smooth
+from accal.closure.search import Found, augmented, run, swap_smooth
 
 if TYPE_CHECKING:  # annotations only
     from accal.closure.search import Search
@@ -214,7 +213,7 @@ def _continue_from(again: Search, search: Search, coupled: set) -> bool:
     for f in search.found:
         g = Found(f.prop, f.p_adj, f.verdict, f.stat, member=f.member)
         if f.aug is not None:
-            g.aug = with_jacobian(f.prop, again.t_all, again.t0, again.use, basis)
+            g.aug = augmented(f.prop, again, basis)
         again.found.append(g)
         basis = again.state(again.found)[0]
     again.rejected.extend(search.rejected)
