@@ -71,6 +71,7 @@ from accal.closure.search import Found, Search, run, swap_smooth
 from accal.closure.significance import describe_smooth, unexplained_test
 from accal.closure.unknownhistory import (
     UNKNOWN_DEPTH,
+    fired,
     new_unknown,
     pause_at,
     reject_unconfirmed,
@@ -390,7 +391,9 @@ def _select(make, st, use, setup: _Setup, max_effects: int, stop) -> tuple[Searc
     (:mod:`accal.closure.channelfault`) is rejected when not found again without it,
     first or not: on a QA thruster day (2026-11-29) a z coupling to a 50 s low-pass of
     ``ang_accl_y`` whose coefficient reversed over 5.5 h was not significant on the
-    other 77 % of the record, was kept unconfirmed, and moved the z bias 1.4σ.
+    other 77 % of the record, was kept unconfirmed, and moved the z bias 1.4σ.  So is a
+    coupling to an angular acceleration not found again without the known thruster
+    firings (:func:`~accal.closure.unknownhistory.fired`).
     """
     search = make(st, use)
     kept: set = set()  # couplings kept unconfirmed (the first search's first ones)
@@ -414,7 +417,9 @@ def _select(make, st, use, setup: _Setup, max_effects: int, stop) -> tuple[Searc
             reject_unconfirmed(search, skip)
         else:
             first = new_unknown(search, skip)
-            fault = [f for f in first if faulted(search.options, f.prop.channel)]
+            fault = [
+                f for f in first if faulted(search.options, f.prop.channel) or fired(search, f)
+            ]
             if fault:
                 reject_unconfirmed(search, skip | {f for f in first if f not in fault})
             kept.update(f for f in first if f not in fault)

@@ -34,6 +34,7 @@ if TYPE_CHECKING:  # annotations only
 
 __all__ = [
     "UNKNOWN_DEPTH",
+    "fired",
     "reject_unconfirmed",
     "unknown_history",
     "new_unknown",
@@ -176,6 +177,22 @@ def without_unknown_history(
         {"left_out": lead, "left_out_firings": int(fire.sum())},
     )
     return again, st2
+
+
+def fired(search: Search, f: Found) -> bool:
+    """Whether coupling ``f`` is to an angular acceleration whose known thruster firings
+    reach used samples (:func:`accal.closure.madeup.firing_samples`).  Such a coupling
+    not found again without them is rejected even when it is a search's first: at a
+    firing each thruster moves the linear and angular accelerations at its own ratio,
+    real accelerations that are no lever arm, not a history nobody could know (a clean
+    QA thruster day, 2026-11-29: a y coupling of 4.0e-4 ± 6.1e-5 m to ``ang_accl_y`` at a
+    7.4 s lag, which a lever arm does not have, was kept unconfirmed and removed)."""
+    if f.prop.name != "auxiliary":
+        return False
+    lag, tc = f.prop.path
+    name = str(f.prop.channel).removesuffix(SQUARED)
+    hit = firing_samples(search.options, name, search.t_all, lag, tc)
+    return hit is not None and bool((hit & search.use).any())
 
 
 def _firing_mask(search: Search, skip) -> NDArray[np.bool_]:
