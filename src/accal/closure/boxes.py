@@ -24,12 +24,24 @@ import itertools
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["BOX_MAX", "BOX_SHARE", "box_reasons", "reject_boxes", "step_sizes"]
+__all__ = [
+    "BOX_MAX",
+    "BOX_SHARE",
+    "UNDO_WINDOW",
+    "box_reasons",
+    "give_back",
+    "reject_boxes",
+    "step_sizes",
+    "undone_jumps",
+]
 
 #: Longest box [s]: a level that returns within it did not change.
 BOX_MAX = 3600.0
 #: Least ratio of the smaller to the larger size of a box's two steps.
 BOX_SHARE = 0.5
+#: Largest distance [s] between an edge-scan jump and a least-squares step of the
+#: opposite sign that gives it back (twice the transition left out of the jump's test).
+UNDO_WINDOW = 80.0
 
 
 def step_sizes(props, gamma: NDArray[np.float64]) -> list[tuple[float, float, int]]:
@@ -75,3 +87,54 @@ def reject_boxes(search, final, fit) -> None:
         f = search.found.pop(i)
         verdict = dataclasses.replace(f.verdict, ok=False, reason=why[i], coefficient=size[i])
         search.rejected.append(dataclasses.replace(f, verdict=verdict))
+
+
+def undone_jumps(final, fit, jumps) -> dict[int, tuple[int, str]]:
+    """``{i: (k, reason)}``: the bias steps ``i`` of the final model (``final``, ``fit``
+    as for :func:`reject_boxes`) that give back the edge-scan jump ``k`` of ``jumps``
+    (:class:`accal.closure.jumps.Jump`, taken out of the data before the search).
+
+    A least-squares step within :data:`UNDO_WINDOW` s of a jump, of the opposite sign
+    and at least :data:`BOX_SHARE` of its size, puts the level the jump took out back:
+    together they are a box of no width, and neither is a bias change.  A QA day
+    (2026-11-29, an outside generator): a −4.19e-9 m/s² jump and a +3.90e-9 step at the
+    same epoch, two orbits after a real 2e-8 step, were both removed (net −2.8e-10).
+    """
+    out: dict[int, tuple[int, str]] = {}
+    for epoch, size, i in step_sizes([f.prop for f in final], fit.gamma):
+        for k, j in enumerate(jumps):
+            if abs(epoch - j.epoch) > UNDO_WINDOW or size * j.size >= 0:
+                continue
+            if min(abs(size), abs(j.size)) < BOX_SHARE * max(abs(size), abs(j.size)):
+                continue
+            if k in {kk for kk, _ in out.values()}:
+                continue
+            out[i] = (
+                k,
+                f"not a bias step: it gives back the edge-scan jump of {j.size:.3g} m/s² "
+                f"{j.epoch - epoch:+.0f} s away (a box of no width: neither is a bias change)",
+            )
+            break
+    return out
+
+
+def give_back(search, final, fit, jumps) -> tuple:
+    """The jumps ``jumps`` less those a bias step of the final model gives back
+    (:func:`undone_jumps`); those steps are moved from ``search.found`` to
+    ``search.rejected``, and each jump dropped gets a note (it goes back into the data,
+    the caller's)."""
+    undo = undone_jumps(final, fit, jumps)
+    drop = {k for k, _ in undo.values()}
+    for i in sorted(undo, reverse=True):
+        f = search.found.pop(i)
+        verdict = dataclasses.replace(f.verdict, ok=False, reason=undo[i][1])
+        search.rejected.append(dataclasses.replace(f, verdict=verdict))
+    for k in sorted(drop):
+        j = jumps[k]
+        search.note(
+            "bias_step",
+            None,
+            f"a jump of {j.size:.3g} ± {j.sigma:.2g} m/s² at {j.epoch:.1f} s was not "
+            "removed: a least-squares step of the search at its epoch gave it back",
+        )
+    return tuple(j for k, j in enumerate(jumps) if k not in drop)

@@ -31,6 +31,7 @@ and makes the final fit (:mod:`accal.closure.final`):
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -44,7 +45,7 @@ from accal.closure.aliasspread import (
 )
 from accal.closure.basis import Basis
 from accal.closure.blockbase import BlockBase
-from accal.closure.boxes import reject_boxes
+from accal.closure.boxes import give_back, reject_boxes
 from accal.closure.channelfault import fault_notes, faulted
 from accal.closure.epochprofile import add_epoch_uncertainties
 from accal.closure.final import covariances, describe, refer_exponentials
@@ -333,12 +334,27 @@ def close_loop(
     make = _search_maker(setup, builders, alpha, opts, aux_all, ref_all, proxies, notes)
     stop = _floor_stop(resolution)
     search, st = _select(make, st, use, setup, max_effects, stop)
+    st, jumps = _given_back(search, setup, st, jumps)
     reject_boxes(search, *_final_fit(search, setup, st)[::2])
     floored = stop is not None and stop(search)
     noise_psd = _updated_psd(search, setup, st, jumps.jumps, use, noise_psd, psd_update)
     return _finish(
         search, setup, st, catchall_knots, noise_psd, floored, considered, opts, jumps.jumps
     )
+
+
+def _given_back(search: Search, setup: _Setup, st, scan):
+    """Edge-scan jumps a least-squares step gives back put back into the data
+    (:func:`~accal.closure.boxes.give_back`), the null fit rebuilt: ``(st, scan)``."""
+    kept = give_back(search, *_final_fit(search, setup, st)[::2], scan.jumps)
+    if len(kept) == len(scan.jumps):
+        return st, scan
+    sizes = np.array([j.size for j in kept])
+    setup.y_all = setup.y_all_given - jump_columns(setup.t_all, kept) @ sizes
+    st = setup.build(search.use)
+    search.y_u = setup.y_all[search.use]
+    search.drop_caches()
+    return st, dataclasses.replace(scan, jumps=kept)
 
 
 def _updated_psd(search: Search, setup: _Setup, st, jumps, use, noise_psd, psd_update):
