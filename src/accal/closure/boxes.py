@@ -84,9 +84,14 @@ def reject_boxes(search, final, fit) -> None:
     why = box_reasons(steps)
     size = {i: s for _, s, i in steps}
     for i in sorted(why, reverse=True):
-        f = search.found.pop(i)
-        verdict = dataclasses.replace(f.verdict, ok=False, reason=why[i], coefficient=size[i])
-        search.rejected.append(dataclasses.replace(f, verdict=verdict))
+        _reject(search, i, why[i], coefficient=size[i])
+
+
+def _reject(search, i: int, reason: str, **verdict) -> None:
+    """Move ``search.found[i]`` to ``search.rejected`` with ``reason``."""
+    f = search.found.pop(i)
+    v = dataclasses.replace(f.verdict, ok=False, reason=reason, **verdict)
+    search.rejected.append(dataclasses.replace(f, verdict=v))
 
 
 def undone_jumps(final, fit, jumps) -> dict[int, tuple[int, str]]:
@@ -101,14 +106,14 @@ def undone_jumps(final, fit, jumps) -> dict[int, tuple[int, str]]:
     same epoch, two orbits after a real 2e-8 step, were both removed (net −2.8e-10).
     """
     out: dict[int, tuple[int, str]] = {}
+    taken: set[int] = set()
     for epoch, size, i in step_sizes([f.prop for f in final], fit.gamma):
         for k, j in enumerate(jumps):
-            if abs(epoch - j.epoch) > UNDO_WINDOW or size * j.size >= 0:
+            if k in taken or abs(epoch - j.epoch) > UNDO_WINDOW or size * j.size >= 0:
                 continue
             if min(abs(size), abs(j.size)) < BOX_SHARE * max(abs(size), abs(j.size)):
                 continue
-            if k in {kk for kk, _ in out.values()}:
-                continue
+            taken.add(k)
             out[i] = (
                 k,
                 f"not a bias step: it gives back the edge-scan jump of {j.size:.3g} m/s² "
@@ -126,9 +131,7 @@ def give_back(search, final, fit, jumps) -> tuple:
     undo = undone_jumps(final, fit, jumps)
     drop = {k for k, _ in undo.values()}
     for i in sorted(undo, reverse=True):
-        f = search.found.pop(i)
-        verdict = dataclasses.replace(f.verdict, ok=False, reason=undo[i][1])
-        search.rejected.append(dataclasses.replace(f, verdict=verdict))
+        _reject(search, i, undo[i][1])
     for k in sorted(drop):
         j = jumps[k]
         search.note(

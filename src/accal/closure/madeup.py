@@ -28,7 +28,7 @@ from accal.closure.kinds import channel_class
 if TYPE_CHECKING:  # annotations only
     from accal.closure.search import Found, Search
 
-__all__ = ["firing_samples", "made_up", "unknown_stretches"]
+__all__ = ["coupling_firings", "firing_samples", "made_up", "unknown_stretches"]
 
 #: A hole of more than this many steps between finite values is unknown (shorter
 #: ones are interpolated).
@@ -119,3 +119,13 @@ def firing_samples(
     hi = np.searchsorted(tf, t_all - lag, side="right")
     lo = np.searchsorted(tf, t_all - lag - 5.0 * tc, side="left")
     return fm | (hi > lo)
+
+
+def coupling_firings(search: Search, f: Found) -> NDArray[np.bool_] | None:
+    """:func:`firing_samples` of coupling ``f`` (its channel, lag and low-pass); None for
+    an effect that is not a coupling."""
+    if f.prop.name != "auxiliary":
+        return None
+    lag, tc = f.prop.path
+    name = str(f.prop.channel).removesuffix(SQUARED)
+    return firing_samples(search.options, name, search.t_all, lag, tc)

@@ -71,29 +71,25 @@ def with_wide_ramp(aug: Proposal, s: Search, rest: Basis) -> Proposal:
     if int(aug.params.get("jacobian") or 0) != 1:
         return aug
     epoch = float(aug.params["epoch"])
-    edge = aug.columns[:, 0]
+    model = rest.extend(aug.columns[s.use])  # the step as an edge, with its transition
+    fit = model.fit(s.y_u)
     shape = aug.columns[s.use][:, 1:]  # the transition's columns
     # the duration: the ramp (with the transition's columns) that fits best
-    rss = {0.0: float(np.sum(rest.extend(aug.columns[s.use]).fit(s.y_u).resid ** 2))}
+    rss = {0.0: float(np.sum(fit.resid**2))}
     for d in DURATIONS:
-        ramp, _ = ramp_columns(s.t_all, epoch, d)
-        cols = np.column_stack([ramp[s.use], shape])
+        cols = np.column_stack([ramp_columns(s.t_all, epoch, d)[0][s.use], shape])
         rss[d] = float(np.sum(rest.extend(cols).fit(s.y_u).resid ** 2))
     d = min(rss, key=rss.get)
     if d == 0.0:
         return aug
     # whether the data ask for it: the ramp's misfit to the edge given the step
-    model = rest.extend(aug.columns[s.use])
-    ramp, _ = ramp_columns(s.t_all, epoch, d)
-    zt = model.complement((ramp - edge)[s.use][:, None])
+    ramp, jac = ramp_columns(s.t_all, epoch, d)
+    zt = model.complement((ramp - aug.columns[:, 0])[s.use][:, None])
     if zt.shape[1] == 0:
         return aug
-    w = wald_test(s.grid, model.fit(s.y_u).resid, zt, s.leverage(model))
-    best = (d, float(w.pvalue))
-    if not best[1] * len(DURATIONS) < RAMP_LEVEL:
+    p_ramp = float(wald_test(s.grid, fit.resid, zt, s.leverage(model)).pvalue)
+    if not p_ramp * len(DURATIONS) < RAMP_LEVEL:
         return aug
-    d = best[0]
-    ramp, jac = ramp_columns(s.t_all, epoch, d)
     cand = dataclasses.replace(
         aug,
         columns=np.column_stack([ramp, aug.columns[:, 1:], jac]),
@@ -108,6 +104,6 @@ def with_wide_ramp(aug: Proposal, s: Search, rest: Basis) -> Proposal:
         **aug.params,
         "jacobian_params": kept,
         "ramp_duration": d,
-        "ramp_p": min(1.0, best[1] * len(DURATIONS)),
+        "ramp_p": min(1.0, p_ramp * len(DURATIONS)),
     }
     return dataclasses.replace(red, params=params)

@@ -23,10 +23,9 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from accal.closure.candidates import SQUARED
 from accal.closure.channelfault import mark_faults
 from accal.closure.inputs import MIN_SAMPLES
-from accal.closure.madeup import firing_samples, made_up
+from accal.closure.madeup import coupling_firings, made_up
 from accal.closure.search import Found, augmented, run, swap_smooth
 
 if TYPE_CHECKING:  # annotations only
@@ -181,30 +180,22 @@ def without_unknown_history(
 
 def fired(search: Search, f: Found) -> bool:
     """Whether coupling ``f`` is to an angular acceleration whose known thruster firings
-    reach used samples (:func:`accal.closure.madeup.firing_samples`).  Such a coupling
+    reach used samples (:func:`accal.closure.madeup.coupling_firings`).  Such a coupling
     not found again without them is rejected even when it is a search's first: at a
     firing each thruster moves the linear and angular accelerations at its own ratio,
     real accelerations that are no lever arm, not a history nobody could know (a clean
     QA thruster day, 2026-11-29: a y coupling of 4.0e-4 ± 6.1e-5 m to ``ang_accl_y`` at a
     7.4 s lag, which a lever arm does not have, was kept unconfirmed and removed)."""
-    if f.prop.name != "auxiliary":
-        return False
-    lag, tc = f.prop.path
-    name = str(f.prop.channel).removesuffix(SQUARED)
-    hit = firing_samples(search.options, name, search.t_all, lag, tc)
+    hit = coupling_firings(search, f)
     return hit is not None and bool((hit & search.use).any())
 
 
 def _firing_mask(search: Search, skip) -> NDArray[np.bool_]:
     """The samples the known thruster firings take from the accepted couplings (not in
-    ``skip``) to an angular acceleration (:func:`accal.closure.madeup.firing_samples`)."""
+    ``skip``) to an angular acceleration (:func:`accal.closure.madeup.coupling_firings`)."""
     out = np.zeros(search.t_all.size, dtype=bool)
     for f in search.found:
-        if f.prop.name != "auxiliary" or f in skip:
-            continue
-        lag, tc = f.prop.path
-        name = str(f.prop.channel).removesuffix(SQUARED)
-        hit = firing_samples(search.options, name, search.t_all, lag, tc)
+        hit = None if f in skip else coupling_firings(search, f)
         if hit is not None:
             out |= hit
     return out
