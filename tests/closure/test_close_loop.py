@@ -105,7 +105,7 @@ def test_slow_exponential_is_not_removed_as_polynomial_terms(sim, seed, amp, tau
     assert _names(res) == ["exponential_drift"]
     e = res.effects[0]
     assert abs(e.coefficient - amp) < 3 * e.sigma
-    assert {r.name for r in res.removed} >= {"quadratic_drift"}
+    assert {r.name for r in res.eliminated} >= {"quadratic_drift"}
     # T's uncertainty is propagated (Jacobian column): T and the bias within 3σ
     assert abs(e.tau - tau) < 3 * e.details["tau_sigma"]
     bias = res.base_coefficient("bias")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 
 from accal.closure import close_loop
 from accal.closure.demod import close_loop_demod
@@ -52,7 +53,7 @@ def test_demod_report_has_axes_notes_and_a_psd(platform, tmp_path):
     assert all(p.stat().st_size > 10_000 for p in paths)
 
 
-def test_removed_effects_say_which_member(sim):
+def test_eliminated_effects_say_which_member(sim):
     """An effect added then eliminated names its epoch/frequency/lag and its p at admission."""
     import dataclasses
 
@@ -62,12 +63,15 @@ def test_removed_effects_say_which_member(sim):
     res = close_loop(d["t"], d["y"], candidates=("bias_step",))
     gone = Effect("bias_step", None, float("nan"), float("nan"), 1e-5, epoch=1.5e8)
     line = Effect("periodic", "line", float("nan"), float("nan"), 2e-3, frequency=1e-3)
-    out = result_to_dict(dataclasses.replace(res, removed=(gone, line)))
-    assert out["removed"] == [
+    out = result_to_dict(dataclasses.replace(res, eliminated=(gone, line)))
+    # "eliminated", not "removed": these were not removed from the data (QA, 2026-11-29:
+    # a key "removed" that was always empty read as "nothing removed")
+    assert "removed" not in out
+    assert out["eliminated"] == [
         {"name": "bias_step", "channel": None, "p_accept": 1e-5, "epoch": 1.5e8},
         {"name": "periodic", "channel": "line", "p_accept": 2e-3, "frequency": 1e-3},
     ]
-    md = to_markdown(dataclasses.replace(res, removed=(gone, line)))
+    md = to_markdown(dataclasses.replace(res, eliminated=(gone, line)))
     # the Markdown names the step by its epoch, not "bias_step (None)" (QA)
     assert "eliminated (stood in for another effect): bias_step@2004-10-02T14:40:00GPS, " in md
     assert "periodic(0.001 Hz)" in md and "(None)" not in md
@@ -86,3 +90,17 @@ def test_exponential_time_constant_reported_with_its_sigma():
     out = json.loads(json.dumps(result_to_dict(res)))
     assert out["effects"][0]["details"]["tau_sigma"] == sig
     assert "± " in to_markdown(res).split("exponential_drift", 1)[1].splitlines()[0]
+
+
+def test_the_old_name_of_eliminated_still_works_and_warns(sim):
+    """``ClosureResult.removed`` was the eliminated effects: it stays, deprecated."""
+    import dataclasses
+
+    from accal.closure.select import Effect
+
+    d = sim(3, n=4320, dt=20.0)
+    res = close_loop(d["t"], d["y"], candidates=("bias_step",))
+    gone = Effect("bias_step", None, float("nan"), float("nan"), 1e-5, epoch=1.5e8)
+    res = dataclasses.replace(res, eliminated=(gone,))
+    with pytest.warns(DeprecationWarning, match="eliminated"):
+        assert res.removed == (gone,)

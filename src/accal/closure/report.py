@@ -8,8 +8,9 @@ files, and only to the paths their caller gives.  ``result_to_dict`` is the ``cl
                   "epoch", "frequency", "lag", "tau", "details"}, ...],
      "unexplained": [...same keys, name "unexplained"...],
      "notes": [{"name", "channel", "note"}, ...],   # candidates not testable here
-     "removed": [{"name", "channel", "p_accept", "epoch"/"frequency"/"lag"/"tau"}, ...],
-                                                    # added, then eliminated
+     "eliminated": [{"name", "channel", "p_accept", "epoch"/"frequency"/"lag"/"tau"}, ...],
+                        # added to the model, then eliminated (not removed from the data;
+                        # the caller's "removed_from_calibrated" lists what was)
      "rejected": [{...effect keys...; details.reason}, ...],  # significant, not added:
                         # not identifiable, not confirmed on held-out stretches, implausible
      "considered": [{"channel", "status", "reason"}, ...],  # channels offered / left out
@@ -106,7 +107,7 @@ def result_to_dict(result: ClosureResult, truth: dict[str, float] | None = None)
         "effects": [_effect_dict(e) for e in result.effects],
         "unexplained": [_effect_dict(e) for e in result.unexplained],
         "notes": list(result.notes),
-        "removed": [
+        "eliminated": [
             {
                 "name": e.name,
                 "channel": e.channel,
@@ -122,7 +123,7 @@ def result_to_dict(result: ClosureResult, truth: dict[str, float] | None = None)
                     if v is not None
                 },
             }
-            for e in result.removed
+            for e in result.eliminated
         ],
         "rejected": [_effect_dict(e) for e in result.rejected],
         "considered": list(result.considered),
@@ -256,8 +257,8 @@ def to_markdown(
     for n in result.notes:
         ch = f" ({n['channel']})" if n.get("channel") is not None else ""
         lines.append(f"- {n['name']}{ch}: {n['note']}")
-    if result.removed:
-        names = ", ".join(effect_label(e) for e in result.removed)  # a step: its epoch
+    if result.eliminated:
+        names = ", ".join(effect_label(e) for e in result.eliminated)  # a step: its epoch
         lines.append(f"- added and later eliminated (stood in for another effect): {names}")
     for e in result.rejected:
         ch = f" ({e.channel})" if e.channel is not None else ""
@@ -292,7 +293,7 @@ def to_markdown(
             f"- channels tested for couplings: {', '.join(considered) or 'none'}"
             + (f"; left out: {'; '.join(left)}" if left else "")
         )
-    if result.unexplained or result.notes or result.removed or result.rejected:
+    if result.unexplained or result.notes or result.eliminated or result.rejected:
         lines.append("")
     lines += [
         "| base | before ± σ | after ± σ | change ± σ | significant |",

@@ -6,6 +6,7 @@ its coefficient.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -157,8 +158,10 @@ class ClosureResult:
         Data channel of every sample (several channels).
     channel_names : tuple of str
         Their names (empty for one channel).
-    removed : tuple of Effect
-        Effects added and later removed by backward elimination.
+    eliminated : tuple of Effect
+        Effects added and later eliminated from the model by backward elimination
+        (they stood in for another effect); never removed from the data.  What was
+        removed from the data is :attr:`effects` with ``instrument`` set.
     rejected : tuple of Effect
         Significant candidates that were *not* added: not identifiable from the
         signal, not confirmed on held-out stretches, or physically implausible
@@ -195,10 +198,22 @@ class ClosureResult:
     notes: tuple[dict[str, Any], ...] = ()
     channel: NDArray[np.int64] | None = None
     channel_names: tuple[str, ...] = ()
-    removed: tuple[Effect, ...] = ()
+    eliminated: tuple[Effect, ...] = ()
     rejected: tuple[Effect, ...] = ()
     considered: tuple[dict[str, Any], ...] = ()
     signal_model: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def removed(self) -> tuple[Effect, ...]:
+        """Deprecated name of :attr:`eliminated` (these effects were *not* removed from
+        the data)."""
+        warnings.warn(
+            "ClosureResult.removed is deprecated: it holds the effects eliminated from the "
+            "model, not those removed from the data; use .eliminated",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return self.eliminated
 
     @property
     def found(self) -> bool:

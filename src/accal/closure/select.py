@@ -759,7 +759,7 @@ def _finish(
         notes=tuple(search.notes.values()),
         channel=search.chan_all,
         channel_names=names,
-        removed=tuple(_rejected_effect(f, units) for f in search.removed),
+        eliminated=tuple(_rejected_effect(f, units) for f in search.removed),
         rejected=tuple(_rejected_effect(f, units) for f in search.rejected),
         considered=tuple(considered),
         signal_model=_signal_model(st["template"], search.proxies),
