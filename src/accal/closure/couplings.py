@@ -42,6 +42,7 @@ from accal.closure.lagscan import (
     projected_width,
     scan_power,
 )
+from accal.closure.scaleband import band_limited
 from accal.closure.significance import test_proposal
 
 __all__ = [
@@ -744,7 +745,10 @@ def scale(ctx: Context) -> list[Proposal]:
 
     With ``raw = s·a + b + d·t`` and the reference ``a_ref ≈ a``, ``raw − a_ref =
     (s − 1)·a_ref + b + d·t``: the coefficient of ``a_ref`` is ``δs = s − 1``
-    (dimensionless).  Only with a reference, one proposal, no search.
+    (dimensionless).  Only with a reference, one proposal, no search.  The regressor
+    is the reference low-passed to where the data's and the reference's filters agree
+    (:func:`accal.closure.scaleband.band_limited`, one data channel): a Level-1B
+    filter the reference does not share made scale errors of up to 3 % out of nothing.
     """
     ref = ctx.reference
     if ref is None or ctx.has_label("scale") or ctx.is_blocked("scale", None):
@@ -752,5 +756,8 @@ def scale(ctx: Context) -> list[Proposal]:
     col = np.asarray(ref, dtype=np.float64)
     if not np.all(np.isfinite(col[ctx.use])) or np.ptp(col[ctx.use]) == 0:
         return []
+    if ctx.channel_all is None:
+        col = np.where(ctx.use, col, np.nan)
+        col = band_limited(ctx.t_all, col, ctx.grid.step)
     cols, labs, axes = ctx.split(np.nan_to_num(col)[:, None], ("scale",))
     return [Proposal("scale", None, cols, labs, 1.0, {}, axes)]
