@@ -83,3 +83,16 @@ def test_a_failed_rename_names_the_target_not_the_temporary(tmp_path):
         tmp.write_text("{}")
     assert exc.value.filename == str(tmp_path / "t.json")
     assert not [p for p in tmp_path.iterdir() if p.name.endswith(".tmp")]
+
+
+def test_a_run_that_processes_nothing_writes_no_manifest(tmp_path):
+    """A directory given without ``--recursive``: one clear error, exit 1, and only the
+    run's log (and its lock) in the new output directory (QA, 2026-11-29: an empty
+    manifest.json too)."""
+    inputs = tmp_path / "days"
+    inputs.mkdir()
+    (inputs / SAMPLE.name).write_bytes(SAMPLE.read_bytes())
+    out = tmp_path / "out"
+    code, msg = _run("grace-bias", inputs, "--out", out)
+    assert code == 1 and "use --recursive" in msg
+    assert sorted(p.name for p in out.iterdir()) == [".accal.lock", "accal.log"]

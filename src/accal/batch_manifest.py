@@ -151,8 +151,11 @@ class Manifest:
             self.entries[self.key(path)]["n_rows"] = int(n_rows)
 
     def save(self) -> None:
-        """Write the manifest atomically."""
+        """Write the manifest atomically (not at all while it is empty and no file of
+        it exists: a run that processed nothing leaves no manifest, QA 2026-11-29)."""
         self.changed = False
+        if not self.entries and not self.path.exists():
+            return
 
         with atomic_path(self.path) as tmp:
             tmp.write_text(

@@ -609,7 +609,8 @@ def write_closure_reports(
         + "; periodic terms and unexplained structure are reported only.",
         "",
     ]
-    lines += summary_table(sources)
+    lines += summary_table(sources, diagnose=diagnose)
+    lines += _failed_inputs(outcomes, sources)
     for src, axes in sources.items():
         for ax, entry in axes.items():
             md = entry.get("markdown") or f"## {src} axis {ax}\n"
@@ -632,22 +633,48 @@ def write_closure_reports(
     return jpath, mpath
 
 
-def summary_table(sources: dict[str, dict[str, Any]]) -> list[str]:
+def _failed_inputs(outcomes: Sequence[FileOutcome], sources: dict[str, Any]) -> list[str]:
+    """Lines of ``closure.md`` naming this run's failed inputs (each with its one-line
+    error) and saying which of them keep an earlier run's closure in the report (QA,
+    2026-11-29: a run with four bad files opened with "8 input(s)" and said nothing)."""
+    failed = [o for o in outcomes if not o.ok]
+    if not failed:
+        return []
+    lines = [f"**{len(failed)} input(s) failed in this run** (nothing written for them):", ""]
+    for o in failed:
+        kept = (
+            " The report below keeps an earlier run's closure of this input."
+            if o.path.name in sources
+            else ""
+        )
+        lines.append(f"- {(o.message or o.path.name).rstrip('.')}.{kept}")
+    return [*lines, ""]
+
+
+def _entry_name(e: dict[str, Any]) -> str:
+    """An effect's name for the summary, with its channel (``auxiliary(ang_accl_y)``)."""
+    ch = e.get("channel")
+    return f"{e['name']}({ch})" if ch not in (None, "") else str(e["name"])
+
+
+def summary_table(sources: dict[str, dict[str, Any]], diagnose: bool = False) -> list[str]:
     """The summary across inputs that opens ``closure.md``: per input and axis, what was
-    removed, what was significant but not removed, and how far the closure moved the
-    table's bias and drift (in their σ: do no harm)."""
+    removed (with ``diagnose``: would be removed), what was significant but not
+    removed, and how far the closure moved the table's bias and drift (in their σ: do
+    no harm)."""
+    removed_head = "would remove" if diagnose else "removed"
     lines = [
         "## Summary",
         "",
-        "| input | axis | removed | significant, not removed | unexplained | bias moved [σ] "
-        "| drift moved [σ] |",
+        f"| input | axis | {removed_head} | significant, not removed | unexplained "
+        "| bias moved [σ] | drift moved [σ] |",
         "|---|---|---|---|---|---|---|",
     ]
     n_moved = n_axes = 0
     for src, axes in sources.items():
         for ax, entry in axes.items():
             removed = entry.get("removed_from_calibrated", entry.get("would_remove")) or []
-            rejected = [e["name"] for e in entry.get("rejected") or []]
+            rejected = [_entry_name(e) for e in entry.get("rejected") or []]
             moved = {"bias": 0.0, "drift": 0.0}
             for m in (entry.get("estimates") or {}).values():
                 for q in moved:
