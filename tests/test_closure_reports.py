@@ -51,3 +51,5 @@ def test_diagnose_summary_says_would_remove(tmp_path):
                           diagnose=True)  # fmt: skip
     md = (tmp_path / "closure.md").read_text()
     assert "| input | axis | would remove |" in md and "failed" not in md
+    # nothing was refitted: no "moved 0.00σ" that reads as harmless (QA)
+    assert "| d.asc | x | – | – | – | – | – |" in md

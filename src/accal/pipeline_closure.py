@@ -682,14 +682,18 @@ def summary_table(sources: dict[str, dict[str, Any]], diagnose: bool = False) ->
                         moved[q] = max(moved[q], float(m[q]["change_sigmas"]))
             n_axes += 1
             n_moved += any(v > 1.0 for v in moved.values())
+            # accal diagnose refits nothing: no "moved" to show (a 0.00 read as "harmless")
+            shown = {q: f"{v:.2f}" if entry.get("estimates") else "–" for q, v in moved.items()}
             lines.append(
                 f"| {src} | {ax} | {', '.join(removed) or '–'} | {', '.join(rejected) or '–'} "
-                f"| {'yes' if entry.get('unexplained') else '–'} | {moved['bias']:.2f} "
-                f"| {moved['drift']:.2f} |"
+                f"| {'yes' if entry.get('unexplained') else '–'} | {shown['bias']} "
+                f"| {shown['drift']} |"
             )
     lines += [
         "",
-        f"{n_moved} of {n_axes} axes had an estimate moved by more than its σ.",
+        "accal diagnose refits nothing: the estimates a re-run would move are not shown (–)."
+        if diagnose
+        else f"{n_moved} of {n_axes} axes had an estimate moved by more than its σ.",
         "",
     ]
     return lines
