@@ -1,11 +1,11 @@
-"""``closure.md`` across the inputs of a batch (accal.pipeline_closure.write_closure_reports)."""
+"""``closure.md`` across the inputs of a batch (accal.closure_reports.write_closure_reports)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
+from accal.closure_reports import write_closure_reports
 from accal.gracejob.outcome import FileOutcome
-from accal.pipeline_closure import write_closure_reports
 
 
 def _entry(removed: list[str], rejected: list[dict]) -> dict:

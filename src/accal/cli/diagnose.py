@@ -113,7 +113,8 @@ def _diagnose_grace(
     directory: Path, out: Path, aux: Path | None, alpha: float, quiet: bool, plots: bool
 ) -> None:
     """An accal grace-bias output directory; exits with 1 if an input failed."""
-    from accal.pipeline_closure import diagnose_dir, write_closure_reports
+    from accal.closure_reports import write_closure_reports
+    from accal.pipeline_closure import diagnose_dir
 
     outcomes = diagnose_dir(
         directory, out, aux=aux, alpha=alpha, plots=plots, progress=progress(quiet, "diagnose")

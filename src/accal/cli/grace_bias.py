@@ -65,9 +65,9 @@ def grace_bias(
     PNG plots with --plots).
     """
     from accal.batch import DEFAULT_INCLUDE, Interrupted, LockedError, default_workers, discover
+    from accal.closure_reports import write_closure_reports
     from accal.errors import AccalError
     from accal.pipeline import KEPT_EARLIER, GraceBiasOptions, run
-    from accal.pipeline_closure import write_closure_reports
 
     colmap = parse_column_map(columns)
     try:
