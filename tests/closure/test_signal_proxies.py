@@ -139,7 +139,11 @@ def closure_x(t, data, proxies: bool):
     ("seed", "walk", "method"),
     [
         (0, 1e-2, "spectrum-weighted jump"),
-        (1, 1e-3, "least squares"),
+        # was found by the least-squares scan while the onset pulled the orbit period
+        # (2026-11-29: the period is now searched with the onset's level shift out, and
+        # the jump scan sees it); the least-squares path's check of the other axes is
+        # test_a_storm_onset_is_not_removed_as_a_step's
+        (1, 1e-3, "spectrum-weighted jump"),
         (5, 3e-4, "spectrum-weighted jump"),
     ],
 )
