@@ -19,7 +19,17 @@ from accal.gracejob.outcome import FileOutcome
 from accal.gracejob.outputs import output_stem, write_json
 from accal.io.writers import atomic_path
 
-__all__ = ["summary_table", "write_closure_reports"]
+__all__ = ["read_sources", "summary_table", "write_closure_reports"]
+
+
+def read_sources(jpath: Path) -> dict[str, Any]:
+    """The ``sources`` of an earlier ``closure.json`` (empty when there is none or it
+    cannot be read)."""
+    try:
+        old = json.loads(Path(jpath).read_text())
+    except (OSError, ValueError):
+        return {}
+    return old.get("sources", {}) if isinstance(old, dict) else {}
 
 
 def write_closure_reports(
@@ -41,11 +51,7 @@ def write_closure_reports(
     """
     out_dir = Path(out_dir)
     jpath = out_dir / "closure.json"
-    try:
-        old = json.loads(jpath.read_text())
-        sources = old.get("sources", {}) if isinstance(old, dict) else {}
-    except (OSError, ValueError):
-        sources = {}
+    sources = read_sources(jpath)
     for o in outcomes:
         if o.ok and o.closure:
             sources[o.path.name] = o.closure

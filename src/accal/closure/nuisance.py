@@ -84,10 +84,10 @@ def estimate_period(
     found on the residual of the first estimate's harmonics), when one explains at
     least :data:`SHIFT_SHARE` of that residual and is sharp (a storm's rise over an
     hour explains as much, but is not): drawn days 0.25-1.2 s → ≤ 0.005 s off, the QA
-    day 0.4 → 0.02 s; without a shift the first search stands.  (First differences, which make a step
-    one spike, were tried: they weight the ``h``-th harmonic by ``h²``, and on the real
-    Swarm storm day the storm's own variation at the 10th-20th harmonics moved the
-    estimate from 5606 s to 5553 s.)
+    day 0.4 → 0.02 s; without a shift the first search stands.  (First differences,
+    which make a step one spike, were tried: they weight the ``h``-th harmonic by
+    ``h²``, and on the real Swarm storm day the storm's own variation at the 10th-20th
+    harmonics moved the estimate from 5606 s to 5553 s.)
     """
     t = np.asarray(t, dtype=np.float64)
     tau = t - t[0]
@@ -123,7 +123,7 @@ def _without_shift(
     of squares ``(ē_after − ē_before)² k (n − k) / n`` (cumulative sums); when that is
     at least :data:`SHIFT_SHARE` of ``Σ e²`` and the means of ``e`` over
     :data:`SHIFT_LOCAL` s either side of ``k`` differ by half the split's size or
-    more (on the QA days 2.4-2.6 times it for real steps, 0.06-0.14 for the drag's
+    more (on the QA days 2.1-3.2 times it for real steps, 0.03-0.14 for the drag's
     slow changes), the step at ``k`` is fitted together
     with the harmonics and the line (which take part of it in) and taken out, and the
     line fitted again.

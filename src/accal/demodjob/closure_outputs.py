@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from accal import __version__
+from accal.closure_reports import read_sources
 from accal.demodjob.outputs import json_text
 from accal.io.writers import atomic_path
 
@@ -122,11 +122,7 @@ def write_demod_closure(
     entry and plots; with no source left the two files are removed.
     """
     jpath, mpath = out_dir / "closure.json", out_dir / "closure.md"
-    try:
-        old = json.loads(jpath.read_text())
-        sources = old.get("sources", {}) if isinstance(old, dict) else {}
-    except (OSError, ValueError):
-        sources = {}
+    sources = read_sources(jpath)
     if entry is None:
         if sources.pop(source, None) is None:
             return jpath, mpath
