@@ -443,7 +443,7 @@ def run_grace_api(case: Case) -> list[dict[str, Any]]:
     ``grace-bias --close-loop --aux temperatures`` does; the injected axis only when
     there is one (the other axes are clean days, counted there)."""
     from accal.closure import close_loop
-    from accal.closure.nuisance import estimate_period
+    from accal.closure.period import estimate_period
 
     day, inj, ref = indep_day(case)
     t, raw = day.time, day.lin_accl

@@ -26,7 +26,7 @@ from accal import __version__
 from accal.batch import Manifest, failure_message, write_error_message
 from accal.calibration import parse_scale
 from accal.closure import DEFAULT_CANDIDATES, close_loop, effect_label, kind_of
-from accal.closure.nuisance import estimate_period
+from accal.closure.period import estimate_period
 from accal.closure.report import plot_closure, to_markdown
 from accal.crn import is_level1b, smooth_channel
 from accal.errors import AccalError, ValidationError

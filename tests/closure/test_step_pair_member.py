@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from accal.closure import close_loop
-from accal.closure.nuisance import estimate_period
+from accal.closure.period import estimate_period
 
 N = 86400
 T0 = 740059202.0  # GPS seconds of 2023-06-15

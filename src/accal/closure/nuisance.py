@@ -23,8 +23,8 @@ search uses (Frisch-Waugh-Lovell: testing a candidate ``z`` with the template in
 the model is testing ``M z`` against ``M y``), never formed as a dense design.
 
 The orbit period ``P`` must be known to a few 1e-5 (15 orbits a day, a phase slip
-of a few samples): :func:`estimate_period` refines the nominal value on the data
-(the summed power of the first harmonics, maximised within ±3 %).
+of a few samples): :func:`accal.closure.period.estimate_period` refines the nominal
+value on the data.
 """
 
 from __future__ import annotations
@@ -33,14 +33,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.sparse import csr_matrix
 
-__all__ = ["OrbitTemplate", "estimate_period", "template_order"]
+__all__ = ["OrbitTemplate", "template_order"]
 
-#: Harmonics whose summed power locates the orbit frequency (grid search).
-PERIOD_HARMONICS = 8
-#: Harmonics of the final refinement.
-PERIOD_HARMONICS_FINE = 20
-#: Relative half-width of the orbit-period search.
-PERIOD_BAND = 0.03
 #: A bin whose profile jumps by more than twice this many residual σ to a neighbouring
 #: bin is not resolved by one-sample bins (:meth:`OrbitTemplate.unresolved`).
 UNRESOLVED_SIGMAS = 3.0
@@ -56,154 +50,6 @@ def template_order(n_orbits: float) -> int:
     At least ~4 orbits per parameter of a bin: 0 below 4 orbits, 1 below 8, else 2.
     """
     return 0 if n_orbits < 4 else (1 if n_orbits < 8 else 2)
-
-
-def estimate_period(
-    t: NDArray[np.float64], r: NDArray[np.float64], nominal: float, band: float = PERIOD_BAND
-) -> float:
-    """The orbit period [s] near ``nominal`` that best explains the residual ``r``.
-
-    ``r`` may hold several columns (the axes of one record), each scaled to unit
-    variance: the axes with sharp eclipse edges then fix the period for all.
-
-    Maximises ``Σ_h |Σ_i w_i r_i e^{−2πi h f t_i}|²`` over the harmonics ``h`` of ``f``
-    within ``±band`` of ``1/nominal``, with a Hann window ``w`` over the record:
-    without it the sidelobes of the other harmonics and of the negative-frequency
-    images bias the peak (a noise-free eclipse signal over 15.36 orbits: 0.56 s off
-    with 8 harmonics; windowed, 2 ms).  A grid of a quarter of the resolution of
-    the :data:`PERIOD_HARMONICS`-th harmonic, then a bounded search with up to
-    :data:`PERIOD_HARMONICS_FINE` harmonics.  Falls back to ``nominal`` when the
-    residual has no power at the orbit frequency.
-
-    A level shift of the record (a bias step) has a ``1/f²`` spectrum that tilts the
-    harmonics' band: a 2e-8 m/s² step on one axis moved the estimate by 0.25-1.2 s on
-    drawn days (QA, 2026-11-29: 0.4 s on a GRACE-A day, whose eclipse edges the
-    template then missed by up to 3 s at the record's ends, and a −3e-10 m/s² "step"
-    49 s before an edge was removed).  So the search is made twice: once on ``r``,
-    then with each axis' dominant level shift taken out (:func:`_without_shift`,
-    found on the residual of the first estimate's harmonics), when one explains at
-    least :data:`SHIFT_SHARE` of that residual and is sharp (a storm's rise over an
-    hour explains as much, but is not): drawn days 0.25-1.2 s → ≤ 0.005 s off, the QA
-    day 0.4 → 0.02 s; without a shift the first search stands.  (First differences,
-    which make a step one spike, were tried: they weight the ``h``-th harmonic by
-    ``h²``, and on the real Swarm storm day the storm's own variation at the 10th-20th
-    harmonics moved the estimate from 5606 s to 5553 s.)
-    """
-    t = np.asarray(t, dtype=np.float64)
-    tau = t - t[0]
-    span = float(tau[-1]) if tau.size > 1 else 0.0
-    if span / nominal < 2.0:
-        return float(nominal)
-    r = np.asarray(r, dtype=np.float64)
-    r = r[:, None] if r.ndim == 1 else r
-    first = _period_search(t, r, nominal, band)
-    shifted = _without_shift(tau, r, first)
-    if shifted is None:
-        return first
-    return _period_search(t, shifted, nominal, band)
-
-
-#: Least share of an axis' residual (after the orbit harmonics) that its largest level
-#: shift must explain to be taken out before the period is estimated again.
-SHIFT_SHARE = 0.2
-#: Orbit harmonics fitted before the level shift is looked for.
-SHIFT_HARMONICS = 10
-#: Half-width [s] of the windows either side of a level shift whose means must differ
-#: by half its size (it is sharp, not a slow change of the signal).
-SHIFT_LOCAL = 300.0
-
-
-def _without_shift(
-    tau: NDArray[np.float64], r: NDArray[np.float64], period: float
-) -> NDArray[np.float64] | None:
-    """``r`` with each column's dominant level shift out (None when no column has one).
-
-    Per column: a line and :data:`SHIFT_HARMONICS` harmonics of ``period`` fitted by
-    least squares; in their residual ``e`` the split ``k`` maximising the step's sum
-    of squares ``(ē_after − ē_before)² k (n − k) / n`` (cumulative sums); when that is
-    at least :data:`SHIFT_SHARE` of ``Σ e²`` and the means of ``e`` over
-    :data:`SHIFT_LOCAL` s either side of ``k`` differ by half the split's size or
-    more (on the QA days 2.1-3.2 times it for real steps, 0.03-0.14 for the drag's
-    slow changes), the step at ``k`` is fitted together
-    with the harmonics and the line (which take part of it in) and taken out, and the
-    line fitted again.
-    """
-    n = tau.size
-    ph = 2.0 * np.pi * tau / period
-    x = np.column_stack(
-        [np.ones(n), tau / max(float(tau[-1]), 1e-300)]
-        + [f(h * ph) for h in range(1, SHIFT_HARMONICS + 1) for f in (np.cos, np.sin)]
-    )
-    coef = np.linalg.lstsq(x, r, rcond=None)[0]
-    e = r - x @ coef
-    out = r.copy()
-    changed = False
-    k = np.arange(1, n)
-    for j in range(r.shape[1]):
-        c = np.cumsum(e[:, j])
-        before = c[:-1] / k
-        after = (c[-1] - c[:-1]) / (n - k)
-        ss = (after - before) ** 2 * k * (n - k) / n
-        i = int(np.argmax(ss))
-        if not ss[i] >= SHIFT_SHARE * float(np.sum(e[:, j] ** 2)):
-            continue
-        # sharp: the level just after the split differs from the level just before by
-        # at least half the split's size (a slow change of the signal does not)
-        w = max(int(np.searchsorted(tau, tau[i] + SHIFT_LOCAL)) - i, 2)
-        lo, hi = max(i + 1 - w, 0), min(i + 1 + w, n)
-        local = float(np.mean(e[i + 1 : hi, j]) - np.mean(e[lo : i + 1, j]))
-        if not abs(local) >= 0.5 * abs(after[i] - before[i]):
-            continue
-        # its size fitted with the harmonics and the line (they take part of it in)
-        step = (np.arange(n) > i).astype(np.float64)
-        size = float(np.linalg.lstsq(np.column_stack([x, step]), r[:, j], rcond=None)[0][-1])
-        y = r[:, j] - size * step
-        out[:, j] = y - x[:, :2] @ np.linalg.lstsq(x[:, :2], y, rcond=None)[0]
-        changed = True
-    return out if changed else None
-
-
-def _period_search(
-    t: NDArray[np.float64], r: NDArray[np.float64], nominal: float, band: float
-) -> float:
-    """The windowed harmonic search of :func:`estimate_period` on the columns ``r``."""
-    from scipy.optimize import minimize_scalar
-
-    tau = t - t[0]
-    span = float(tau[-1])
-    f0 = 1.0 / nominal
-    r = r - np.mean(r, axis=0)
-    r = r / np.maximum(np.std(r, axis=0), 1e-300)  # several axes count alike
-    r = r * (np.sin(np.pi * tau / span) ** 2)[:, None]
-    if not np.any(r):
-        return float(nominal)
-    step_t = float(np.median(np.diff(t)))
-    h_top = max(1, int(0.5 / (step_t * f0 * (1 + band))))
-
-    def power(f: float, hmax: int) -> float:
-        ph = 2.0 * np.pi * f * tau
-        c1, s1 = np.cos(ph), np.sin(ph)
-        c, s = c1.copy(), s1.copy()
-        acc = 0.0
-        for _ in range(hmax):  # cos/sin of h·φ by angle addition: real, contiguous
-            acc += float(np.sum((c @ r) ** 2 + (s @ r) ** 2))
-            c, s = c * c1 - s * s1, s * c1 + c * s1
-        return acc
-
-    h1 = min(PERIOD_HARMONICS, h_top)
-    df = 0.25 / (h1 * span)
-    grid = np.arange(f0 * (1 - band), f0 * (1 + band) + df, df)
-    pw = np.array([power(f, h1) for f in grid])
-    k = int(np.argmax(pw))
-    h2 = min(PERIOD_HARMONICS_FINE, h_top)
-    res = minimize_scalar(
-        lambda f: -power(f, h2),
-        bounds=(grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)]),
-        method="bounded",
-        options={"xatol": 1e-3 * df},
-    )
-    f = float(res.x) if res.success else float(grid[k])
-    return 1.0 / f
 
 
 def _gram_orthonormal(x: NDArray[np.float64], tol: float = 1e-12) -> NDArray[np.float64]:

@@ -60,12 +60,9 @@ from accal.closure.jumpfit import add_jump_covariance, jump_columns, jump_effect
 from accal.closure.jumps import jumps_first
 from accal.closure.kinds import EFFECT_NAMES, kind_of, unit_of
 from accal.closure.lagprofile import add_lag_uncertainties
-from accal.closure.nuisance import (
-    OrbitTemplate,
-    estimate_period,
-    template_order,
-)
+from accal.closure.nuisance import OrbitTemplate, template_order
 from accal.closure.outliers import OUTLIER_SIGMAS, edge_runs, outliers, spikes
+from accal.closure.period import estimate_period
 from accal.closure.residual import characterise, make_grid, projection_bias
 from accal.closure.results import BaseCoefficient, ClosureResult, Effect
 from accal.closure.search import Found, Search, run, swap_smooth
