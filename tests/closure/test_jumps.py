@@ -220,3 +220,24 @@ def test_an_effect_beside_a_jump_has_its_own_sigma():
     plain = close_loop(t, y - 1e-8 * (t >= 18_000.3), **kw)
     (ref,) = [e for e in plain.effects if e.name == "auxiliary"]
     assert 0.5 < cpl.sigma / ref.sigma < 2.0, (cpl.sigma, ref.sigma)
+
+
+def test_the_other_edges_are_judged_without_the_jumps_transition():
+    """What a sharp step leaves of a low-passed one lies within its transition; the
+    checks for a second edge see the line between the means of 10 s either side of it
+    instead (a QA day's real 3e-9 m/s² step left a −1.55e-9 m/s² lump there, and a
+    red kernel 83 s away took it for a box's other edge), and nothing else changes."""
+    t = np.arange(1000.0)
+    rng = np.random.default_rng(3)
+    r = 1e-10 * rng.standard_normal(t.size)
+    r[500:515] -= 1.5e-9
+    out = jumps._bridged(t, r, 500.0)
+    tr = jumps.TRANSITION
+    inside = np.abs(t - 500.0) <= tr
+    np.testing.assert_array_equal(out[~inside], r[~inside])
+    r0 = r[(t >= 500 - tr - 10) & (t < 500 - tr)].mean()
+    r1 = r[(t > 500 + tr) & (t <= 500 + tr + 10)].mean()
+    line = r0 + (r1 - r0) * (t[inside] - (500 - tr - 5)) / (2 * tr + 10)
+    np.testing.assert_allclose(out[inside], line, rtol=0, atol=1e-24)
+    # a side without samples: unchanged
+    np.testing.assert_array_equal(jumps._bridged(t[:520], r[:520], 500.0), r[:520])
