@@ -514,15 +514,20 @@ def _epoch_interval(
     seven 10 s boxcars, ±22 s for accal's CRN stand-in, ±40 s for a sharp step).
     ``epoch_ambiguous``: other such epochs away from that set.
 
-    The size is the kernel's at the midpoint (at ``e`` only when the midpoint is not a
-    used sample within ±2 transitions): ``e`` is the epoch of largest ``|z|`` among
-    kernels that all hold the ramp, and its size carries the largest of their noises
-    (signed z of jump-found steps +0.39 at 1e-8 m/s² and +0.64 at 3e-9 on
-    ``tests/indep`` days; +0.10 and +0.41 at the midpoint).  The midpoint's kernel
-    was used only when the midpoint lay in the set; in red noise a kernel 13 s away
-    uses other samples, the midpoint fell just outside it, and the scan's size was
-    kept (QA days with AR(1) and random-walk noise: mean signed z +0.82 over 31 steps,
-    +0.35 with the midpoint's always, ``docs/closure.md``).
+    The size is the kernel's at the midpoint when it is within
+    :data:`MIDPOINT_AGREE` σ or :data:`MIDPOINT_SHARE` of the size at ``e``: ``e`` is
+    the epoch of largest ``|z|`` among kernels that all hold the ramp, and its size
+    carries the largest of their noises (signed z of jump-found steps +0.39 at 1e-8
+    m/s² and +0.64 at 3e-9 on ``tests/indep`` days; +0.10 and +0.41 at the midpoint).
+    Kernels that hold the ramp differ by their noise and, for a step of hundreds of σ,
+    by ~1 % of it (the ramp's shape; ``tests.indep`` day 7411 D z, 1e-8 m/s²:
+    9.979e-9 ± 1.6e-11 at the midpoint, 1.0087e-8 at ``e``); a midpoint whose kernel
+    is further off does not hold the ramp (an along-track day whose drag placed the
+    sharp split away from it: 1.3e-10 for a 1e-8 m/s² step).  It used to need to be
+    within 1σ (the set above): in red noise a kernel 13 s away uses other samples, the
+    midpoint fell just outside, and the scan's size was kept (QA days with AR(1) and
+    random-walk noise: mean signed z +0.82 over 31 steps, +0.35 with the midpoint's,
+    ``docs/closure.md``).
     """
     w = max(1, int(round(TRANSITION / grid.step)))
     near = np.arange(e - 2 * w, e + 2 * w + 1)
@@ -546,9 +551,18 @@ def _epoch_interval(
     }
     m = int(grid.idx[min(int(np.searchsorted(t, float(epoch))), t.size - 1)])
     k = int(np.searchsorted(near, m))
-    if k < near.size and near[k] == m:
+    agree = max(MIDPOINT_AGREE * sd[at], MIDPOINT_SHARE * abs(size[at]))
+    if k < near.size and near[k] == m and abs(size[k] - size[at]) <= agree:
         return info, float(size[k]), float(sd[k])
     return info, float(size[at]), float(sd[at])
+
+
+#: Largest difference, in σ of the scan's size, between the sizes at a jump's midpoint
+#: and at the scan's epoch for the midpoint's to be reported (:func:`_epoch_interval`).
+MIDPOINT_AGREE = 3.0
+#: ... or as a share of that size (a kernel that misses part of the ramp sees a share of
+#: the step).
+MIDPOINT_SHARE = 0.25
 
 
 def _midpoint(grid: Grid, t: NDArray[np.float64], r: NDArray[np.float64], e: int,
