@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from accal.closure import close_loop, jumps
+from accal.closure import close_loop, jumpchecks, jumps
 
 P = 5600.0  # orbit period [s]
 
@@ -187,7 +187,7 @@ def test_unrelated_steps_of_one_size_are_all_removed(seed):
     """Three steps of one sign and size at unrelated epochs are three bias steps, and
     nothing else: on seed 14 the scan had also removed "jumps" of 2.8e-9 and 2.2e-9
     m/s² one and two orbits before the 16,500 s step, its images in the orbit template
-    (jumps._image), and that step came out 3.7σ large."""
+    (jumpchecks.image), and that step came out 3.7σ large."""
     truth = [(7_000.3, 3e-9), (16_500.7, 3e-9), (27_100.2, 3e-9)]
     t, y = red_day(seed, step=truth)
     res = _run(t, y)
@@ -231,7 +231,7 @@ def test_the_other_edges_are_judged_without_the_jumps_transition():
     rng = np.random.default_rng(3)
     r = 1e-10 * rng.standard_normal(t.size)
     r[500:515] -= 1.5e-9
-    out = jumps._bridged(t, r, 500.0)
+    out = jumpchecks.bridged(t, r, 500.0)
     tr = jumps.TRANSITION
     inside = np.abs(t - 500.0) <= tr
     np.testing.assert_array_equal(out[~inside], r[~inside])
@@ -240,4 +240,4 @@ def test_the_other_edges_are_judged_without_the_jumps_transition():
     line = r0 + (r1 - r0) * (t[inside] - (500 - tr - 5)) / (2 * tr + 10)
     np.testing.assert_allclose(out[inside], line, rtol=0, atol=1e-24)
     # a side without samples: unchanged
-    np.testing.assert_array_equal(jumps._bridged(t[:520], r[:520], 500.0), r[:520])
+    np.testing.assert_array_equal(jumpchecks.bridged(t[:520], r[:520], 500.0), r[:520])

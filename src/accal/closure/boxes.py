@@ -12,7 +12,7 @@ removes the transient from the calibrated series.  QA (2026-11-29): a 10-minute,
 :func:`box_reasons`: among the bias steps of the final model, two of opposite signs
 within :data:`BOX_MAX` s whose smaller size is at least :data:`BOX_SHARE` of the
 larger are a box; both are reported, not removed (the same rule as the edge scan's
-neighbouring edge, :data:`accal.closure.jumps.RECUR_SHARE`).  Steps with one size per
+neighbouring edge, :data:`accal.closure.jumpchecks.RECUR_SHARE`).  Steps with one size per
 data channel (a demodulation's two axes) are left to their own checks.
 """
 

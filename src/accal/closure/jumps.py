@@ -54,9 +54,11 @@ twice the transition left out (:func:`_wide`), and the jump is kept only when bo
 agree (the difference within :data:`AGREE_Z` of its own σ, computed exactly), the
 second is itself significant at :data:`WIDE_Z` σ, and the first carries at least
 :data:`EDGE_SHARE` of it: a spike near the first transition is inside the second.
-A box is two steps: another edge of half the size nearby (:func:`_neighbour`), or the
-same edge one or two orbits away (:func:`_recurrence`, an edge of the orbit signal),
-rejects the jump.  A box shorter than the transition is not seen at all.
+A box is two steps: another edge of half the size nearby, or the same edge one or two
+orbits away (an edge of the orbit signal), rejects the jump; so does an edge that is
+the orbit template's image of a larger one (:mod:`accal.closure.jumpchecks`).  A box
+shorter than the transition is not seen at all.  When no edge is significant, the
+strongest is tested again with its own step out of the PSD (:func:`_with_step_out`).
 
 When the residual is white enough that the kernel is long (half-width over
 :data:`HALF_MAX` s: the least-squares scan is then near optimal already) no scan is
@@ -86,6 +88,13 @@ from accal.closure.edgekernel import (
     kernels_at,
     step_kernel,
     top_epochs,
+)
+from accal.closure.jumpchecks import (
+    bridged,
+    image,
+    image_of_rejected,
+    neighbour,
+    recurrence,
 )
 from accal.closure.noise_psd import Grid, two_sided_weights
 from accal.closure.wald import quad_form
@@ -246,7 +255,7 @@ def scan_jumps(
         Most jumps accepted.
     period : float, optional
         Orbit period [s]: a jump that recurs at the same orbital phase one or two
-        orbits away is the signal's (:func:`_recurrence`).
+        orbits away is the signal's (:func:`accal.closure.jumpchecks.recurrence`).
     proxies : ndarray, shape (n, q), optional
         Series that carry the signal and not this axis' instrument (the other axes) on
         the used samples, named ``proxy_names``: a jump seen on them is the signal's
@@ -317,7 +326,7 @@ def scan_jumps(
                 m, jumps, period, others, proxy_names,
             )  # fmt: skip
             if why is None:
-                why = _image_of_rejected(grid, t, basis, k0, psd, pos, e, float(size[i]), rejected)
+                why = image_of_rejected(grid, t, basis, k0, psd, pos, e, float(size[i]), rejected)
             if why is not None:
                 rejected.append({**common, "reason": why})
                 continue
@@ -401,15 +410,15 @@ def _examine(grid, t, r, basis, kernels, pos, used, e, size, sd, m, jumps, perio
     # orbit template spreads it to the same phase in other orbits)
     step_col = (t >= common["epoch"]).astype(np.float64)
     r_given = r - size * (step_col - basis.project(step_col))
-    r_checked = _bridged(t, r_given, common["epoch"])
+    r_checked = bridged(t, r_given, common["epoch"])
     s_given = edge_scores(grid, r_checked, kf)
     # any used sample may hold the other edge, also beside a left-out stretch
     args = (grid, t, r_checked, basis, k0, psd, pos, s_given, used, e, size)
-    why = _image(jumps, common["epoch"], size, period)
+    why = image(jumps, common["epoch"], size, period)
     if why is None:
-        why = _recurrence(*args, period)
+        why = recurrence(*args, period)
     if why is None:
-        why = _neighbour(*args, m)
+        why = neighbour(*args, m)
     if why is None:
         why = _not_persistent(size, wide, m * grid.step)
     if why is None and others is not None:
@@ -417,42 +426,12 @@ def _examine(grid, t, r, basis, kernels, pos, used, e, size, sd, m, jumps, perio
     return common, wide, r_given, why
 
 
-#: Width [s] of the stretches either side of a jump's transition whose means bridge it
-#: (:func:`_bridged`).
-BRIDGE = 10.0
-
-
-def _bridged(t: NDArray[np.float64], r: NDArray[np.float64], epoch: float) -> NDArray[np.float64]:
-    """``r`` with the samples within ±:data:`TRANSITION` s of ``epoch`` replaced by the
-    line between the means of the :data:`BRIDGE` s either side (unchanged when a side
-    has none).
-
-    A jump is taken out as a sharp step; in low-passed data it is a ramp, and what is
-    left of it within its transition (left out of its own test) is a lump of up to half
-    its size.  The kernels of a red residual respond to that lump from beyond the
-    transition: on a QA day (boxcar-filtered data, AR(1) and random-walk noise) a real
-    3e-9 m/s² step left −1.55e-9 m/s² right after its midpoint, and an "edge" of
-    −1.63e-9 m/s² (7σ) 83 s away made it a box; on the same day without the step
-    nothing is there.  The other edges are judged on the residual without that lump.
-    """
-    before = (t >= epoch - TRANSITION - BRIDGE) & (t < epoch - TRANSITION)
-    after = (t > epoch + TRANSITION) & (t <= epoch + TRANSITION + BRIDGE)
-    inside = np.abs(t - epoch) <= TRANSITION
-    if not before.any() or not after.any() or not inside.any():
-        return r
-    t0, t1 = epoch - TRANSITION - 0.5 * BRIDGE, epoch + TRANSITION + 0.5 * BRIDGE
-    r0, r1 = float(np.mean(r[before])), float(np.mean(r[after]))
-    out = r.copy()
-    out[inside] = r0 + (r1 - r0) * (t[inside] - t0) / (t1 - t0)
-    return out
-
-
 def _off_comb(grid, t, r, basis, leverage, jumps, at, ok):
     """The jumps off any comb of recurring ones (:func:`accal.closure.comb.find_comb`):
     ``(jumps, at, r, rejected)``, the residual with the comb's jumps back in and those
     as rejected.  A tooth is measured at its best-ranked scannable epoch within
     ±:data:`accal.closure.comb.WINDOW` s, by the kernel on the residual itself (as
-    :func:`_recurrence` does one orbit away)."""
+    :func:`accal.closure.jumpchecks.recurrence` does one orbit away)."""
     found = find_comb(
         np.array([j.epoch for j in jumps]),
         np.array([j.size for j in jumps]),
@@ -647,156 +626,6 @@ def _wide(grid, r, basis, psd, e, m, k2, g_sharp) -> dict[str, float] | None:
     sd_w = float(np.sqrt(max(cov[0, 0], 0.0)))
     sd_d = float(np.sqrt(max(cov[1, 1], 0.0)))
     return {"size": size_w, "sigma": sd_w, "diff_z": diff / sd_d if sd_d > 0 else 0.0}
-
-
-#: Orbits either side where a jump is looked for again, and the search window there [s].
-RECUR_ORBITS = (-2, -1, 1, 2)
-RECUR_WINDOW = 30.0
-#: Half-width [s] of the window at the same orbital phase in which a jump no larger than
-#: an accepted one is its image in the orbit template (:func:`_image`): three times
-#: the transition left out.
-IMAGE_WINDOW = 3.0 * TRANSITION
-#: A jump there of this share of the size (same sign) at :data:`RECUR_Z` σ is a recurrence.
-RECUR_SHARE = 0.5
-RECUR_Z = 4.0
-
-
-def _image(jumps: list[Jump], epoch: float, size: float, period: float | None) -> str | None:
-    """Why a jump at ``epoch`` is an image of an accepted one (None when it is not).
-
-    A jump of the same sign, no larger, within ±:data:`IMAGE_WINDOW` s of the same
-    orbital phase one or two orbits from an accepted jump: the orbit template fitted with that step in
-    the data holds part of its edge at that phase in every orbit, and the scan, which
-    takes the accepted jumps out one at a time, can see it there (a red test day with
-    steps of 3e-9 m/s² at 7000, 16500 and 27100 s: "jumps" of 2.8e-9 and 2.2e-9 at
-    10898 and 5298 s, one and two orbits before the largest, were removed as well,
-    ``tests/closure/test_jumps.py``).  :func:`_recurrence` looks for the other edge in
-    the residual, from which an accepted jump is gone.  The image is a weak edge, and
-    the scan places it less well than a step: with numpy 2.4.6 / scipy 1.17.1 the same
-    day's image one orbit before the 16,500 s step came out at 10,819 s (1.68e-9 m/s²,
-    its epoch interval 10,819-10,865 s), 80 s from that orbital phase.
-    """
-    if not period or period <= 0:
-        return None
-    for j in jumps:
-        if np.sign(j.size) != np.sign(size):
-            continue
-        if abs(size) > abs(j.size):
-            continue
-        for k in RECUR_ORBITS:
-            if abs(epoch - (j.epoch + k * period)) <= IMAGE_WINDOW:
-                return (
-                    f"the jump at {j.epoch:.0f} s ({j.size:.3g} m/s²) is {k:+d} orbit(s) "
-                    "away at the same orbital phase: its image in the orbit signal's "
-                    "model, or an edge of that signal, not a second bias step"
-                )
-    return None
-
-
-def _image_of_rejected(grid, t, basis, k0, psd, pos, e, size, rejected) -> str | None:
-    """Why the jump at grid epoch ``e`` is the image of a larger edge left in the data
-    (None when it is not).
-
-    A significant edge that was not taken out (``rejected``: not a lone or persistent
-    step) stays in the residual, and the orbit template fitted with it in holds part
-    of it at the same phase in other orbits: the kernel at ``e``, with the template
-    projected out of it, responds to that edge ``j`` by ``s_j`` times its response to
-    a unit step at ``e_j`` (exact, the edge's own column through the same weights).
-    When that response carries :data:`RECUR_SHARE` of the jump's size or more, with
-    its sign, the jump is the other edge's image.  QA (2026-11-29, boxcar-filtered
-    data, AR(1) and random-walk noise): a real 3.2e-9 m/s² step beside an eclipse
-    edge failed the persistence test, and a −9.8e-10 m/s² "step" three orbits later,
-    at its phase, was removed; on the same day without the step there is nothing.
-    """
-    for j in rejected:
-        sj = float(j.get("size", 0.0))
-        if not np.isfinite(sj) or abs(sj) <= abs(size):
-            continue
-        col = sj * (t >= float(j["epoch"])).astype(np.float64)
-        _, img, _ = edge_sizes(grid, col, basis, k0, psd, np.array([e], dtype=np.int64), pos)
-        if img[0] * size > 0 and abs(img[0]) >= RECUR_SHARE * abs(size):
-            return (
-                f"the edge of {sj:.3g} m/s² at {float(j['epoch']):.0f} s, not taken out, "
-                f"puts {img[0]:.3g} m/s² here through the orbit template: its image, not "
-                "a bias step"
-            )
-    return None
-
-
-def _neighbour(grid, t, r, basis, k0, psd, pos, score, ok, e, size, m) -> str | None:
-    """Why the jump at grid epoch ``e`` is not a lone edge (None when it is).
-
-    A bias step is one level change.  A box or a burst of the residual longer than the
-    transition left out comes with a second one nearby (boxes an eclipse penumbra
-    leaves where the orbit template does not follow it: `tests.indep` day seed 31,
-    cross-track, 1.0e-9 m/s² edges 40 s apart).  Within ±``m`` samples (the neighbour
-    window), beyond twice the transition (kernels there see the same change), there
-    must be no other (the :data:`NEIGHBOURS` best ranked, at least two samples apart)
-    of :data:`RECUR_SHARE` of its size or more at :data:`RECUR_Z` σ.
-    """
-    a, b = max(e - m, 0), min(e + m + 1, grid.size)
-    s = np.where(ok[a:b], score[a:b], -1.0)
-    # kernels whose left-out transition is near this one see the same step
-    near = 2 * max(1, int(round(TRANSITION / grid.step))) + 2
-    s[max(e - near - a, 0) : e + near + 1 - a] = -1.0
-    picks = a + top_epochs(s, NEIGHBOURS, 2)
-    if picks.size == 0:
-        return None
-    z, sz, _ = edge_sizes(grid, r, basis, k0, psd, picks, pos, project=False)
-    for zk, sk, ek in zip(z, sz, picks, strict=True):
-        if abs(sk) >= RECUR_SHARE * abs(size) and abs(zk) >= RECUR_Z:
-            return (
-                f"another edge of {sk:.3g} m/s² ({abs(zk):.0f}σ) {(ek - e) * grid.step:+.0f} s "
-                "away: a box, burst or ramp of the residual, not a bias step"
-            )
-    return None
-
-
-#: Edges looked at around a jump by :func:`_neighbour` (4 missed the other edge of a 52 s
-#: box of ±1.6e-10 m/s², cross-track, C/D day seed 2003).
-NEIGHBOURS = 16
-
-
-def _recurrence(grid, t, r, basis, k0, psd, pos, score, ok, e, size, period) -> str | None:
-    """Why the jump at grid epoch ``e`` is the signal's (None when it is not).
-
-    An eclipse edge that the orbit template does not follow exactly leaves a sharp
-    edge at nearly the same orbital phase in every orbit (a 40 s penumbra on the
-    cross-track axis: edges of ±5e-10 m/s² with a kernel σ of 2e-11 on `tests.indep`
-    days, one per orbit).  A bias jump happens once: within ±:data:`RECUR_WINDOW` s
-    of the same phase one and two orbits away there must be no jump of the same sign
-    and at least :data:`RECUR_SHARE` of its size at :data:`RECUR_Z` σ.
-    """
-    if not period or period <= 0:
-        return None
-    w = max(int(round(RECUR_WINDOW / grid.step)), 1)
-    picks = []
-    for k in RECUR_ORBITS:
-        c = e + int(round(k * period / grid.step))
-        a, b = max(c - w, 0), min(c + w + 1, grid.size)
-        if b <= a:
-            continue
-        s = np.where(ok[a:b], score[a:b], -1.0)
-        if s.max() < 0:
-            continue
-        picks.append(a + int(np.argmax(s)))
-    if not picks:
-        return None
-    z, sz, _ = edge_sizes(
-        grid, r, basis, k0, psd, np.array(picks, dtype=np.int64), pos, project=False
-    )
-    for zk, sk, ek in zip(z, sz, picks, strict=True):
-        if (
-            np.sign(sk) == np.sign(size)
-            and abs(sk) >= RECUR_SHARE * abs(size)
-            and abs(zk) >= RECUR_Z
-        ):
-            dt = (ek - e) * grid.step
-            return (
-                f"a jump of {sk:.3g} m/s² ({abs(zk):.0f}σ) {dt:+.0f} s away, at the same "
-                "orbital phase: an edge of the orbit signal, not a bias step"
-            )
-    return None
 
 
 #: Significant jumps that failed their checks, reported in the notes (the largest).
