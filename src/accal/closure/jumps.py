@@ -323,10 +323,8 @@ def scan_jumps(
             taken[max(0, e - m) : e + m] = True
             common, wide, r_given, why = _examine(
                 grid, t, r, basis, (kf, k0, k2, psd), pos, used, e, float(size[i]), float(sd[i]),
-                m, jumps, period, others, proxy_names,
+                m, jumps, rejected, period, others, proxy_names,
             )  # fmt: skip
-            if why is None:
-                why = image_of_rejected(grid, t, basis, k0, psd, pos, e, float(size[i]), rejected)
             if why is not None:
                 rejected.append({**common, "reason": why})
                 continue
@@ -383,17 +381,19 @@ def _with_step_out(grid, t, r, basis, leverage, cand, size, pos, z):
     epoch = _midpoint(grid, t, r, e0, float(size[i0]))
     col = (t >= epoch).astype(np.float64)
     r_alt = r - float(size[i0]) * (col - basis.project(col))
-    kernels = step_kernel(grid, r_alt, leverage)
+    kernels = step_kernel(grid, r_alt, leverage)  # (kf, k0, psd, half, k2)
     if kernels[3] * grid.step > HALF_MAX:
         return None
-    kf, k0, psd, half, k2 = kernels
-    return kernels, edge_sizes(grid, r, basis, k0, psd, cand, pos)
+    return kernels, edge_sizes(grid, r, basis, kernels[1], kernels[2], cand, pos)
 
 
-def _examine(grid, t, r, basis, kernels, pos, used, e, size, sd, m, jumps, period, others, names):
+def _examine(
+    grid, t, r, basis, kernels, pos, used, e, size, sd, m, jumps, rejected, period, others, names
+):
     """The checks of a significant edge at grid epoch ``e`` (module notes: persistence,
-    a box's other edge, the same edge an orbit away, an image of an accepted jump, an
-    edge of the other axes): ``(common, wide, r_given, why)``, its report fields, the
+    a box's other edge, the same edge an orbit away, an image of an accepted jump or of
+    a larger edge ``rejected`` before, an edge of the other axes):
+    ``(common, wide, r_given, why)``, its report fields, the
     size with twice the transition left out (:func:`_wide`), the residual with it taken
     out, and why it is not a bias jump (None when it is)."""
     kf, k0, k2, psd = kernels
@@ -423,6 +423,8 @@ def _examine(grid, t, r, basis, kernels, pos, used, e, size, sd, m, jumps, perio
         why = _not_persistent(size, wide, m * grid.step)
     if why is None and others is not None:
         why = others.seen(common["epoch"], size, names)
+    if why is None:
+        why = image_of_rejected(grid, t, basis, k0, psd, pos, e, size, rejected)
     return common, wide, r_given, why
 
 
