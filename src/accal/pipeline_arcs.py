@@ -326,6 +326,16 @@ def _fit_arc_inputs(arc: Arc, out_dir: Path, opts: GraceBiasOptions) -> list[Fil
         who = loaded[ks[0]][0].satellite or output_stem(paths[ks[0]])
         par_name = f"arc_{who}_{first}_{last}.bias_basis.{opts.fmt}"
         info = {"sources": names, "parameters": par_name, "first": first, "last": last}
+        closures: list[Any] = [None] * len(ks)
+        notes: list[list[str]] = [[] for _ in ks]
+        if opts.close_loop:
+            # imported here: the closure modules cost ~0.4 s of start-up (scipy.signal)
+            from accal.gracejob.reference_closure import close_arc_loop
+
+            days, closures, notes = close_arc_loop(
+                [paths[k] for k in ks], [loaded[k][0] for k in ks], [loaded[k][1] for k in ks],
+                days, opts, [out_dir / output_stem(paths[k]) for k in ks],
+            )  # fmt: skip
         write_table(
             parameter_file_columns(days[0].fit, opts.fmt),
             out_dir / par_name,
@@ -334,10 +344,12 @@ def _fit_arc_inputs(arc: Arc, out_dir: Path, opts: GraceBiasOptions) -> list[Fil
             meta={"sources": names, **report_entry(days[0])},
         )
         write_covariance(out_dir / f"arc_{who}_{first}_{last}.reference_cov.npz", days[0].fit)
-        for k, day in zip(ks, days, strict=True):
+        for j, (k, day) in enumerate(zip(ks, days, strict=True)):
             series, minus_ref = loaded[k]
-            series = with_warnings(series, *(n for n in arc.notes if first in n))
-            out = reference_outputs(paths[k], out_dir, opts, series, minus_ref, day, info)
+            series = with_warnings(series, *(n for n in arc.notes if first in n), *notes[j])
+            out = reference_outputs(
+                paths[k], out_dir, opts, series, minus_ref, day, info, closure=closures[j]
+            )
             outcomes[k] = dataclasses.replace(
                 out, peak_rss=peak_rss_mb(), signature=arc.inputs[k].signature
             )

@@ -153,13 +153,6 @@ class GraceBiasOptions:
         what = f"--bias-basis {self.bias_basis}" if self.bias_basis else f"--scale {self.scale}"
         if self.reference is None:
             raise ValidationError(f"{what} fits against a reference: give --reference REF")
-        if self.close_loop and self.arc != "day":
-            # an arc is one fit over its days: its closure would need one base over the
-            # arc (accal.gracejob.reference_closure closes the loop per day)
-            raise ValidationError(
-                f"--close-loop with {what} runs on each day's own fit: not available with "
-                f"--arc {self.arc} (days fitted together) yet; use --arc day"
-            )
         if self.pool_days:
             raise ValidationError(f"--pool-days applies to the wavelet/lsq fits, not to {what}")
         if self.bias_basis is not None:

@@ -1,4 +1,4 @@
-"""``grace-bias --reference REF --bias-basis ... | --scale fit ... --close-loop``: one day.
+"""``grace-bias --reference REF --bias-basis ... | --scale fit ... --close-loop``.
 
 Issue 22: the closure runs on the calibrated residual of the reference fit, in
 the raw data's units, with the fit's scales held at their estimates (eq. 1 of
@@ -18,9 +18,9 @@ the raw data and the reference fit is made again
 what estimating the effects adds (as :func:`accal.pipeline_closure.with_effect_uncertainty`
 does for the wavelet/lsq fits).
 
-Per day only: an arc of several days (``--arc 30d``, ``month``) is one fit
-whose closure would need one base over the arc; refused up front
-(:class:`accal.gracejob.options.GraceBiasOptions`).
+An arc of several days (``--arc 30d``, ``month``) is one fit: each day's closure
+runs on that day's share of it, and the arc is fitted again without the effects
+found (:func:`close_arc_loop`).
 """
 
 from __future__ import annotations
@@ -46,10 +46,10 @@ from accal.pipeline_closure import (
     load_truth,
     write_closure_plots,
 )
-from accal.pipeline_reference import fit_day, row_fields
+from accal.pipeline_reference import fit_arc, row_fields
 from accal.series import AccSeries
 
-__all__ = ["ReferenceClosure", "close_reference_loop", "null_design"]
+__all__ = ["ReferenceClosure", "close_arc_loop", "close_reference_loop", "null_design"]
 
 AXES = "xyz"
 
@@ -332,52 +332,103 @@ def close_reference_loop(
         None when the day is too short for the residual analysis (said in the warnings).
     warnings : list of str
     """
-    n_use = int(np.count_nonzero(day.use))
-    if n_use < MIN_SAMPLES:  # the reference fit stands; say why there is no closure
-        return (
-            day,
-            None,
-            [
-                f"too short to close the loop ({n_use} usable samples, the residual analysis "
-                f"needs {MIN_SAMPLES}): reference fit {day.fit.basis.name()} only"
-            ],
-        )
-    found, plots, warnings, covered = _close_axes(path, series, day, opts, prefix)
-    removed = {ax: c for ax, c in found.items() if c["summary"]["removed_from_calibrated"]}
-    after = day
-    if removed:
-        inst = np.column_stack([found[ax]["instrument"] for ax in AXES])
-        valid = minus_ref.valid
-        n_out = int(np.count_nonzero(day.use & ~covered))
-        if any(c["coupled"] for c in removed.values()) and n_out:
-            # a coupling is not removed where its channel is missing: out of the refit
-            valid = valid & covered
-            warnings.append(
-                f"a coupling was removed and its channel misses {n_out} used samples: they "
-                "are left out of the refit and marked invalid in the calibrated file"
+    days, closures, warnings = close_arc_loop([path], [series], [minus_ref], [day], opts, [prefix])
+    return days[0], closures[0], warnings[0]
+
+
+def close_arc_loop(
+    paths: list[Path],
+    series: list[AccSeries],
+    minus_ref: list[AccSeries],
+    days: list[Any],
+    opts: GraceBiasOptions,
+    prefixes: list[Path],
+) -> tuple[list[Any], list[ReferenceClosure | None], list[list[str]]]:
+    """Close the loop on each day of an arc's reference fit; refit the arc when
+    instrument effects are removed.
+
+    ``days[k]`` is input ``k``'s share of one fit over the arc
+    (:func:`accal.pipeline_reference.fit_arc`; one input: a day fitted alone).  Each
+    day's closure runs on its own calibrated residual (eq. 3) with the arc's bias
+    basis on that day as its null model (the columns that are not zero there: a
+    spline's local ones, a polynomial's all), which frees the day's bias from the
+    continuity across days for the search (a looser null, so nothing of the day's bias
+    is taken for an effect).  The instrument effects accepted on any day are taken out
+    of that day's data and the whole arc is fitted again: one fit, as without
+    ``--close-loop``; what estimating the effects adds to the variance of the bias
+    coefficients is added to the refit's covariance (:func:`with_effect_uncertainty`,
+    summed over the days that share a coefficient).
+
+    Returns the days of the refit (``days`` when nothing was removed), each day's
+    :class:`ReferenceClosure` (None when too short for the residual analysis) and
+    each day's warnings.
+    """
+    n = len(paths)
+    warnings: list[list[str]] = [[] for _ in range(n)]
+    found: list[dict[str, Any] | None] = [None] * n
+    covered: list[np.ndarray | None] = [None] * n
+    plots: list[list[Path]] = [[] for _ in range(n)]
+    for k in range(n):
+        n_use = int(np.count_nonzero(days[k].use))
+        if n_use < MIN_SAMPLES:  # the reference fit stands; say why there is no closure
+            warnings[k].append(
+                f"too short to close the loop ({n_use} usable samples, the residual "
+                f"analysis needs {MIN_SAMPLES}): reference fit {days[k].fit.basis.name()} only"
             )
-        history = (
-            f"accal {__version__}: close_loop(alpha={opts.alpha}) on the reference fit's "
-            "residual removed " + "; ".join(f"{ax}: {found[ax]['model']}" for ax in AXES)
+            continue
+        found[k], plots[k], notes, covered[k] = _close_axes(
+            paths[k], series[k], days[k], opts, prefixes[k]
         )
-        after = fit_day(
-            path,
-            series.replace(acc=series.acc - inst).with_history(history),
-            minus_ref.replace(acc=minus_ref.acc - inst, valid=valid),
-            opts,
+        warnings[k].extend(notes)
+    removed = [
+        {ax: c for ax, c in f.items() if c["summary"]["removed_from_calibrated"]} if f else {}
+        for f in found
+    ]
+    after = days
+    if any(removed):
+        new_series, new_minus = list(series), list(minus_ref)
+        for k in range(n):
+            if not removed[k]:
+                continue
+            f, cov_k = found[k], covered[k]
+            inst = np.column_stack([f[ax]["instrument"] for ax in AXES])
+            valid = minus_ref[k].valid
+            n_out = int(np.count_nonzero(days[k].use & ~cov_k))
+            if any(c["coupled"] for c in removed[k].values()) and n_out:
+                # a coupling is not removed where its channel is missing: out of the refit
+                valid = valid & cov_k
+                warnings[k].append(
+                    f"a coupling was removed and its channel misses {n_out} used samples: "
+                    "they are left out of the refit and marked invalid in the calibrated file"
+                )
+            history = (
+                f"accal {__version__}: close_loop(alpha={opts.alpha}) on the reference fit's "
+                "residual removed " + "; ".join(f"{ax}: {f[ax]['model']}" for ax in AXES)
+            )
+            new_series[k] = series[k].replace(acc=series[k].acc - inst).with_history(history)
+            new_minus[k] = minus_ref[k].replace(acc=minus_ref[k].acc - inst, valid=valid)
+        after = fit_arc(paths, new_series, new_minus, opts)
+        fit = after[0].fit
+        for k in range(n):
+            if removed[k]:
+                fit = with_effect_uncertainty(fit, {a: c["summary"] for a, c in removed[k].items()})
+        after = [dataclasses.replace(d, fit=fit) for d in after]
+    truth = load_truth(opts.truth, series[0], True) if opts.truth and n == 1 else {}
+    closures: list[ReferenceClosure | None] = []
+    for k in range(n):
+        f = found[k]
+        if f is None:
+            closures.append(None)
+            continue
+        for ax in AXES:
+            f[ax]["summary"]["estimates"] = before_after(
+                days[k], after[k], ax, series[k].time, opts, truth.get(ax)
+            )
+        closures.append(
+            ReferenceClosure(
+                summaries={ax: c["summary"] for ax, c in f.items()},
+                models={ax: c["model"] for ax, c in f.items()},
+                outputs=tuple(plots[k]),
+            )
         )
-        after = dataclasses.replace(
-            after,
-            fit=with_effect_uncertainty(after.fit, {a: c["summary"] for a, c in removed.items()}),
-        )
-    truth = load_truth(opts.truth, series, True) if opts.truth else {}
-    for ax in AXES:
-        found[ax]["summary"]["estimates"] = before_after(
-            day, after, ax, series.time, opts, truth.get(ax)
-        )
-    closure = ReferenceClosure(
-        summaries={ax: c["summary"] for ax, c in found.items()},
-        models={ax: c["model"] for ax, c in found.items()},
-        outputs=tuple(plots),
-    )
-    return after, closure, warnings
+    return after, closures, warnings
