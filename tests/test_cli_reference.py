@@ -191,10 +191,6 @@ def test_inertial_reference_is_rotated_with_the_real_sca1b(tmp_path):
         (("--bias-basis", "spline:6h"), "give --reference"),
         (("--reference", "REF", "--bias-basis", "spline:0h"), "node step"),
         (("--reference", "REF", "--bias-basis", "poly7"), "expected poly0"),
-        (
-            ("--reference", "REF", "--scale", "fit", "--arc", "3d", "--close-loop"),
-            "not available with --arc 3d",
-        ),
         (("--reference", "REF", "--scale", "fit", "--pool-days", "4"), "pool-days"),
         (("--reference-frame", "inertial"), "add --bias-basis"),
         (("--reference", "REF", "--scale", "fit", "--thruster-margins", "1"), "BEFORE,AFTER"),
@@ -383,3 +379,37 @@ def test_a_sparser_reference_is_interpolated_and_said(tmp_path):
     assert any("interpolated linearly" in w for w in rep["read_report"]["warnings"])
     x = read_bias_drift(out / "bias_drift.parquet").set_index("axis").loc["x"]
     assert abs(x["scale"] - SCALE[0]) < 5 * x["scale_x_sigma"] + 1e-3
+
+
+def test_a_sparse_reference_ending_just_before_the_data_leaves_those_samples_out(tmp_path):
+    """QA (2026-11-29): a 10 s reference whose last sample is 9 s before the day's last
+    lost the whole day ("must cover the data").  Now those 9 samples are left out with
+    a warning, and the fit is the same as with them."""
+    t, true, day, ref = _day(tmp_path, 20_000, 7)
+    full = pd.read_csv(ref)
+    full.iloc[::10].to_csv(ref, index=False, float_format="%.17g")  # every 10 s, ends 9 s early
+    out = tmp_path / "out"
+    code, msg = _run(day, "--reference", ref, "--scale", "fit", "--out", out, "-j", "1")
+    assert code == 0, msg
+    assert "ends within 25 s of the data's end: 9 sample(s)" in msg
+    cal = pd.read_parquet(out / "day.calibrated.parquet")
+    assert not cal["valid"].to_numpy(bool)[-9:].any() and cal["valid"].to_numpy(bool)[-10]
+    # an hour short is still an error
+    full.iloc[:-3600].to_csv(ref, index=False, float_format="%.17g")
+    code, msg = _run(day, "--reference", ref, "--scale", "fit", "--out", tmp_path / "o2", "-q")
+    assert code == 1 and "the reference must cover the data" in msg
+
+
+def test_a_reference_in_another_unit_is_an_error_not_a_scale_of_1e9(tmp_path):
+    """QA: a reference in nm/s² (no unit metadata) gave scales of 9.6e8 and exit 0."""
+    t, true, day, ref = _day(tmp_path, 20_000, 8)
+    nm = pd.read_csv(ref)
+    for ax in "xyz":
+        nm[f"lin_accl_{ax}"] *= 1e9
+    nm.to_csv(ref, index=False, float_format="%.17g")
+    out = tmp_path / "out"
+    code, msg = _run(day, "--reference", ref, "--scale", "fit", "--out", out, "-q", "-j", "1")
+    assert code == 1, msg
+    (line,) = [ln for ln in msg.splitlines() if ln.startswith("accal: ")]
+    assert "the fitted scale on x is 9.6e+08" in line and "is the reference in m/s²" in line
+    assert not (out / "day.calibrated.parquet").exists()

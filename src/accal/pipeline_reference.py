@@ -87,7 +87,18 @@ def _thrusters(path: Path, series: AccSeries, opts: Any) -> tuple[np.ndarray, di
     none = np.zeros(len(series), bool)
     if thr is None or opts.thruster_margins is None:
         why = "off" if opts.thruster_margins is None else "no THR1B file found"
-        return none, {"file": None, "firings": 0, "n_excluded": 0, "why": why}, []
+        notes = []
+        if (
+            thr is None
+            and opts.thruster_margins is not None
+            and series.satellite.startswith("GRACE")
+        ):
+            # QA: unmasked firing spikes took S_zz to 0.44 ± 0.02 (truth 0.95), silently
+            notes.append(
+                f"no THR1B file beside {path.name}: thruster firings are not left out of the "
+                "reference fit (give --thrusters FILE, or --thruster-margins off)"
+            )
+        return none, {"file": None, "firings": 0, "n_excluded": 0, "why": why}, notes
     firings = read_thrusters(thr)
     before, after = opts.thruster_margins
     mask = firing_mask(series.time, firings, before=before, after=after)
@@ -166,6 +177,12 @@ def fit_arc(
     mode = opts.scale if opts.scale in ("fit", "fit-matrix") else "fixed"
     apriori = apriori_scale(opts.scale, series[0].satellite)
     fit = fit_reference(t, raw, ref, use, basis, scale=mode, apriori=apriori, breaks=breaks)
+    unmasked = [
+        p.name
+        for p, part in zip(paths, parts, strict=True)
+        if part[2].get("why") == "no THR1B file found"
+    ]
+    _check_scales(fit, mode, opts, unmasked)
     days = []
     edges = np.cumsum([0] + [len(s) for s in series])
     arc = f" over an arc of {len(series)} inputs" if len(series) > 1 else ""
@@ -181,6 +198,35 @@ def fit_arc(
         notes = [*parts[k][3], *(f"reference fit: {n}" for n in fit.notes)]
         days.append(ReferenceDay(fit, fit.used[sl], cal, parts[k][2], tuple(notes), parts[k][0]))
     return days
+
+
+#: Range of a fitted diagonal scale outside which the reference is taken to be in
+#: another unit or of another quantity: an electrostatic accelerometer's scale factors
+#: are within a few % of 1 (GRACE TN-02: 0.93-0.98; QA: a reference in nm/s² gave
+#: scales of 9.6e8 with nothing said).
+SCALE_RANGE = (0.5, 2.0)
+
+
+def _check_scales(fit: ReferenceFit, mode: str, opts: Any, unmasked: list[str]) -> None:
+    """Raise when a fitted diagonal scale is outside :data:`SCALE_RANGE` (``unmasked``:
+    inputs whose thruster firings were not left out, for the message)."""
+    if mode == "fixed":
+        return
+    lo, hi = SCALE_RANGE
+    for i, ax in enumerate("xyz"):
+        s = float(fit.scale[i, i])
+        if fit.modes[i] != "fixed" and not lo <= s <= hi:
+            raise ValidationError(
+                f"{opts.reference}: the fitted scale on {ax} is {s:.3g} (an accelerometer's "
+                f"is within {lo:g}-{hi:g}): is the reference in m/s² and of the same axes "
+                "as the data?"
+                + (
+                    f" Thruster firings were not left out ({', '.join(unmasked)}: no THR1B "
+                    "file; --thrusters FILE): their spikes also pull the scale."
+                    if unmasked
+                    else ""
+                )
+            )
 
 
 def fit_day(path: Path, series: AccSeries, minus_ref: AccSeries, opts: Any) -> ReferenceDay:

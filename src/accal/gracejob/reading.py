@@ -73,7 +73,9 @@ def subtract_reference(series: AccSeries, reference: AccSeries, ref_path: Path) 
     marked invalid (left out of the fit) and a warning in the returned series'
     report says how many.  A reference sampled more sparsely than that relative to
     the data (or so holed that its median step is a hole) is interpolated, with a
-    warning that gives both steps.  QA: 96 missing samples of a 1 Hz reference were bridged
+    warning that gives both steps.  A reference that ends less than a hole's length
+    before the data (or starts after them) leaves the samples outside it out, with a
+    warning; further, it is an error.  QA: 96 missing samples of a 1 Hz reference were bridged
     by a straight line and moved the bias by 8.7e-10 m/s² (2.5σ), silently.
 
     Raises
@@ -83,8 +85,14 @@ def subtract_reference(series: AccSeries, reference: AccSeries, ref_path: Path) 
     """
     t = series.time
     tr = reference.time
-    if tr.size < 2 or tr[0] > t[0] or tr[-1] < t[-1]:
+    if tr.size < 2:
         raise ValidationError(_not_covered(ref_path, tr, t))
+    # an end short of the data by less than a hole (e.g. a 10 s reference whose last
+    # sample is 9 s before the day's: QA lost the whole day) leaves those samples out
+    slack = REFERENCE_MAX_BRIDGE * float(np.median(np.diff(tr)))
+    if tr[0] > t[0] + slack or tr[-1] < t[-1] - slack:
+        raise ValidationError(_not_covered(ref_path, tr, t))
+    outside = (t < tr[0]) | (t > tr[-1])
     unit = reference.units.get("acc")
     factor = acceleration_factor(unit)
     if factor is None:
@@ -98,6 +106,8 @@ def subtract_reference(series: AccSeries, reference: AccSeries, ref_path: Path) 
             raise ValidationError(f"{ref_path}: reference has no axis {ax!r}")
         cols.append(series.axis(ax) - factor * np.interp(t, tr, reference.axis(ax)))
     valid = series.valid & (np.interp(t, tr, reference.valid.astype(float)) > 0.999)
+    n_out = int(np.count_nonzero(outside & valid))
+    valid &= ~outside
     step = float(np.median(np.diff(tr)))
     j = np.clip(np.searchsorted(tr, t, side="right"), 1, tr.size - 1)
     lo, hi = tr[j - 1], tr[j]
@@ -111,6 +121,18 @@ def subtract_reference(series: AccSeries, reference: AccSeries, ref_path: Path) 
         warnings.append(
             f"--reference {ref_path.name} is sampled every {step:g} s (median), the data "
             f"every {step_data:g} s: it is interpolated linearly between its samples"
+        )
+    if n_out:
+        warnings.append(
+            f"--reference {ref_path.name} ends within {slack:g} s of the data's "
+            f"{'start' if tr[0] > t[0] else 'end'}: {n_out} sample(s) of the data outside it "
+            "are left out of the fit"
+        )
+    n_ref_nan = int(np.count_nonzero(~reference.valid))
+    if n_ref_nan:
+        warnings.append(
+            f"--reference {ref_path.name}: {n_ref_nan} of its {tr.size} samples are missing "
+            "or not finite: the data around them are left out of the fit"
         )
     n_hole = int(np.count_nonzero(hole & valid))
     if n_hole:

@@ -170,13 +170,20 @@ class TableStream:
 
         pf = self._parquet_file()
         row = 0
+        batches = pf.iter_batches(batch_size=self.rows, use_threads=self.threads)
         try:
-            for batch in pf.iter_batches(batch_size=self.rows, use_threads=self.threads):
+            for batch in batches:
                 if batch.num_rows:
                     yield row, pa.Table.from_batches([batch])
                     row += batch.num_rows
         except (pa.ArrowException, OSError) as exc:
             raise FormatError(f"corrupt Parquet file ({_exc_text(exc)})", self.path) from None
+        finally:
+            # a reader left open (a caller that stops early, an error) kept pyarrow's
+            # decoding threads alive at exit: "terminate called without an active
+            # exception", exit 134 instead of 1 (QA, 2026-11-29: a rejected reference)
+            batches.close()
+            pf.close()
         expected = pf.metadata.num_rows
         if row != expected:  # a corrupt page can end a column early without an error
             raise FormatError(
