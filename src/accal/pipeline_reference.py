@@ -177,11 +177,9 @@ def fit_arc(
     mode = opts.scale if opts.scale in ("fit", "fit-matrix") else "fixed"
     apriori = apriori_scale(opts.scale, series[0].satellite)
     fit = fit_reference(t, raw, ref, use, basis, scale=mode, apriori=apriori, breaks=breaks)
-    unmasked = [
-        p.name
-        for p, part in zip(paths, parts, strict=True)
-        if part[2].get("why") == "no THR1B file found"
-    ]
+    unmasked = []
+    if opts.thruster_margins is not None:  # inputs with no THR1B file to mask firings by
+        unmasked = [p.name for p, part in zip(paths, parts, strict=True) if part[2]["file"] is None]
     _check_scales(fit, mode, opts, unmasked)
     days = []
     edges = np.cumsum([0] + [len(s) for s in series])

@@ -105,7 +105,9 @@ def subtract_reference(series: AccSeries, reference: AccSeries, ref_path: Path) 
         if ax not in reference.axes:
             raise ValidationError(f"{ref_path}: reference has no axis {ax!r}")
         cols.append(series.axis(ax) - factor * np.interp(t, tr, reference.axis(ax)))
-    valid = series.valid & (np.interp(t, tr, reference.valid.astype(float)) > 0.999)
+    ref_ok = np.interp(t, tr, reference.valid.astype(float)) > 0.999
+    n_ref_bad = int(np.count_nonzero(series.valid & ~ref_ok & ~outside))
+    valid = series.valid & ref_ok
     n_out = int(np.count_nonzero(outside & valid))
     valid &= ~outside
     step = float(np.median(np.diff(tr)))
@@ -128,11 +130,10 @@ def subtract_reference(series: AccSeries, reference: AccSeries, ref_path: Path) 
             f"{'start' if tr[0] > t[0] else 'end'}: {n_out} sample(s) of the data outside it "
             "are left out of the fit"
         )
-    n_ref_nan = int(np.count_nonzero(~reference.valid))
-    if n_ref_nan:
+    if n_ref_bad:
         warnings.append(
-            f"--reference {ref_path.name}: {n_ref_nan} of its {tr.size} samples are missing "
-            "or not finite: the data around them are left out of the fit"
+            f"--reference {ref_path.name} has missing or non-finite samples: {n_ref_bad} "
+            "sample(s) of the data next to them are left out of the fit"
         )
     n_hole = int(np.count_nonzero(hole & valid))
     if n_hole:
