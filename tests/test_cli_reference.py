@@ -101,6 +101,18 @@ def test_scale_fit_recovers_scales_and_bias_and_writes_every_product(tmp_path):
     with np.load(out / "day.reference_cov.npz") as npz:
         cov, scale = npz["cov"], npz["scale"]
         assert cov.shape == (9 + 3 * 2, 9 + 3 * 2) and str(npz["basis"]) == "poly1"
+        # the file names its own rows: S row by row, then each axis' coefficients
+        names, units = npz["names"].tolist(), npz["units"].tolist()
+    assert names[:4] == ["scale_xx", "scale_xy", "scale_xz", "scale_yx"]
+    assert names[9:] == [
+        "bias_x[0]",
+        "bias_x[1]",
+        "bias_y[0]",
+        "bias_y[1]",
+        "bias_z[0]",
+        "bias_z[1]",
+    ]
+    assert units == ["1"] * 9 + ["m/s^2"] * 6
     assert scale[0, 0] == tab.loc["x", "scale"]
     assert np.sqrt(cov[0, 0]) == pytest.approx(tab.loc["x", "scale_x_sigma"], rel=1e-12)
     np.testing.assert_allclose(cov, cov.T, rtol=0, atol=1e-12 * np.abs(cov).max())
@@ -413,3 +425,41 @@ def test_a_reference_in_another_unit_is_an_error_not_a_scale_of_1e9(tmp_path):
     (line,) = [ln for ln in msg.splitlines() if ln.startswith("accal: ")]
     assert "the fitted scale on x is 9.6e+08" in line and "is the reference in m/s²" in line
     assert not (out / "day.calibrated.parquet").exists()
+
+
+def test_a_reference_with_no_finite_sample_names_itself(tmp_path):
+    """QA (2026-11-29): an all-NaN reference failed as "0 usable samples for 5
+    parameters", without naming the reference."""
+    t, true, day, ref = _day(tmp_path, 5_000, 9)
+    nan = pd.read_csv(ref)
+    nan[["lin_accl_x", "lin_accl_y", "lin_accl_z"]] = np.nan
+    ref = tmp_path / "ref.parquet"  # (a CSV of empty fields is a column of no type)
+    nan.to_parquet(ref, index=False)
+    out = tmp_path / "out"
+    code, msg = _run(day, "--reference", ref, "--scale", "fit", "--out", out, "-q", "-j", "1")
+    assert code == 1, msg
+    (line,) = [ln for ln in msg.splitlines() if ln.startswith("accal: ")]
+    assert f"{ref}: the reference has no valid (finite) sample over the data's span" in line
+    assert not (out / "day.calibrated.parquet").exists()
+
+
+def test_column_maps_a_table_reference_beside_an_l1b_input_without_a_warning(tmp_path):
+    """QA (2026-11-29): ``--column`` maps a table reference's columns, but an L1B input
+    warned that the option "is for table inputs" as if it had been ignored."""
+    day = tmp_path / "ACC1B_2005-01-01_A_00.asc"
+    ref = tmp_path / "ref.parquet"
+    res = CliRunner().invoke(
+        main,
+        ["simulate", "grace", "--date", "2005-01-01", "--duration", "7200", "--out", str(day),
+         "--reference-out", str(ref)],
+    )  # fmt: skip
+    assert res.exit_code == 0, res.output
+    renamed = pd.read_parquet(ref).rename(columns={f"lin_accl_{a}": f"acc_{a}" for a in "xyz"})
+    renamed.to_parquet(ref, index=False)
+    cols = [f"--column={a}=acc_{a}" for a in "xyz"]
+    code, msg = _run(day, "--reference", ref, *cols, "--scale", "fit", "--out", tmp_path / "o")
+    assert code == 0, msg
+    assert "is for table inputs" not in msg
+    # without the mapping the reference's columns are not found
+    code, msg = _run(day, "--reference", ref, "--scale", "fit", "--out", tmp_path / "o2", "-q")
+    assert code == 1 and "lin_accl_x" in msg, msg

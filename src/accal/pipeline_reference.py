@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from accal.calibration import parse_scale, tn02_scale
 from accal.errors import ValidationError
@@ -314,18 +315,36 @@ def write_covariance(path: Path, fit: ReferenceFit) -> Path:
 
     Arrays: ``scale`` (3, 3), ``bias_coef`` (3, K), ``cov`` (9 + 3K square: the
     covariance of ``scale.ravel()`` then ``bias_coef.ravel()``, SI units squared),
-    ``knots`` (spline knot vector [s GPS], empty for poly) and ``basis`` (its name).
+    ``names`` and ``units`` (9 + 3K: each row/column of ``cov``, e.g. ``scale_xy``
+    [1] and ``bias_y[4]`` [m/s^2]; the file says its own layout), ``knots`` (spline
+    knot vector [s GPS], empty for poly) and ``basis`` (its name).
     """
+    names, units = covariance_labels(fit.bias_coef.shape[1])
     with atomic_path(path) as tmp, open(tmp, "wb") as fh:
         np.savez(
             fh,
             scale=fit.scale,
             bias_coef=fit.bias_coef,
             cov=fit.cov,
+            names=names,
+            units=units,
             knots=fit.basis.knots,
             basis=np.array(fit.basis.name()),
         )
     return path
+
+
+def covariance_labels(k: int) -> tuple[NDArray[np.str_], NDArray[np.str_]]:
+    """Names and units of the 9 + 3k rows of :func:`write_covariance`'s ``cov``.
+
+    ``scale_ij`` (row i, column j of S in ``a_cal = S (a_raw − b)``, unit 1), then
+    ``bias_<axis>[m]`` (coefficient m of the bias basis of that axis, m/s²), in the
+    order of ``scale.ravel()`` and ``bias_coef.ravel()``.
+    """
+    names = [f"scale_{i}{j}" for i in "xyz" for j in "xyz"]
+    names += [f"bias_{ax}[{m}]" for ax in "xyz" for m in range(k)]
+    units = ["1"] * 9 + ["m/s^2"] * (3 * k)
+    return np.array(names), np.array(units)
 
 
 def report_entry(day: ReferenceDay) -> dict[str, Any]:

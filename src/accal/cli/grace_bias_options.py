@@ -173,7 +173,7 @@ _OPTIONS: list[Callable[[Any], Any]] = [
         multiple=True,
         metavar="AXIS=COLUMN",
         help="Map a table column to an axis, e.g. --column x=a_cal_x, or name the time "
-        "column, --column time=t (repeatable).",
+        "column, --column time=t (repeatable; for table inputs and a table --reference).",
     ),
     click.option(
         "--input-format",

@@ -16,7 +16,7 @@ import numpy as np
 
 from accal import __version__
 from accal.batch_discovery import L1B_NAME
-from accal.errors import ValidationError
+from accal.errors import AccalError, ValidationError
 from accal.gracejob.options import GraceBiasOptions
 from accal.io import FORMATS, detect_format, read
 from accal.plausibility import flag_wild_samples
@@ -34,12 +34,23 @@ def read_input(path: Path, opts: GraceBiasOptions) -> AccSeries:
         series = FORMATS[fmt][1](path, **kwargs)
     else:
         series = read(path, format=fmt, **kwargs)
-    if opts.columns and fmt != "table":  # QA (issue 23): silently ignored
+    if opts.columns and fmt != "table" and not _reference_is_table(opts):
+        # QA (issue 23): silently ignored; a table --reference uses the mapping (QA, 22)
         cols = ", ".join(f"{a}={c}" for a, c in sorted(opts.columns.items()))
         series = with_warnings(
             series, f"--column {cols} is for table inputs; this {fmt} file's columns are fixed"
         )
     return series
+
+
+def _reference_is_table(opts: GraceBiasOptions) -> bool:
+    """Whether ``--reference`` is a table (``--column`` maps its columns too)."""
+    if opts.reference is None:
+        return False
+    try:
+        return detect_format(Path(opts.reference)) == "table"
+    except (AccalError, OSError):  # its reader says what is wrong with it
+        return False
 
 
 #: Longest spacing of two reference samples that :func:`subtract_reference` interpolates
@@ -106,6 +117,11 @@ def subtract_reference(series: AccSeries, reference: AccSeries, ref_path: Path) 
             raise ValidationError(f"{ref_path}: reference has no axis {ax!r}")
         cols.append(series.axis(ax) - factor * np.interp(t, tr, reference.axis(ax)))
     ref_ok = np.interp(t, tr, reference.valid.astype(float)) > 0.999
+    if not np.any(ref_ok & ~outside):  # QA: "0 usable samples", the reference not named
+        raise ValidationError(
+            f"{ref_path}: the reference has no valid (finite) sample over the data's span "
+            f"({_utc_span(t)})"
+        )
     n_ref_bad = int(np.count_nonzero(series.valid & ~ref_ok & ~outside))
     valid = series.valid & ref_ok
     n_out = int(np.count_nonzero(outside & valid))
