@@ -388,7 +388,7 @@ def test_a_sparser_reference_is_interpolated_and_said(tmp_path):
     code, msg = _run(day, "--reference", ref, "--scale", "fit", "--out", out, "-q")
     assert code == 0, msg
     rep = json.loads((out / "day.report.json").read_text())
-    assert any("interpolated linearly" in w for w in rep["read_report"]["warnings"])
+    assert any("interpolated by a cubic spline" in w for w in rep["read_report"]["warnings"])
     x = read_bias_drift(out / "bias_drift.parquet").set_index("axis").loc["x"]
     assert abs(x["scale"] - SCALE[0]) < 5 * x["scale_x_sigma"] + 1e-3
 
