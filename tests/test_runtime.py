@@ -93,3 +93,37 @@ def test_atomic_path_names_the_target_when_its_directory_refuses_files(tmp_path)
     with pytest.raises(OSError) as e, writers.atomic_path(target):
         pass
     assert e.value.filename == str(target)
+
+
+@pytest.mark.parametrize(
+    ("code", "status", "err"), [(None, 0, ""), (2, 2, ""), ("bad", 1, "bad\n")]
+)
+def test_the_exit_skips_finalization_with_the_status_systemexit_means(
+    monkeypatch, capsys, code, status, err
+):
+    """With pyarrow loaded the CLI leaves by ``os._exit`` (its thread pools aborted the
+    interpreter's finalization: exit 134 after a bad ``--aux``), with SystemExit's status."""
+    from accal import __main__ as entry
+
+    got = []
+    monkeypatch.setattr(entry.os, "_exit", got.append)
+    entry._exit_without_finalizing(code)
+    assert got == [status] and capsys.readouterr().err == err
+
+
+def test_a_bad_aux_table_exits_1_every_time(tmp_path):
+    """The QA helper's case (a Parquet --aux without a time column) in fresh processes."""
+    import pandas as pd
+
+    bad = tmp_path / "aux.parquet"
+    pd.DataFrame({"t": [0.0, 1.0], "temperature": [20.0, 20.1]}).to_parquet(bad)
+    day = Path(__file__).parent.parent / "data" / "samples" / "ACC1B_2003-09-14_A_00.asc"
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
+    for k in range(4):
+        out = subprocess.run(
+            [sys.executable, "-m", "accal", "grace-bias", str(day), "--aux", str(bad),
+             "--out", str(tmp_path / f"o{k}"), "-q"],
+            capture_output=True, text=True, env=env, timeout=120,
+        )  # fmt: skip
+        assert out.returncode == 1, out.stderr
+        assert "no time column" in out.stderr and "terminate called" not in out.stderr

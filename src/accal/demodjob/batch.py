@@ -400,7 +400,9 @@ class DemodJob(BatchJob):
             if self.opts.fmt == "parquet":
                 import pyarrow.parquet as pq
 
-                sources = pq.read_table(table, columns=["source"]).column("source").to_pylist()
+                with pq.ParquetFile(table) as pf:  # one thread: see io.table_parse
+                    sources = pf.read(columns=["source"], use_threads=False)
+                sources = sources.column("source").to_pylist()
             else:
                 import pandas as pd
 

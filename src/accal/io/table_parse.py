@@ -285,8 +285,13 @@ def read_parquet_table(raw: bytes, path: Path) -> tuple[Any, dict, dict, int]:
 
     try:
         # ParquetFile, not pq.read_table: that one imports pyarrow.dataset and with it
-        # pandas (~0.5 s, a third of a one-file run)
-        table = pq.ParquetFile(io.BytesIO(raw)).read()
+        # pandas (~0.5 s, a third of a one-file run).  One thread, and the file closed:
+        # a threaded read's clean-up can meet the interpreter's shutdown when a bad
+        # --aux or --reference ends the run right after it (exit 134, "terminate called
+        # without an active exception", 4-9 of 12-15 runs of a QA helper; see
+        # accal.io.common.csv_read_options)
+        with pq.ParquetFile(io.BytesIO(raw)) as pf:
+            table = pf.read(use_threads=False)
     except UnicodeDecodeError:  # the field names are decoded as the file is read
         raise FormatError("corrupt Parquet file (a column name is not UTF-8)", path) from None
     except (pa.ArrowException, OSError, ValueError) as exc:
