@@ -225,3 +225,40 @@ def test_an_l1b_file_larger_than_its_record_count_is_refused_before_it_is_read(t
     assert read(SAMPLE).time.size == 60  # the bound does not touch a right file
     outcome = process_one(padded, tmp_path / "p", GraceBiasOptions())
     assert not outcome.ok and outcome.peak_rss > 0
+
+
+def test_a_dead_axis_is_refused_not_calibrated(tmp_path):
+    """QA (2026-11-30): an all-zero day gave bias 0 ± 0 (an internal error with
+    --close-loop), a stuck x axis a bias σ of 1e-22 m/s²; demod an all-zero m_z
+    a_Z = 3e-23 ± 2.7e-12 and an all-zero run an internal error."""
+    import numpy as np
+    import pandas as pd
+
+    n = 4000
+    t = 757_382_400.0 + np.arange(n, dtype=float)
+    rng = np.random.default_rng(1)
+    live = 1e-7 + 1e-10 * rng.standard_normal((n, 3))
+    for name, acc in (("stuck", np.c_[np.full(n, 1e-6), live[:, 1:]]), ("zeros", 0 * live)):
+        pd.DataFrame({"gps_time": t, **{f"lin_accl_{a}": acc[:, i] for i, a in enumerate("xyz")}}
+                     ).to_csv(tmp_path / f"{name}.csv", index=False)  # fmt: skip
+    pd.DataFrame({"gps_time": t, **{f"lin_accl_{a}": live[:, i] for i, a in enumerate("xyz")}}
+                 ).to_csv(tmp_path / "live.csv", index=False)  # fmt: skip
+    out = tmp_path / "o"
+    code, msg = _run("grace-bias", tmp_path / "stuck.csv", tmp_path / "zeros.csv",
+                     tmp_path / "live.csv", "--close-loop", "--out", out, "-q")  # fmt: skip
+    assert code == 1, msg
+    assert "stuck.csv: axis x = 1e-06 at every valid sample (4000): a dead or zero-filled" in msg
+    assert "zeros.csv: axis x = 0 and y = 0 and z = 0 at every valid sample" in msg
+    assert "internal error" not in msg
+    assert (out / "live.calibrated.parquet").exists()  # the batch's good input
+    assert not (out / "stuck.calibrated.parquet").exists()
+    # demod: a run whose m_z is zero-filled
+    run = tmp_path / "run.parquet"
+    code, msg = _run("simulate", "gap", "--days", "0.1", "--tau", "600", "--mask", "200",
+                     "--out", run)  # fmt: skip
+    assert code == 0, msg
+    df = pd.read_parquet(run)
+    df["m_z"] = 0.0
+    df.to_parquet(run, index=False)
+    code, msg = _run("demod", run, "--tau", "600", "--mask", "200", "--out", tmp_path / "d", "-q")
+    assert code == 1 and "m_z = 0 at every valid sample: a dead or zero-filled channel" in msg

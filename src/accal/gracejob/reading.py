@@ -214,6 +214,7 @@ def read_with_reference(
     if len(series) == 0:
         raise ValidationError("no data records")
     series, wild = flag_wild_samples(series)
+    _check_live_axes(series)
     series = with_warnings(series, *name_mismatch(path, series), *wild)
     if opts.reference is None:
         return series, series, None
@@ -221,6 +222,30 @@ def read_with_reference(
         reference = read_input(opts.reference, GraceBiasOptions(columns=opts.columns))
     minus_ref = subtract_reference(series, reference, opts.reference)
     return series.replace(report=minus_ref.report), minus_ref, minus_ref
+
+
+def _check_live_axes(series: AccSeries) -> None:
+    """Refuse an axis whose valid samples all hold one value (a dead or zero-filled channel).
+
+    QA (2026-11-30): an all-zero day gave bias 0 ± 0 (and an internal error with
+    ``--close-loop``), a stuck x axis a bias σ of 1e-22 m/s²: numbers, not data.
+
+    Raises
+    ------
+    ValidationError
+        Naming the axes and their value.
+    """
+    dead = []
+    for k, ax in enumerate(series.axes):
+        a = series.acc[series.valid, k]
+        a = a[np.isfinite(a)]
+        if a.size >= 2 and a.min() == a.max():
+            dead.append(f"{ax} = {a[0]:.6g}")
+    if dead:
+        raise ValidationError(
+            f"axis {' and '.join(dead)} at every valid sample ({int(series.valid.sum())}): "
+            "a dead or zero-filled channel, nothing to calibrate"
+        )
 
 
 def with_warnings(series: AccSeries, *warnings: str) -> AccSeries:

@@ -229,6 +229,7 @@ class _Checker:
         self.last_t = None
         self.th_min, self.th_max = np.inf, -np.inf
         self.reaches_pi = False
+        self.span = {"m_y": [np.inf, -np.inf], "m_z": [np.inf, -np.inf]}  # valid samples
 
     def __call__(self, ch: DemodChunk) -> dict[str, NDArray]:
         arrs = {}
@@ -279,6 +280,10 @@ class _Checker:
             self.th_min = min(self.th_min, float(th.min()))
             self.th_max = max(self.th_max, float(th.max()))
             self.reaches_pi |= bool(np.any(np.abs(np.cos(th) + 1.0) < 1e-3))
+        for name, span in self.span.items():
+            a = arrs[name][ok]
+            if a.size:
+                span[0], span[1] = min(span[0], float(a.min())), max(span[1], float(a.max()))
         if n:
             self.last_t = float(t[-1])
         self.n += n
@@ -292,4 +297,12 @@ class _Checker:
             raise ValidationError(
                 f"theta never reaches π (range {self.th_min:.3g} to {self.th_max:.3g} rad): "
                 "the pattern must measure at θ = 0 and θ = π"
+            )
+        # QA (2026-11-30): an all-zero m_z gave a_Z = 3e-23 ± 2.7e-12 (σ from the other
+        # axis' noise), an all-zero run an internal error in the noise fit
+        dead = [f"{k} = {v[0]:.6g}" for k, v in self.span.items() if v[0] == v[1]]
+        if dead:
+            raise ValidationError(
+                f"{' and '.join(dead)} at every valid sample: a dead or zero-filled "
+                "channel, nothing to demodulate"
             )
