@@ -266,6 +266,10 @@ def test_diagnose_empty_directory_is_a_clear_error(tmp_path):
     code, _, err = invoke("diagnose", tmp_path)
     assert code == 1
     assert err.startswith(f"accal: {tmp_path}: no *.calibrated")
+    # QA (2026-11-30): a directory that is not accal's is left as it was
+    (tmp_path / "notes.txt").write_text("mine")
+    code, _, err = invoke("diagnose", tmp_path)
+    assert code == 1 and sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
 
 
 def test_close_loop_on_real_short_samples_runs_and_reports(tmp_path):

@@ -83,6 +83,20 @@ def test_plot_errors_are_one_line(archive, tmp_path):
         bias_drift_figure(many, source="t")
 
 
+def test_plot_out_is_a_png_in_an_existing_directory(archive, tmp_path):
+    """QA (2026-11-30): ``--out notes.txt`` replaced a user's file with a PNG, and
+    ``--out /nonexist/x.png`` created /nonexist."""
+    notes = tmp_path / "notes.txt"
+    notes.write_text("mine")
+    code, msg = _run("plot", archive, "--out", notes)
+    assert code == 2 and "give a file name ending in .png" in msg
+    assert notes.read_text() == "mine"
+    code, msg = _run("plot", archive, "--out", tmp_path / "nonexist" / "x.png")
+    assert code == 2 and "does not exist" in msg and not (tmp_path / "nonexist").exists()
+    code, msg = _run("plot", archive, "--out", tmp_path / "ok.PNG")
+    assert code == 0 and (tmp_path / "ok.PNG").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
 def test_one_day_is_plotted_over_a_week_not_years(archive):
     table = pd.read_parquet(archive / "bias_drift.parquet")
     one = table[table["date"] == table["date"].iloc[0]]

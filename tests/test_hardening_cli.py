@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -262,3 +263,23 @@ def test_a_dead_axis_is_refused_not_calibrated(tmp_path):
     df.to_parquet(run, index=False)
     code, msg = _run("demod", run, "--tau", "600", "--mask", "200", "--out", tmp_path / "d", "-q")
     assert code == 1 and "m_z = 0 at every valid sample: a dead or zero-filled channel" in msg
+
+
+def test_a_directory_s_broken_link_and_fifo_are_named_not_skipped(tmp_path):
+    """QA (2026-11-30): in a directory or glob input, a broken link and a FIFO under
+    day names were skipped without a word (exit 0): days of an archive on a missing
+    volume would vanish unnoticed."""
+    import shutil
+
+    d = tmp_path / "arch"
+    d.mkdir()
+    shutil.copy(SAMPLE, d / "ACC1B_2003-09-14_A_00.asc")
+    os.mkfifo(d / "ACC1B_2003-09-15_A_00.asc")
+    (d / "ACC1B_2003-09-16_A_00.asc").symlink_to(tmp_path / "missing-volume" / "x.asc")
+    for given in (d, d / "ACC1B_*"):
+        out = tmp_path / f"o{len(str(given))}"
+        code, msg = _run("grace-bias", given, "-r", "--out", out, "-q")
+        assert code == 1, msg
+        assert "ACC1B_2003-09-15_A_00.asc: not a regular file (a FIFO)" in msg
+        assert "ACC1B_2003-09-16_A_00.asc: a broken symbolic link" in msg
+        assert (out / "ACC1B_2003-09-14_A_00.calibrated.parquet").exists()

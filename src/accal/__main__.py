@@ -48,7 +48,7 @@ def _exit_interrupted() -> None:
     ignore_late_signals()
     logging.shutdown()
     for stream in (sys.stdout, sys.stderr):
-        with contextlib.suppress(OSError, ValueError):  # a closed pipe: nothing to say
+        with contextlib.suppress(OSError, ValueError, AttributeError):  # closed, or None
             stream.flush()
     os._exit(EXIT_INTERRUPTED)
 
@@ -97,10 +97,14 @@ def _exit_without_finalizing(code: object) -> None:
     elif isinstance(code, int):
         status = code
     else:  # SystemExit("message"): printed, status 1
-        sys.stderr.write(f"{code}\n")
+        if sys.stderr is not None:
+            with contextlib.suppress(OSError, ValueError):
+                sys.stderr.write(f"{code}\n")
         status = 1
     logging.shutdown()
     for stream in (sys.stdout, sys.stderr):
+        if stream is None:  # closed at start (``2>&-`` in a crontab)
+            continue
         with contextlib.suppress(OSError, ValueError):  # a closed pipe: nothing to say
             stream.flush()
     os._exit(status)

@@ -603,12 +603,14 @@ def diagnose_dir(
     (:func:`accal.closure_reports.write_closure_reports`).
     """
     directory, out_dir = Path(directory), Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
     files = sorted(
         p
         for p in directory.iterdir()
         if p.name.endswith((".calibrated.parquet", ".calibrated.csv"))
     )
+    if not files:  # not a grace-bias directory: nothing created in it (QA)
+        return []
+    out_dir.mkdir(parents=True, exist_ok=True)
     runs = {  # the options each calibrated file was made with (grace-bias's manifest)
         out: e.get("options") or {}
         for e in Manifest.load(directory).entries.values()

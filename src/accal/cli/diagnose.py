@@ -55,6 +55,12 @@ def diagnose(
     """
     from accal.batch import LockedError, OutputLock
 
+    if not any(
+        p.name.endswith((".calibrated.parquet", ".calibrated.csv")) or p.name.startswith("periods.")
+        for p in directory.iterdir()
+    ):  # QA: a directory of someone else's got .accal.lock and an empty diagnose/
+        err(_NOTHING.format(directory=directory))
+        sys.exit(1)
     # a grace-bias or demod run writing DIRECTORY now: its files are half-written (QA:
     # diagnose ran beside a live run and wrote into DIR/diagnose)
     lock = OutputLock(directory, "accal diagnose")
@@ -74,6 +80,13 @@ def diagnose(
             _diagnose_grace(directory, out, aux, alpha, quiet, plots)
     finally:
         lock.release()
+
+
+_NOTHING = (
+    "{directory}: no *.calibrated.parquet or *.calibrated.csv file (accal grace-bias output) "
+    "and no periods.parquet or periods.csv with summary.json or <stem>.summary.json (accal "
+    "demod output) to diagnose"
+)
 
 
 def _effect_line(name: str, entry: dict[str, Any]) -> str:
@@ -120,11 +133,7 @@ def _diagnose_grace(
         directory, out, aux=aux, alpha=alpha, plots=plots, progress=progress(quiet, "diagnose")
     )
     if not outcomes:
-        err(
-            f"{directory}: no *.calibrated.parquet or *.calibrated.csv file (accal grace-bias "
-            "output) and no periods.parquet or periods.csv with summary.json or "
-            "<stem>.summary.json (accal demod output) to diagnose"
-        )
+        err(_NOTHING.format(directory=directory))
         sys.exit(1)
     for o in outcomes:
         if not o.ok:

@@ -47,6 +47,11 @@ def plot_cmd(
     from accal.products import table_view
     from accal.products.archive_plot import plot_bias_drift, plot_periods
 
+    if out is not None:  # QA: a user's notes.txt replaced by a PNG, /nonexist created
+        if out.suffix.lower() != ".png":
+            usage_fail(f"--out {out}: the plot is a PNG; give a file name ending in .png")
+        if not out.parent.is_dir():
+            usage_fail(f"--out {out}: directory {out.parent} does not exist")
     try:
         path, df = table_view.load(directory, periods=True)
         if table_view.is_periods(path):
