@@ -99,15 +99,38 @@ def outliers(
         sig = 1.4826 * float(np.median(dev[finite]))  # dev >= 0: MAD about 0
         if not sig > 0:
             continue
-        # off the medians and off the lines: a sloped residual's lag behind a median is
-        # no outlier (the samples after a large step, where the null model's partial
-        # fit leaves a slope)
-        far = np.minimum(dev, dev_line) > OUTLIER_SIGMAS * sig
-        hit = _bursts_only(finite & far, x)
+        hit = finite & (dev > OUTLIER_SIGMAS * sig)
+        if segs:  # a sloped stretch inside a segment is no outlier (_on_lines)
+            hit = _on_lines(hit, dev_line, OUTLIER_SIGMAS * sig, at, pos, back, w)
+        hit = _bursts_only(hit, x)
         if 0 < hit.sum() <= OUTLIER_MAX_FRACTION * idx.size:
             pad = np.convolve(hit, np.ones(2 * OUTLIER_PAD + 1), mode="same") > 0
             bad[idx[pad]] = True
     return bad
+
+
+def _on_lines(hit, dev_line, limit, at, pos, back, w):
+    """``hit`` without its runs that lie on a side's robust line (:func:`_side_levels`).
+
+    A run of flagged samples whose every sample is within ``limit`` of the line of one
+    side, and which lies inside its segment (at least ``w − 1`` samples from either
+    end), is a sloped stretch that a median lags, not a burst: the samples after a
+    large step, where the null model's partial fit leaves a slope (a QA helper's
+    GRACE-A day: 114 samples after a 1e-8 m/s² step left out with the step's edge,
+    and the step was not found).  Runs are judged whole: unflagging part of a run
+    changed what :func:`edge_runs` and :func:`_bursts_only` make of the rest (a
+    noise-free exponential's start), and at a segment's ends the lines did not make
+    the screen more right but changed what it left out (the start of a QA day's drag
+    axis, after which a 2.4e-8 ± 4e-9 m/s² "step" on that axis passed the scan).
+    """
+    inside = np.zeros(hit.size, bool)
+    inside[at] = (pos >= w - 1) & (back >= w - 1)
+    out = hit.copy()
+    edges = np.flatnonzero(np.diff(np.r_[0, hit.astype(np.int8), 0]))
+    for a, b in zip(edges[::2], edges[1::2], strict=True):
+        if inside[a:b].all() and np.all(dev_line[a:b] <= limit):
+            out[a:b] = False
+    return out
 
 
 def _side_levels(x, segs, w, pos, back):
@@ -122,11 +145,9 @@ def _side_levels(x, segs, w, pos, back):
     both sides of it, and the samples after a 1e-8 m/s² step on a quiet axis (QA
     helper's GRACE-A day, residual 6e-10 m/s² RMS) were 10σ off the median after
     them: 114 samples left out, the step's edge with them, and the step was not
-    found.  A sample is an outlier only when it is off both (the lines alone are
-    closer on smooth data and would take the curvature of eclipse ramps for
-    outliers).  Where a side's far half window is not inside the segment, the line
-    is that side's median of ``w`` samples.  Aligned with the segments'
-    concatenation.
+    found (:func:`_on_lines` gives such runs back).  Where a side's far half window
+    is not inside the segment, the line is that side's median of ``w`` samples.
+    Aligned with the segments' concatenation.
     """
     h = (w + 1) // 2
     lo_w, hi_w = _segment_medians(x, segs, w, (w // 2, -(w // 2)))
