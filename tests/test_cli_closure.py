@@ -553,6 +553,32 @@ def test_rerun_without_close_loop_drops_the_stale_closure(tmp_path):
     assert not (out / "closure.json").exists() and not (out / "closure.md").exists()
 
 
+def test_a_rerun_after_an_interruption_restores_the_closure_reports(tmp_path):
+    """QA (2026-11-30): closure.json is merged at the end of a run; a batch killed (or
+    stopped by SIGTERM) before that, then re-run, skipped the finished days as current
+    and closure.json covered 4 or 8 of 10 days.  Their report.json has the closure."""
+    from accal.simulate.grace import write_simulated_grace
+
+    days = []
+    for k, sat in enumerate("AB"):
+        p = tmp_path / "in" / f"ACC1B_2005-01-01_{sat}_02.asc"
+        write_simulated_grace(p, date="2005-01-01", satellite=sat, duration=7200.0, seed=5 + k)
+        days.append(p)
+    out = tmp_path / "out"
+    run = CliRunner().invoke
+    args = ["grace-bias", *map(str, days), "--close-loop", "--out", str(out), "-q"]
+    assert run(main, args).exit_code == 0
+    whole = json.loads((out / "closure.json").read_text())["sources"]
+    # the state an interruption before the merge leaves: both days done, no report
+    (out / "closure.json").unlink()
+    (out / "closure.md").unlink()
+    res = run(main, args)
+    assert res.exit_code == 0, res.stderr
+    assert json.loads((out / "closure.json").read_text())["sources"] == whole
+    md = (out / "closure.md").read_text()
+    assert days[0].name in md and days[1].name in md
+
+
 def test_orbit_periodic_channel_with_a_decay_is_a_coupling_not_an_orbit_term(tmp_path):
     """QA: a 4e-9 m/s² exponential (T = 5000 s) plus a 3e-9 m/s²/K coupling to a 293 K
     temperature with an orbital cycle and a random walk (1 s samples), GRACE-FO D, half

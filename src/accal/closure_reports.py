@@ -32,6 +32,15 @@ def read_sources(jpath: Path) -> dict[str, Any]:
     return old.get("sources", {}) if isinstance(old, dict) else {}
 
 
+def _closure_of_report(path: Path) -> dict[str, Any]:
+    """The ``closure`` entry of an input's ``<stem>.report.json`` ({} if none or unreadable)."""
+    try:
+        entry = json.loads(path.read_text()).get("closure")
+    except (OSError, ValueError, AttributeError):
+        return {}
+    return entry if isinstance(entry, dict) else {}
+
+
 def write_closure_reports(
     out_dir: Path, outcomes: Sequence[FileOutcome], *, diagnose: bool = False
 ) -> tuple[Path, Path]:
@@ -55,6 +64,13 @@ def write_closure_reports(
     for o in outcomes:
         if o.ok and o.closure:
             sources[o.path.name] = o.closure
+        elif o.ok and getattr(o, "skipped", False) and o.path.name not in sources:
+            # current, but its closure is not in closure.json: the run that made it was
+            # interrupted (or killed) before the reports were merged (QA: a re-run then
+            # skipped those days and closure.json lacked 2-6 of 10): its report.json has it
+            earlier = _closure_of_report(out_dir / f"{output_stem(o.path)}.report.json")
+            if earlier:
+                sources[o.path.name] = earlier
         elif (
             o.ok
             and not diagnose
