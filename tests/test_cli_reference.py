@@ -463,3 +463,27 @@ def test_column_maps_a_table_reference_beside_an_l1b_input_without_a_warning(tmp
     # without the mapping the reference's columns are not found
     code, msg = _run(day, "--reference", ref, "--scale", "fit", "--out", tmp_path / "o2", "-q")
     assert code == 1 and "lin_accl_x" in msg, msg
+
+
+def test_a_thruster_file_of_another_day_is_said_and_not_used(tmp_path):
+    """QA (2026-11-30): a THR1B whose records are of another day was used silently: no
+    firing in the day, n_thruster 0, as if the day had none."""
+    n = 7200
+    _, _, day, ref = _day(tmp_path, n, 3)
+    shifted = pd.read_csv(day)
+    shifted["gps_time"] += 10 * 86400.0  # the same data ten days later
+    shifted.to_csv(day, index=False, float_format="%.17g")
+    moved = pd.read_csv(ref)
+    moved["gps_time"] += 10 * 86400.0
+    moved.to_csv(ref, index=False, float_format="%.17g")
+    thr = SAMPLES / "THR1B_2003-09-14_A_00.asc"
+    out = tmp_path / "out"
+    code, msg = _run(day, "--reference", ref, "--scale", "1,1,1", "--bias-basis", "poly1",
+                     "--thrusters", thr, "--out", out, "-j", "1")  # fmt: skip
+    assert code == 0, msg
+    assert (
+        "THR1B_2003-09-14_A_00.asc: its records are of 2003-09-14 to 2003-09-14 (GPS), the "
+        "data of 2003-09-24: another day's thruster file, not used" in msg
+    )
+    rep = json.loads((out / "day.report.json").read_text())["reference_fit"]["thrusters"]
+    assert rep["firings"] == 0 and "another day's thruster file" in rep["why"]

@@ -22,7 +22,7 @@ from accal.errors import ValidationError
 from accal.estimators.refbasis import parse_bias_basis
 from accal.estimators.reference import ReferenceFit, fit_reference
 from accal.io.attitude import find_attitude_file, read_attitude, rotate_to_srf
-from accal.io.thrusters import find_thruster_file, firing_mask, read_thrusters
+from accal.io.thrusters import find_thruster_file, firing_mask, foreign_day, read_thrusters
 from accal.io.writers import atomic_path
 from accal.series import AccSeries
 from accal.timescale import gps_to_date
@@ -101,6 +101,13 @@ def _thrusters(path: Path, series: AccSeries, opts: Any) -> tuple[np.ndarray, di
             )
         return none, {"file": None, "firings": 0, "n_excluded": 0, "why": why}, notes
     firings = read_thrusters(thr)
+    foreign = foreign_day(firings, series.time, thr)
+    if foreign is not None:
+        return (
+            none,
+            {"file": Path(thr).name, "firings": 0, "n_excluded": 0, "why": foreign},
+            [foreign],
+        )
     before, after = opts.thruster_margins
     mask = firing_mask(series.time, firings, before=before, after=after)
     t0, t1 = float(series.time[0]), float(series.time[-1])

@@ -9,7 +9,7 @@ import numpy as np
 from accal.closure.edgekernel import TRANSITION
 from accal.crn import is_level1b
 from accal.gracejob.options import GraceBiasOptions
-from accal.io.thrusters import find_thruster_file, firing_mask, read_thrusters
+from accal.io.thrusters import find_thruster_file, firing_mask, foreign_day, read_thrusters
 from accal.series import AccSeries
 
 __all__ = ["closure_firings"]
@@ -40,7 +40,11 @@ def closure_firings(
             "no THR1B file beside the input (or --thrusters): the firings are unknown, so "
             "a coupling to an angular acceleration is reported, not removed"
         )
-    mask = firing_mask(series.time, read_thrusters(thr), before=TRANSITION, after=TRANSITION)
+    firings = read_thrusters(thr)
+    foreign = foreign_day(firings, series.time, thr)
+    if foreign is not None:
+        return None, (f"{foreign}: a coupling to an angular acceleration is reported, not removed")
+    mask = firing_mask(series.time, firings, before=TRANSITION, after=TRANSITION)
     note = (
         f"{Path(thr).name}: {int(mask.sum())} samples within ±{TRANSITION:g} s of a thruster "
         "firing; a coupling to an angular acceleration must hold without them"

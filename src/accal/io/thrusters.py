@@ -99,6 +99,7 @@ from accal.io.grace_l1b import (
     refuse_binary,
     split_header,
 )
+from accal.timescale import gps_to_date
 
 #: The 14 thrusters in record order: attitude control branch 1 and 2, thrusters 1-6
 #: (GRACE A11-A16, A21-A26), then the two orbit-control thrusters (O11, O21).
@@ -598,6 +599,33 @@ def read_thrusters(path: str | Path) -> ThrusterFirings:
     )
 
 
+#: A THR1B file whose records all lie further than this from the data [s] is another
+#: day's (:func:`foreign_day`).
+FOREIGN_MARGIN = 3600.0
+
+
+def foreign_day(firings: ThrusterFirings, times: ArrayLike, path: str | Path) -> str | None:
+    """Why ``firings`` (read from ``path``) are not those of the data at ``times``, or None.
+
+    QA (2026-11-30): a THR1B file beside a day whose records were of another epoch was
+    used without a word: no firing fell in the day, ``n_thruster`` 0, and the fit
+    differed from the one with the day's firings.  Records only where the counters
+    change make a file's span shorter than its day, so only a file with no record
+    within :data:`FOREIGN_MARGIN` of the data is taken for another day's.
+    """
+    t = np.asarray(times, dtype=np.float64)
+    rec = firings.time
+    if t.size == 0 or rec.size == 0:
+        return None
+    if rec[-1] >= t[0] - FOREIGN_MARGIN and rec[0] <= t[-1] + FOREIGN_MARGIN:
+        return None
+    return (
+        f"{Path(path).name}: its records are of {gps_to_date(float(rec[0]))} to "
+        f"{gps_to_date(float(rec[-1]))} (GPS), the data of {gps_to_date(float(t[0]))}: "
+        "another day's thruster file, not used (the firings are unknown)"
+    )
+
+
 def firing_mask(
     times: ArrayLike,
     firings: ThrusterFirings | FiringEvents,
@@ -725,5 +753,6 @@ __all__ = [
     "ThrusterFirings",
     "find_thruster_file",
     "firing_mask",
+    "foreign_day",
     "read_thrusters",
 ]
