@@ -120,3 +120,22 @@ def test_qa_inputs_say_what_is_wrong_and_quirky_good_files_are_read(tmp_path):
         assert len(mine) == 1 and mine[0].startswith(f"accal: {path}{rest}"), err
     manifest = json.loads((out / "manifest.json").read_text())["entries"]
     assert sorted(Path(k).name for k in manifest) == sorted(p.name for p in good)
+
+
+def test_a_time_column_of_unix_seconds_is_said(tmp_path):
+    """QA (2026-11-30): Unix seconds in ``time`` were read as GPS seconds since
+    2000-01-01 12:00 and the day dated 2054-05-12, without a word."""
+    import numpy as np
+
+    t = 1_715_385_600.0 + np.arange(600.0)  # 2024-05-11 in Unix seconds
+    x = -7e-7 + 1e-10 * np.random.default_rng(0).standard_normal(t.size)
+    path = tmp_path / "swarm.csv"
+    path.write_text(
+        "time,a_cal_x\n" + "".join(f"{a:.3f},{b:.6e}\n" for a, b in zip(t, x, strict=True))
+    )
+    res = CliRunner().invoke(
+        main, ["grace-bias", str(path), "--column", "x=a_cal_x", "--out", str(tmp_path / "o")]
+    )
+    assert res.exit_code == 0, res.output
+    assert "column 'time' dates the data from 2054-05-1" in res.output
+    assert "Unix seconds count from 1970" in res.output

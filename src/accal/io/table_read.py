@@ -153,7 +153,7 @@ def read_table_series(path: str | Path, *, columns: dict[str, str] | None = None
     tname, time = _time_column(table, names, path, line_of, time_name)
     axes, acc_cols, acc = _acc_columns(table, names, columns, path, line_of)
 
-    warn: list[str] = _unit_warnings(acc, acc_cols)
+    warn: list[str] = [*_unit_warnings(acc, acc_cols), *_future_times(time, tname)]
     quality, valid, used = _quality_columns(table, names, path, first_line, line_of)
     # the other time columns are the same instants (an accal series carries time_utc
     # beside gps_time): not auxiliary channels, and not "non-numeric columns ignored"
@@ -302,6 +302,26 @@ def _acc_columns(
 #: Median |acceleration| [m/s²] above which a table's column is taken to be in another
 #: unit: electrostatic accelerometers measure below ~1e-3 m/s² (GRACE ±5e-5 m/s²).
 UNIT_WARN_ACCELERATION = 1e-2
+
+
+def _future_times(time: np.ndarray, name: str) -> list[str]:
+    """A warning when the times lie in the future (a Unix-seconds column read as GPS).
+
+    QA (2026-11-30): a ``time`` column of Unix seconds was read as GPS seconds since
+    2000-01-01 12:00 and the data were dated 2054-05-12, without a word.
+    """
+    finite = time[np.isfinite(time)]
+    if finite.size == 0:
+        return []
+    now = (np.datetime64("now", "s") - np.datetime64("2000-01-01T12:00:00", "s")).astype(float)
+    if float(finite.min()) <= now + 86_400.0:
+        return []
+    first = (np.datetime64("2000-01-01T12:00:00", "s") + int(finite.min())).astype("datetime64[D]")
+    return [
+        f"column {name!r} dates the data from {first} on, in the future: it is read as GPS "
+        "seconds since 2000-01-01 12:00:00; Unix seconds count from 1970 (give the "
+        "instants as time_utc)"
+    ]
 
 
 def _unit_warnings(acc: np.ndarray, acc_cols: list[str]) -> list[str]:
