@@ -518,6 +518,22 @@ def test_aux_holes_bridged_only_when_short_and_partial_cover_is_a_note(tmp_path)
         load_aux(other_day, t)
 
 
+def test_housekeeping_starting_a_fraction_of_its_step_late_covers_the_first_sample(tmp_path):
+    """QA (2026-11-30): the real GRACE-FO AHK1B starts 0.091 s after the ACT1B; the first
+    accelerometer sample was "outside --aux" and every such day warned that no coupling
+    was removed.  Within one housekeeping step of its ends a channel holds its value;
+    further it does not."""
+    from accal.io.writers import write_table
+    from accal.pipeline_closure import load_aux
+
+    t = 1.0e8 + np.arange(0.0, 5000.0, 1.0)
+    ta = 1.0e8 + 0.091 + np.arange(0.0, 4990.0, 1.0)  # late by 0.091 s, ends 10 s early
+    aux = write_table({"time": ta, "temperature": 293.0 + 1e-3 * (ta - ta[0])}, tmp_path / "a.csv")
+    v = load_aux(aux, t)[0]["temperature"]
+    assert v[0] == v[1] and np.isfinite(v[: ta.size + 1]).all()
+    assert np.isnan(v[ta.size + 2 :]).all()  # beyond one step of its last value: not covered
+
+
 def test_rerun_without_close_loop_drops_the_stale_closure(tmp_path):
     """QA: re-running a source without --close-loop rewrote its table rows and
     calibrated file as the plain fit, but closure.json/closure.md (and the plots) kept

@@ -69,7 +69,8 @@ def load_aux_channels(
     """Housekeeping channels of ``path`` interpolated onto ``t``, and what was left out.
 
     Holes inside a channel's span of up to :data:`AUX_MAX_BRIDGE` are bridged
-    linearly; longer holes, and the time before its first and after its last value,
+    linearly; within one housekeeping step of its ends a channel holds its value;
+    longer holes, and the time further before its first and after its last value,
     are NaN (not covered: the closure leaves those samples out).  Channels covering
     under 90 % of ``t``, or constant, are left out (named in the returned notes).
     A file that covers none of the data (another day's housekeeping) is an error;
@@ -87,11 +88,13 @@ def load_aux_channels(
     out = {}
     coverage = 0.0
     constant, short = [], []
+    step = float(np.median(np.diff(hk.time))) if hk.time.size > 1 else 0.0
     for k, v in hk.on(t).items():
         v = np.asarray(v, dtype=np.float64)
         ok = np.isfinite(v)
         if ok.any():
             _bridge_short_holes(t, v, ok)
+            _hold_ends(t, v, np.isfinite(v), step)
             ok = np.isfinite(v)
         coverage = max(coverage, float(ok.mean()))
         # a channel must cover the day and vary to be a candidate regressor
@@ -120,6 +123,24 @@ def load_aux_channels(
         notes.append(f"--aux channel(s) covering under 90 %, not tested: {', '.join(short)}")
     units = dict(getattr(hk, "units", {}) or {})
     return out, {k: str(units.get(k, "") or "") for k in out}, notes
+
+
+def _hold_ends(t: np.ndarray, v: np.ndarray, ok: np.ndarray, step: float) -> None:
+    """Hold, in place, a channel's first and last values over the samples less than one
+    housekeeping ``step`` before its first (after its last) value.
+
+    QA (2026-11-30): the real GRACE-FO AHK1B starts 0.091 s after the ACT1B's first
+    record; that one sample was "outside --aux" and every such day warned that no
+    coupling was removed (also on days where one was).
+    """
+    idx = np.flatnonzero(ok)
+    if idx.size == 0 or not step > 0:
+        return
+    a, b = idx[0], idx[-1]
+    head = t[:a] >= t[a] - step
+    v[:a][head] = v[a]
+    tail = t[b + 1 :] <= t[b] + step
+    v[b + 1 :][tail] = v[b]
 
 
 def _bridge_short_holes(t: np.ndarray, v: np.ndarray, ok: np.ndarray) -> None:
