@@ -219,7 +219,7 @@ def _validate(time, m_y, m_z, theta, aux, valid, tau, tm, theta_tol):
 class _Checker:
     """Per-chunk checks of a stream (the whole-record checks of :func:`_validate`)."""
 
-    def __init__(self, aux_names, tau, tm, fs, theta_tol=1e-6):
+    def __init__(self, aux_names, tau, tm, fs, theta_tol=1e-6, live=False):
         self.aux_names = tuple(aux_names)
         self.tau, self.tm, self.theta_tol = float(tau), float(tm), theta_tol
         self.fs = None if fs is None else float(fs)
@@ -229,7 +229,10 @@ class _Checker:
         self.last_t = None
         self.th_min, self.th_max = np.inf, -np.inf
         self.reaches_pi = False
-        self.span = {"m_y": [np.inf, -np.inf], "m_z": [np.inf, -np.inf]}  # valid samples
+        # value range of each channel's valid samples: with the noise estimated from the
+        # data (``live``) a channel must vary
+        self.live = live
+        self.span = {"m_y": [np.inf, -np.inf], "m_z": [np.inf, -np.inf]}
 
     def __call__(self, ch: DemodChunk) -> dict[str, NDArray]:
         arrs = {}
@@ -300,7 +303,8 @@ class _Checker:
             )
         # QA (2026-11-30): an all-zero m_z gave a_Z = 3e-23 ± 2.7e-12 (σ from the other
         # axis' noise), an all-zero run an internal error in the noise fit
-        dead = [f"{k} = {v[0]:.6g}" for k, v in self.span.items() if v[0] == v[1]]
+        # (a noise-free record with an a-priori PSD may be constant: exact, σ as declared)
+        dead = [f"{k} = {v[0]:.6g}" for k, v in self.span.items() if self.live and v[0] == v[1]]
         if dead:
             raise ValidationError(
                 f"{' and '.join(dead)} at every valid sample: a dead or zero-filled "

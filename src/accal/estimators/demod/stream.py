@@ -113,7 +113,7 @@ def demodulate_stream(
         min_fraction=min_fraction,
         n_lags=n_lags,
     )
-    chk = _Checker(aux_names, tau, mask, fs)
+    chk = _Checker(aux_names, tau, mask, fs, live=noise != "apriori")
     scan = _first_pass(source, chk, setup, rest_tol=rest_tol, settle=settle, noise=noise)
     st = scan.st
     layout = _pattern_of_shifts(scan.shifts)
