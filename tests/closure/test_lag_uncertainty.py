@@ -118,8 +118,11 @@ def test_lag_z_scores_over_seeds_are_calibrated():
 
 def test_a_repeating_channel_lists_the_lags_a_cycle_apart():
     """A heater cycle of 700 s with a weak coupling (W ~ 1000) fits almost alike one cycle
-    off: the other lag is listed with its ΔW, the true lag is the reported one or one of
-    the listed ones, and an alternative within ΔW ≤ 1 widens the interval over it."""
+    off.  The search takes the shortest lag a cycle apart that explains almost as much
+    (the channel's own period, 2026-11-30: it reported 1,147 s for 450 s before, with
+    450 s listed at ΔW 1.05); a lag that still fits alike is listed with its ΔW, the
+    true lag is the reported one or one of the listed ones, and an alternative within
+    ΔW ≤ 1 widens the interval over it."""
     lag, period, coef = 450.0, 700.0, 2e-10
     rng = np.random.default_rng(3)
     pre = 4000
@@ -137,8 +140,9 @@ def test_a_repeating_channel_lists_the_lags_a_cycle_apart():
     e = _coupling(res)
     d = e.details
     alts = d["lag_alternatives"]
-    assert alts, d
-    assert min(abs(abs(a["lag"] - e.lag) - period) for a in alts) < 0.1 * period, alts
+    assert abs(e.lag - lag) < 10.0, (e.lag, alts)  # the shortest of the cycle's lags
+    for a in alts:
+        assert abs(abs(a["lag"] - e.lag) / period - round(abs(a["lag"] - e.lag) / period)) < 0.1
     assert all(0.0 <= a["delta_w"] <= 4.0 for a in alts)
     assert min(abs(v - lag) for v in [e.lag] + [a["lag"] for a in alts]) < 10.0
     lo, hi = d["lag_interval"]

@@ -38,6 +38,7 @@ from accal.closure.kinds import channel_class
 from accal.closure.lagscan import (
     block_scan,
     block_spectra,
+    channel_period,
     correlate_valid,
     projected_width,
     scan_power,
@@ -204,13 +205,30 @@ def _channels(ctx: Context) -> list[tuple[str, NDArray[np.float64]]]:
     return out
 
 
+def lag_period(ctx: Context, name: str, x) -> float:
+    """The period [s] a channel's couplings repeat with, or 0: the per-period base's
+    (``options["lag_period"]``, demodulation), else the channel's own when it repeats
+    (:func:`accal.closure.lagscan.channel_period`; QA, 2026-11-30: on days whose
+    temperature was heater square waves of 1,500 s the lag came out 1,798 s for 300 s,
+    one cycle long)."""
+    period = float(ctx.options.get("lag_period") or 0.0)
+    if period > 0:
+        return period
+    key = ("channel period", name)
+    if key not in ctx.cache:
+        ctx.cache[key] = channel_period(_on_grid(ctx, name, x, 0)[1], ctx.grid.step)
+    return float(ctx.cache[key])
+
+
 def _shortest_lag(ctx: Context, name: str, x, lag: float, tc: float, top: float) -> float:
     """The shortest of ``lag − k·period`` explaining ≥ 98 % of ``lag``'s power.
 
     With a per-period base (demodulation) a channel that repeats with the period (a
     platform temperature kicked by every rotation) couples the same at lags a period
-    apart: a 120 s lag came out as 720 s, with a line and a step beside it.  A channel
-    that does not repeat keeps its lag.
+    apart: a 120 s lag came out as 720 s, with a line and a step beside it.  Without
+    one, the period is the channel's own when it repeats
+    (:func:`accal.closure.lagscan.channel_period`).  A channel that does not repeat
+    keeps its lag.
 
     Tried and not kept (docs/closure.md): the alias explaining the most, each refined
     (on a QA platform day 930.7 s for a 933 s lag where this rule gives 329.5 s, but
@@ -222,7 +240,7 @@ def _shortest_lag(ctx: Context, name: str, x, lag: float, tc: float, top: float)
     Those lags carried the refinement's low-pass of 10 s: polished (:func:`_polish`)
     the lag is 332.5 s without one and the coefficient 2.985e-8 for 3e-8.
     """
-    period = float(ctx.options.get("lag_period") or 0.0)
+    period = lag_period(ctx, name, x)
     if period <= 0 or lag < 0.5 * period:
         return lag
     here = _power_at(ctx, name, x, tc, lag)

@@ -70,6 +70,7 @@ from accal.closure.couplings import (
     _power_at,
     _powers_at,
     _used_rows,
+    lag_period,
     lag_powers,
     max_lag,
     scans_every_lag,
@@ -201,7 +202,7 @@ def lag_uncertainty(
     def powers(lgs: NDArray[np.float64]) -> NDArray[np.float64]:
         return _powers_at(ctx, name, x, tau, np.clip(lgs, 0.0, top))
 
-    period = float(ctx.options.get("lag_period") or 0.0)
+    period = lag_period(ctx, name, x)
     free = None
     if low_pass:
         tau_hi = max(2.0 * tau, tau + TAU_PROFILE_REACH)

@@ -40,10 +40,12 @@ from numpy.typing import NDArray
 from scipy import fft
 
 __all__ = [
+    "PERIODIC_ACF",
     "BlockSpectra",
     "ChannelScan",
     "block_scan",
     "block_spectra",
+    "channel_period",
     "correlate_valid",
     "projected_width",
     "scan_power",
@@ -254,3 +256,38 @@ def projected_width(grid, basis, scan: ChannelScan, big: int) -> float:
     w_r = right[0] if right.size else big - mid + 1
     w_l = left[0] if left.size else mid + 1
     return float(max(0.5 * (w_r + w_l), 1.0))
+
+
+#: Autocorrelation a channel must reach again, past its first zero, to repeat with a
+#: period (:func:`channel_period`).
+PERIODIC_ACF = 0.6
+
+
+def channel_period(values: NDArray[np.float64], step: float) -> float:
+    """The period [s] with which a channel on a uniform grid repeats, or 0.
+
+    The lag of the first local maximum of the autocorrelation past its first zero
+    crossing that reaches :data:`PERIODIC_ACF` (the channel less its least-squares
+    line; Wiener-Khinchin by FFT, zero-padded; lags up to a third of the record).  A heater cycling every 1,500-2,700 s repeats; a random walk, a drift
+    or noise does not.  Used to pick the shortest of couplings' lags a period apart
+    (:func:`accal.closure.couplings._shortest_lag`).
+    """
+    v = np.asarray(values, dtype=np.float64)
+    v = v[np.isfinite(v)]
+    n = v.size
+    if n < 16:
+        return 0.0
+    u = np.arange(n, dtype=np.float64)
+    v = v - np.polyval(np.polyfit(u, v, 1), u)
+    f = np.fft.rfft(v, 2 * n)
+    acf = np.fft.irfft(f.real**2 + f.imag**2, 2 * n)[: n // 3]
+    if not acf[0] > 0:
+        return 0.0
+    acf = acf / acf[0]
+    below = np.flatnonzero(acf < 0)
+    if below.size == 0:
+        return 0.0
+    # the first local maximum that high (not the highest: its multiples are as high)
+    a = acf[below[0] :]
+    peak = np.flatnonzero((a[1:-1] >= PERIODIC_ACF) & (a[1:-1] >= a[:-2]) & (a[1:-1] >= a[2:]))
+    return float((below[0] + 1 + peak[0]) * step) if peak.size else 0.0
