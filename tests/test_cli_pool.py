@@ -88,3 +88,34 @@ def test_without_pool_days_the_table_says_day_and_no_spectra_are_written(days, t
 def test_pool_days_one_is_a_usage_error(days, tmp_path):
     code, msg = _run(days[0], *COLS, "--pool-days", "1", "--out", tmp_path / "o")
     assert code == 2 and "pool_days must be 0 (off) or >= 2" in msg
+
+
+def test_a_day_unlike_its_pool_keeps_its_own_sigma(tmp_path):
+    """QA (2026-11-30): a day with a large slow bump got its neighbours' pooled σ (2.1e-11
+    for its own 6.0e-11 m/s², |z| 7.8).  A day whose spectrum the pool's model does not
+    describe keeps its own σ, and the table says why; the other days pool."""
+    rng = np.random.default_rng(11)
+    paths = []
+    for d in range(8):
+        t = pd.date_range(f"2024-05-{10 + d:02d}", periods=N, freq="10s")
+        e = 1e-10 * rng.standard_normal((N, 2))
+        if d == 3:  # a slow bump of 3e-10 m/s² over ~10 min
+            e += 3e-10 * np.exp(-0.5 * ((np.arange(N) - 1500) / 30.0) ** 2)[:, None]
+        p = tmp_path / f"day{d}.csv"
+        pd.DataFrame(
+            {"time_utc": t.strftime("%Y-%m-%dT%H:%M:%S"), "ax": e[:, 0] + 2e-7, "ay": e[:, 1]}
+        ).to_csv(p, index=False)
+        paths.append(p)
+    out = tmp_path / "o"
+    code, msg = _run(*paths, *COLS, "--pool-days", "8", "--out", out)
+    assert code == 0, msg
+    tab = read_bias_drift(out / "bias_drift.parquet")
+    odd = tab["source"] == "day3.csv"
+    assert tab.loc[odd, "sigma_model"].str.startswith("day (not pooled: this day's spectrum").all()
+    assert tab.loc[~odd, "sigma_model"].str.startswith("pooled: ").all()
+    # its σ is its own (the report's), larger than its neighbours' pooled ones
+    rep = json.loads((out / "day3.report.json").read_text())
+    own = {(f["axis"], f["method"]): f["bias_sigma"] for f in rep["fits"]}
+    row = tab[odd].set_index(["axis", "method"])["bias_sigma"]
+    assert all(row[k] == pytest.approx(v, rel=1e-12) for k, v in own.items())
+    assert row.min() > tab.loc[~odd, "bias_sigma"].max()

@@ -28,7 +28,15 @@ from accal.estimators.lowfreq import NoiseSpectrum, noise_spectra, pooled_covari
 from accal.estimators.trend import METHODS
 from accal.io.writers import atomic_path
 
-__all__ = ["DAY_MODEL", "day_spectra", "pool_rows", "spectra_path", "write_spectra"]
+__all__ = [
+    "DAY_EXCESS",
+    "DAY_MODEL",
+    "day_excess",
+    "day_spectra",
+    "pool_rows",
+    "spectra_path",
+    "write_spectra",
+]
 
 #: ``sigma_model`` of a row whose σ is the day's own binned-periodogram estimate.
 DAY_MODEL = "day"
@@ -162,18 +170,48 @@ def pool_rows(
                 continue
             cov, info = pooled_covariance(spectrum(rows[i]), [spectrum(rows[j]) for j in near])
             if cov is None:
-                why = (
-                    f"{info['lines']} bins of spectral lines (an orbit signal: use --reference)"
-                    if info["lines"]
-                    else f"misfit of {info['model']}, p {info['p_misfit']:.1g}"
-                )
+                if info.get("day_differs"):
+                    why = (
+                        f"this day's spectrum differs from the pool's {info['model']}, "
+                        f"p {info['p_day']:.1g}"
+                    )
+                elif info["lines"]:
+                    why = (
+                        f"{info['lines']} bins of spectral lines (an orbit signal: use --reference)"
+                    )
+                else:
+                    why = f"misfit of {info['model']}, p {info['p_misfit']:.1g}"
                 rows[i]["sigma_model"] = f"{DAY_MODEL} (not pooled: {why})"
+                continue
+            day_cov = cache[rows[i]["source"]][(rows[i]["axis"], rows[i]["method"])][1]
+            excess = day_excess(day_cov, cov)
+            if excess > DAY_EXCESS:
+                rows[i]["sigma_model"] = (
+                    f"{DAY_MODEL} (not pooled: its own σ is {excess:.1f}x the pool's "
+                    f"{info['model']}: low-frequency power the other days lack)"
+                )
                 continue
             _set_sigmas(rows[i], cov)
             rows[i]["sigma_model"] = f"pooled: {info['model']}"
             rows[i]["sigma_days"] = int(info["days"])
             n_pooled += 1
     return n_pooled
+
+
+#: A day whose own bias or drift σ exceeds the pooled one by this factor keeps its own.
+#: Under a stationary noise the day's σ rests on ~6 degrees of freedom at the lowest
+#: bins and is, if anything, too small under red noise: 2.5× the pool's happens with
+#: p ~ 1e-5.  QA (2026-11-30): a day with a slow bump of ~1e-9 m/s² got the pool's
+#: 2.1e-11 m/s² for its own 6.0e-11 and was 7.8σ off.
+DAY_EXCESS = 2.5
+
+
+def day_excess(day_cov: np.ndarray, pooled: np.ndarray) -> float:
+    """Largest ratio of the day's own bias/drift σ to the pooled one."""
+    d = np.sqrt(np.clip(np.diag(day_cov)[:2], 0.0, None))
+    p = np.sqrt(np.clip(np.diag(pooled)[:2], 0.0, None))
+    ok = p > 0
+    return float(np.max(d[ok] / p[ok])) if ok.any() else 0.0
 
 
 def _set_sigmas(row: dict[str, Any], cov: np.ndarray) -> None:

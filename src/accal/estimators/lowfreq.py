@@ -136,6 +136,10 @@ LINE_NEIGHBOURS = 2
 #: Log-spaced groups of the goodness-of-fit test, and its flag level.
 GOF_GROUPS = 10
 GOF_P_FLAG = 1e-4
+#: Weight of one day's deviance in the test of the day against its pool (:func:`_day_misfit`):
+#: ½ for the correlation of neighbouring tapered ordinates (each is worth about half an
+#: independent one; at weight 1 stationary days were flagged on 1-4 % of the pools).
+DAY_GOF_WEIGHT = 0.5
 
 
 # --------------------------------------------------------------------- the models
@@ -497,6 +501,22 @@ def _fit_band(p, w, h, kinds, weight):
     return fit, _gof(p[use], fit["E"][use], weight), int(np.sum(~use))
 
 
+def _day_misfit(target: NoiseSpectrum, fit: dict, band: int) -> float:
+    """The goodness-of-fit tail (:func:`_gof`, one day) of ``target``'s own periodogram
+    over bins ``1 … band`` against the pooled model's expectation on its layout.
+
+    The pool assumes one stationary process over its days.  A QA pass found what that
+    costs when it is not so: a day with a large slow bump got its neighbours' σ (2.1e-11
+    against its own 6.0e-11 m/s², |z| 7.8), and days whose white level differed 3× were
+    pooled as one (the noisy days' σ 1.1–1.2× too small).  Such a day keeps its own σ.
+    """
+    s = fit["s"]
+    e = fit["W"] * target.white[:band]
+    if s >= 0:
+        e = e + fit["A"] * target.shapes[s, :band]
+    return _gof(target.periodogram[:band], np.maximum(e, 1e-300), DAY_GOF_WEIGHT)
+
+
 def pooled_covariance(
     target: NoiseSpectrum, others: Sequence[NoiseSpectrum] = ()
 ) -> tuple[NDArray[np.float64] | None, dict[str, Any]]:
@@ -536,6 +556,12 @@ def pooled_covariance(
             break
     if info["misfit"]:
         return None, info
+    if len(days) > 1:  # the pool's model must describe this day too (QA, 2026-11-30)
+        day_p = _day_misfit(target, fit, band)
+        info["p_day"] = day_p
+        if day_p < GOF_P_FLAG:
+            info.update(misfit=True, day_differs=True)
+            return None, info
     cov = _refined(target, fit, kinds) if fit["s"] >= 0 else fit["W"] * target.white_cov
     cov = 0.5 * (cov + cov.T)  # exactly symmetric (the products above are to rounding)
     # floor: white noise at the band's mean level (not the residual's variance: content
