@@ -37,11 +37,12 @@ def _drag_day(t: np.ndarray) -> np.ndarray:
 
 @settings(max_examples=40, deadline=None)
 @given(
-    steps=st.lists(st.floats(0.5, 40.0), min_size=4, max_size=60),
+    steps=st.lists(st.floats(4.0, 9.9), min_size=4, max_size=60),  # no step a hole
     coef=st.lists(st.floats(-1e-6, 1e-6), min_size=4, max_size=4),
 )
 def test_a_cubic_is_reproduced_at_every_epoch_between_any_samples(steps, coef):
-    """A not-a-knot cubic spline reproduces a cubic polynomial exactly, whatever the spacing."""
+    """A not-a-knot cubic spline reproduces a cubic polynomial exactly, whatever the spacing
+    (irregular, no step over 2.5 times the median: longer ones are holes)."""
     tr = np.cumsum(np.r_[0.0, steps])
     u = (tr - tr.mean()) / np.ptp(tr)
     poly = np.polynomial.Polynomial(coef)
@@ -88,3 +89,19 @@ def test_invalid_and_non_finite_reference_samples_are_not_interpolated_through()
     # the data next to the flagged sample are left out (no bridge through it), the rest kept
     assert not out.valid[(t > tr[99]) & (t < tr[101])].any()
     assert np.isfinite(out.acc[out.valid]).all() and out.valid.sum() > 0.98 * t.size
+
+
+def test_a_hole_is_not_bridged_by_the_spline_and_its_edges_stay_exact():
+    """A 10 s reference with a 10-minute hole: a spline per stretch (a cubic over the
+    hole would ring into its edges); inside the hole NaN."""
+    t = np.arange(0.0, 20_001.0)
+    truth = _drag_day(t)
+    tr = t[::10]
+    keep = (tr < 8_000.0) | (tr > 8_600.0)
+    got = interpolate_reference(_reference(tr[keep], truth[::10][keep]), ("x", "y", "z"), t)
+    hole = (t > 7_990.0) & (t < 8_610.0)
+    assert np.isnan(got[hole]).all() and np.isfinite(got[~hole]).all()
+    near = ((t > 7_900.0) & (t <= 7_990.0)) | ((t >= 8_610.0) & (t < 8_700.0))
+    lin = np.column_stack([np.interp(t, tr, truth[::10, i]) for i in range(3)])
+    err, err_lin = np.abs(got[near] - truth[near]), np.abs(lin[near] - truth[near])
+    assert np.all(err.max(0)[:2] < err_lin.max(0)[:2])  # better than linear up to the hole

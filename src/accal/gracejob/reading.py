@@ -86,8 +86,10 @@ def interpolate_reference(reference: AccSeries, axes: tuple[str, ...], t: np.nda
 
     A not-a-knot cubic spline (de Boor, *A Practical Guide to Splines*, 1978, ch. IV;
     :class:`scipy.interpolate.CubicSpline`) through the reference's valid, finite
-    samples within :data:`SPLINE_MARGIN` samples of ``t``'s span; epochs outside them
-    are NaN (their samples are left out by :func:`subtract_reference`).  Linear
+    samples within :data:`SPLINE_MARGIN` samples of ``t``'s span, one per stretch
+    between holes longer than :data:`REFERENCE_MAX_BRIDGE` steps; epochs outside them
+    (and inside a hole) are NaN (their samples are left out by
+    :func:`subtract_reference`).  Linear
     interpolation, used before, attenuates what varies between two reference
     samples: measured on a drag-like signal with eclipses, a 10 s reference gave
     scale errors of −1.1e-5 to −3.4e-5 linearly and 8e-10 to 4e-6 with the spline
@@ -105,12 +107,22 @@ def interpolate_reference(reference: AccSeries, axes: tuple[str, ...], t: np.nda
     out = np.full((t.size, len(axes)), np.nan)
     if xs.size < 2:
         return out
-    inside = (t >= xs[0]) & (t <= xs[-1])
-    if xs.size < 4 or np.any(np.diff(xs) <= 0):  # too few for a cubic, or repeated epochs
+    if np.any(np.diff(xs) <= 0):  # repeated epochs: no spline (linear, as the reader keeps)
+        inside = (t >= xs[0]) & (t <= xs[-1])
         for i in range(len(axes)):
             out[inside, i] = np.interp(t[inside], xs, ys[:, i])
         return out
-    out[inside] = CubicSpline(xs, ys, axis=0)(t[inside])
+    # one spline per stretch without a hole (a hole's cubic would ring into its edges;
+    # the data inside a hole are left out by subtract_reference)
+    gaps = np.diff(xs) > REFERENCE_MAX_BRIDGE * float(np.median(np.diff(xs)))
+    edges = np.r_[0, np.flatnonzero(gaps) + 1, xs.size]
+    for a, b in zip(edges[:-1], edges[1:], strict=True):
+        inside = (t >= xs[a]) & (t <= xs[b - 1])
+        if b - a >= 4:
+            out[inside] = CubicSpline(xs[a:b], ys[a:b], axis=0)(t[inside])
+        elif b - a >= 2:  # too few for a cubic
+            for i in range(len(axes)):
+                out[inside, i] = np.interp(t[inside], xs[a:b], ys[a:b, i])
     return out
 
 
