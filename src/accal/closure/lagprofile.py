@@ -70,7 +70,6 @@ from accal.closure.couplings import (
     _power_at,
     _powers_at,
     _used_rows,
-    lag_period,
     lag_powers,
     max_lag,
     scans_every_lag,
@@ -202,7 +201,10 @@ def lag_uncertainty(
     def powers(lgs: NDArray[np.float64]) -> NDArray[np.float64]:
         return _powers_at(ctx, name, x, tau, np.clip(lgs, 0.0, top))
 
-    period = lag_period(ctx, name, x)
+    # the per-period base's period only: a channel's own cycle (lag_period) picks the
+    # search's lag, but aliases a cycle apart here would widen the interval over lags
+    # the data tell apart (ΔW 314 on test_coupling_sigma_ridge's line channel)
+    period = float(ctx.options.get("lag_period") or 0.0)
     free = None
     if low_pass:
         tau_hi = max(2.0 * tau, tau + TAU_PROFILE_REACH)
