@@ -175,7 +175,7 @@ def subtract_reference(series: AccSeries, reference: AccSeries, ref_path: Path) 
     n_ref_bad = int(np.count_nonzero(series.valid & ~ref_ok & ~outside))
     valid = series.valid & ref_ok
     n_out = int(np.count_nonzero(outside & valid))
-    valid &= ~outside & np.isfinite(ref_on_t).all(1)
+    valid &= ~outside
     step = float(np.median(np.diff(tr)))
     j = np.clip(np.searchsorted(tr, t, side="right"), 1, tr.size - 1)
     lo, hi = tr[j - 1], tr[j]
@@ -209,6 +209,7 @@ def subtract_reference(series: AccSeries, reference: AccSeries, ref_path: Path) 
             f"{REFERENCE_MAX_BRIDGE * step:g} s: {n_hole} sample(s) of the data "
             f"({n_hole / t.size:.1%}) fall in them and are left out of the fit"
         )
+    valid &= np.isfinite(ref_on_t).all(1)  # the spline's holes are those above, or none
     out = series.replace(acc=np.column_stack(cols), valid=valid).with_history(
         f"accal {__version__}: subtract_reference({ref_path.name})"
     )
