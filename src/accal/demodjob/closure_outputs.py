@@ -10,6 +10,7 @@ import numpy as np
 from accal import __version__
 from accal.closure_reports import read_sources
 from accal.demodjob.outputs import json_text
+from accal.estimators.demod import sigma_factor
 from accal.io.writers import atomic_path
 
 
@@ -27,10 +28,9 @@ def misfit_of(res: Any) -> Any:
     its misfit (``NoiseReport.misfit``, 1 elsewhere), for :func:`apply_closure`; None
     without one."""
     rep = getattr(res, "noise", None)
-    misfit = getattr(rep, "misfit", None)
-    if not misfit or getattr(rep, "source", "") != "data":
+    if rep is None or not (rep.misfit or rep.level) or getattr(rep, "source", "") != "data":
         return None
-    return np.array([misfit.get(int(k), 1.0) for k in res.period_index], dtype=np.float64)
+    return np.array([sigma_factor(rep, int(k)) for k in res.period_index], dtype=np.float64)
 
 
 def apply_closure(

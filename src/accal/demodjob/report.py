@@ -128,6 +128,12 @@ def _noise_warnings(summary: dict[str, Any]) -> list[str]:
             f"sigma from the a-priori PSD ({nz['apriori']}), not from the data: "
             f"{nz['reason']}; check it against the instrument's noise"
         )
+    if nz.get("level_scaled"):
+        w.append(
+            f"the noise level near 2/tau changes over the run (blocks of 12 periods span "
+            f"{nz['level_spread']:.3g} x in power): each period's sigma is scaled by its "
+            "block's level (the PSD's shape is the run's)"
+        )
     if ratio is not None and not 1 / NOISE_RATIO_WARN <= ratio <= NOISE_RATIO_WARN:
         what = (
             "sigma, Rd and GLS use the PSD from the data"

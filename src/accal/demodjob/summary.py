@@ -210,6 +210,8 @@ def noise_summary(res: Any, opts: DemodOptions) -> dict[str, Any]:
         "level_data": float(np.sqrt(fit.psd(f2))) if fit is not None else None,
         "sigma_ratio": rep.sigma_ratio if fit is not None else None,
         "misfit_periods": {str(k): v for k, v in sorted(getattr(rep, "misfit", {}).items())},
+        "level_spread": float(getattr(rep, "level_spread", 1.0)),
+        "level_scaled": bool(getattr(rep, "level", {})),
         "psd_data": (
             {"f": fit.nodes.tolist(), "S": fit.values.tolist()} if fit is not None else None
         ),
@@ -217,7 +219,10 @@ def noise_summary(res: Any, opts: DemodOptions) -> dict[str, Any]:
         "sigma from the a-priori PSD / sigma from the data's PSD, same estimator; psd_data: "
         "the PSD estimated from the residual, f [Hz], S [m^2/s^4/Hz] (usable as --psd FILE); "
         "misfit_periods: period -> root of its residual power near 2/tau over the median "
-        "period's, left out of the noise estimate, its sigma scaled by that factor",
+        "period's, left out of the noise estimate, its sigma scaled by that factor; "
+        "level_spread: highest over lowest noise power near 2/tau of blocks of 12 periods; "
+        "level_scaled: the level changes over the run and each period's sigma is scaled by "
+        "the root of its block's level over the run's",
     }
 
 

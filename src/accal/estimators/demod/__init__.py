@@ -87,7 +87,7 @@ from .series import (
     signal_leakage,
     with_signal_leak,
 )
-from .stream import REQUIRED_COLUMNS, demodulate, demodulate_stream, demodulate_table
+from .stream import REQUIRED_COLUMNS, demodulate, demodulate_stream, demodulate_table, sigma_factor
 from .uncertainty import BudgetResult, budget, tau_scan
 
 __all__ = [
@@ -106,6 +106,7 @@ __all__ = [
     "signal_leakage",
     "period_leakage",
     "with_signal_leak",
+    "sigma_factor",
     "SignalLeakage",
     "REQUIRED_COLUMNS",
     "MIN_PERIODS_DATA_PSD",

@@ -56,6 +56,12 @@ class NoiseReport:
         ``2/τ`` is over :data:`~accal.estimators.demod.residual.MISFIT_POWER` times the
         median period's (a feature the model lacks, not noise): period index → the
         square root of that ratio, by which their σ is scaled.
+    level : dict of int to float
+        When the noise level near ``2/τ`` changes over the run: period index → the
+        root of its block's level over the run's, by which its σ is scaled
+        (:func:`~accal.estimators.demod.residual.level_factors`); empty otherwise.
+    level_spread : float
+        Highest over lowest block level of the run (1 for a stationary one).
     """
 
     source: str
@@ -69,6 +75,8 @@ class NoiseReport:
     band: tuple[float, float] = (float("nan"), float("nan"))
     n_periods: int = 0
     misfit: dict[int, float] = field(default_factory=dict)
+    level: dict[int, float] = field(default_factory=dict)
+    level_spread: float = 1.0
 
 
 @dataclass(frozen=True)

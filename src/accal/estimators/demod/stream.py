@@ -135,10 +135,18 @@ def _with_misfit(res: DemodResult) -> DemodResult:
     describes, and their values hold what made it (QA, a 1e-9 m/s² signal step inside
     a rotation: that period's error 1.6e-11 m/s², 32 times the noise σ)."""
     rep = res.noise
-    if rep is None or not rep.misfit or rep.source != "data":
+    if rep is None or not (rep.misfit or rep.level) or rep.source != "data":
         return res
-    f = np.array([rep.misfit.get(int(k), 1.0) for k in res.period_index], dtype=np.float64)
+    f = np.array([sigma_factor(rep, int(k)) for k in res.period_index], dtype=np.float64)
     return replace(res, sigma_Y=res.sigma_Y * f, sigma_Z=res.sigma_Z * f)
+
+
+def sigma_factor(rep: NoiseReport, period: int) -> float:
+    """The factor a period's σ is scaled by: its misfit's, else its block's noise level
+    (:func:`accal.estimators.demod.residual.level_factors`), else 1."""
+    if period in rep.misfit:
+        return rep.misfit[period]
+    return rep.level.get(period, 1.0)
 
 
 def _solver_used(
