@@ -46,11 +46,18 @@ def _exit_interrupted() -> None:
     every ``finally`` block (temporaries removed, lock released) has run.
     """
     ignore_late_signals()
+    _flush()
+    os._exit(EXIT_INTERRUPTED)
+
+
+def _flush() -> None:
+    """Flush the log handlers and the standard streams before an ``os._exit``."""
     logging.shutdown()
     for stream in (sys.stdout, sys.stderr):
-        with contextlib.suppress(OSError, ValueError, AttributeError):  # closed, or None
+        if stream is None:  # closed at start (``2>&-`` in a crontab)
+            continue
+        with contextlib.suppress(OSError, ValueError):  # a closed pipe: nothing to say
             stream.flush()
-    os._exit(EXIT_INTERRUPTED)
 
 
 def main() -> None:
@@ -101,12 +108,7 @@ def _exit_without_finalizing(code: object) -> None:
             with contextlib.suppress(OSError, ValueError):
                 sys.stderr.write(f"{code}\n")
         status = 1
-    logging.shutdown()
-    for stream in (sys.stdout, sys.stderr):
-        if stream is None:  # closed at start (``2>&-`` in a crontab)
-            continue
-        with contextlib.suppress(OSError, ValueError):  # a closed pipe: nothing to say
-            stream.flush()
+    _flush()
     os._exit(status)
 
 

@@ -33,7 +33,7 @@ from accal.errors import AccalError, ValidationError
 from accal.gracejob.firings import closure_firings
 from accal.gracejob.options import GraceBiasOptions
 from accal.gracejob.outcome import FileOutcome, internal_error
-from accal.gracejob.outputs import output_stem
+from accal.gracejob.outputs import CALIBRATED_SUFFIXES, output_stem
 from accal.gracejob.reading import read_input, subtract_reference
 from accal.io.housekeeping import read_housekeeping
 from accal.io.tables import read_table_series
@@ -624,11 +624,7 @@ def diagnose_dir(
     (:func:`accal.closure_reports.write_closure_reports`).
     """
     directory, out_dir = Path(directory), Path(out_dir)
-    files = sorted(
-        p
-        for p in directory.iterdir()
-        if p.name.endswith((".calibrated.parquet", ".calibrated.csv"))
-    )
+    files = sorted(p for p in directory.iterdir() if p.name.endswith(CALIBRATED_SUFFIXES))
     if not files:  # not a grace-bias directory: nothing created in it (QA)
         return []
     out_dir.mkdir(parents=True, exist_ok=True)

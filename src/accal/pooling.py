@@ -151,11 +151,14 @@ def pool_rows(
             cache[src] = read_spectra(spectra_path(out_dir, stem)) if stem else {}
         return cache[src].get((row["axis"], row["method"]), (None, None))[0]
 
+    def own_cov(row):  # the day's own covariance, saved beside its spectrum
+        return cache[row["source"]][(row["axis"], row["method"])][1]
+
     groups: dict[tuple, list[int]] = {}
     for i, r in enumerate(rows):
         r["sigma_model"], r["sigma_days"] = DAY_MODEL, 1
         if spectrum(r) is not None:  # back to the day's own σ (an earlier run pooled it)
-            _set_sigmas(r, cache[r["source"]][(r["axis"], r["method"])][1])
+            _set_sigmas(r, own_cov(r))
         groups.setdefault((r["satellite"], r["axis"], r["method"], r["order"]), []).append(i)
     n_pooled = 0
     for members in groups.values():
@@ -183,8 +186,7 @@ def pool_rows(
                     why = f"misfit of {info['model']}, p {info['p_misfit']:.1g}"
                 rows[i]["sigma_model"] = f"{DAY_MODEL} (not pooled: {why})"
                 continue
-            day_cov = cache[rows[i]["source"]][(rows[i]["axis"], rows[i]["method"])][1]
-            excess = day_excess(day_cov, cov)
+            excess = day_excess(own_cov(rows[i]), cov)
             if excess > DAY_EXCESS:
                 rows[i]["sigma_model"] = (
                     f"{DAY_MODEL} (not pooled: its own σ is {excess:.1f}x the pool's "

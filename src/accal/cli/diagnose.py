@@ -54,9 +54,10 @@ def diagnose(
     grace-bias with --close-loop to calibrate with the extended model.
     """
     from accal.batch import LockedError, OutputLock
+    from accal.gracejob.outputs import CALIBRATED_SUFFIXES
 
     if not any(
-        p.name.endswith((".calibrated.parquet", ".calibrated.csv")) or p.name.startswith("periods.")
+        p.name.endswith(CALIBRATED_SUFFIXES) or p.name.startswith("periods.")
         for p in directory.iterdir()
     ):  # QA: a directory of someone else's got .accal.lock and an empty diagnose/
         err(_NOTHING.format(directory=directory))

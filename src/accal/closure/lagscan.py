@@ -268,8 +268,9 @@ def channel_period(values: NDArray[np.float64], step: float) -> float:
 
     The lag of the first local maximum of the autocorrelation past its first zero
     crossing that reaches :data:`PERIODIC_ACF` (the channel less its least-squares
-    line; Wiener-Khinchin by FFT, zero-padded; lags up to a third of the record).  A heater cycling every 1,500-2,700 s repeats; a random walk, a drift
-    or noise does not.  Used to pick the shortest of couplings' lags a period apart
+    line; Wiener-Khinchin by FFT, zero-padded; lags up to a third of the record).  A
+    heater cycling every 1,500-2,700 s repeats; a random walk, a drift or noise does
+    not.  Used to pick the shortest of couplings' lags a period apart
     (:func:`accal.closure.couplings._shortest_lag`).
     """
     v = np.asarray(values, dtype=np.float64)
@@ -279,8 +280,8 @@ def channel_period(values: NDArray[np.float64], step: float) -> float:
         return 0.0
     u = np.arange(n, dtype=np.float64)
     v = v - np.polyval(np.polyfit(u, v, 1), u)
-    f = np.fft.rfft(v, 2 * n)
-    acf = np.fft.irfft(f.real**2 + f.imag**2, 2 * n)[: n // 3]
+    f = fft.rfft(v, 2 * n)
+    acf = fft.irfft(f.real**2 + f.imag**2, 2 * n)[: n // 3]
     if not acf[0] > 0:
         return 0.0
     acf = acf / acf[0]

@@ -86,7 +86,8 @@ def outliers(
             pos = np.concatenate([np.arange(seg.size) for seg in segs])
             back = np.concatenate([np.arange(seg.size)[::-1] for seg in segs])
             levels = _segment_medians(x, segs, w, (w // 2, -(w // 2)))
-            for out, (lo, hi) in ((dev, levels), (dev_line, _side_levels(x, segs, w, pos, back))):
+            lines = _side_levels(x, segs, w, pos, back, levels)
+            for out, (lo, hi) in ((dev, levels), (dev_line, lines)):
                 left, right = np.abs(x[at] - lo), np.abs(x[at] - hi)
                 # near a segment's start the left window is not inside it, near its end
                 # the right
@@ -133,7 +134,7 @@ def _on_lines(hit, dev_line, limit, at, pos, back, w):
     return out
 
 
-def _side_levels(x, segs, w, pos, back):
+def _side_levels(x, segs, w, pos, back, levels):
     """The line each side of every sample sets for it, for :func:`outliers`.
 
     Each side's robust line, carried to the sample: the medians of the two half
@@ -146,11 +147,12 @@ def _side_levels(x, segs, w, pos, back):
     helper's GRACE-A day, residual 6e-10 m/s² RMS) were 10σ off the median after
     them: 114 samples left out, the step's edge with them, and the step was not
     found (:func:`_on_lines` gives such runs back).  Where a side's far half window
-    is not inside the segment, the line is that side's median of ``w`` samples.
-    Aligned with the segments' concatenation.
+    is not inside the segment, the line is that side's median of ``w`` samples
+    (``levels``, the one-sided medians :func:`outliers` has).  Aligned with the
+    segments' concatenation.
     """
     h = (w + 1) // 2
-    lo_w, hi_w = _segment_medians(x, segs, w, (w // 2, -(w // 2)))
+    lo_w, hi_w = levels
     near_l, near_r = _segment_medians(x, segs, h, (h // 2, -(h // 2)))
     k = np.arange(pos.size)
     far_l = np.where(pos >= h, near_l[np.maximum(k - h, 0)], np.nan)

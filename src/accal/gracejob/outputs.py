@@ -19,6 +19,9 @@ from accal.io.writers import atomic_path, json_default
 from accal.products.utc import utc_unit, with_utc_columns
 from accal.series import AccSeries
 
+#: Name endings of the calibrated series files (``<stem>.calibrated.<fmt>``).
+CALIBRATED_SUFFIXES = (".calibrated.parquet", ".calibrated.csv")
+
 #: The GPS-seconds column of the calibrated series, which the files carry in UTC too.
 CALIBRATED_TIME_COLUMNS = ("gps_time",)
 

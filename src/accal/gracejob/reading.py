@@ -9,6 +9,7 @@ file-name checks (:func:`name_mismatch`) of every input.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from pathlib import Path
 from typing import Any
 
@@ -46,10 +47,14 @@ def read_input(path: Path, opts: GraceBiasOptions) -> AccSeries:
 
 def _reference_is_table(opts: GraceBiasOptions) -> bool:
     """Whether ``--reference`` is a table (``--column`` maps its columns too)."""
-    if opts.reference is None:
-        return False
+    return opts.reference is not None and _is_table(str(opts.reference))
+
+
+@functools.lru_cache(maxsize=4)
+def _is_table(path: str) -> bool:
+    """Whether ``path`` is sniffed as a table (once per process: every input asks)."""
     try:
-        return detect_format(Path(opts.reference)) == "table"
+        return detect_format(Path(path)) == "table"
     except (AccalError, OSError):  # its reader says what is wrong with it
         return False
 

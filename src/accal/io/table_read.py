@@ -49,6 +49,7 @@ from accal.io.table_columns import (
 from accal.io.table_meta import _aux_dtype, _series_meta
 from accal.io.table_parse import column_list, read_csv_table, read_parquet_table
 from accal.series import UNITS, AccSeries, ReadReport
+from accal.timescale import EPOCH, gps_to_date
 
 #: Time columns, in order of preference; the first two are GPS seconds, the last UTC.
 TIME_COLUMNS = ("gps_time", "time", "time_utc")
@@ -313,12 +314,13 @@ def _future_times(time: np.ndarray, name: str) -> list[str]:
     finite = time[np.isfinite(time)]
     if finite.size == 0:
         return []
-    now = (np.datetime64("now", "s") - np.datetime64("2000-01-01T12:00:00", "s")).astype(float)
+    # GPS-UTC (18 s) does not matter at a day's margin
+    now = (np.datetime64("now", "ns") - EPOCH) / np.timedelta64(1, "s")
     if float(finite.min()) <= now + 86_400.0:
         return []
-    first = (np.datetime64("2000-01-01T12:00:00", "s") + int(finite.min())).astype("datetime64[D]")
     return [
-        f"column {name!r} dates the data from {first} on, in the future: it is read as GPS "
+        f"column {name!r} dates the data from {gps_to_date(float(finite.min()))} on, in the "
+        "future: it is read as GPS "
         "seconds since 2000-01-01 12:00:00; Unix seconds count from 1970 (give the "
         "instants as time_utc)"
     ]
