@@ -250,6 +250,30 @@ class OrbitTemplate:
             x = _gram_orthonormal(x)
         return x
 
+    def remainder(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``x`` (n, m) less its projection on the whole template (the base's
+        polynomials ``G`` and the dense parts included)."""
+        x = np.asarray(x, dtype=np.float64)
+        x = x - np.asarray(self._qst @ self.coef(x))
+        if self.qs.shape[1]:
+            x = x - self.qs @ (self.qs.T @ x)
+        return x
+
+    def add_columns(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Append the columns ``x`` (n, m) to the dense parts, orthonormalised (their
+        directions inside the template dropped); the orthonormal columns added.
+
+        For signal series beyond the orbit profile (:mod:`accal.closure.proxybasis`);
+        they do not count with the bias (:attr:`smooth_columns`).
+        """
+        q = self._orthonormal(np.asarray(x, dtype=np.float64))
+        if q.shape[1]:
+            self.qs = np.column_stack([self.qs, q])
+            self.rank += q.shape[1]
+            self._step_norms.clear()
+            self._spectra.clear()
+        return q
+
     @property
     def smooth_columns(self) -> NDArray[np.float64]:
         """The smooth curve's orthonormal columns (with the bias, for identifiability)."""

@@ -274,6 +274,11 @@ def to_markdown(
             f"(knots {sm.get('knot_spacing', 0):.0f} s) and {sm.get('modulated_harmonics', 0)} "
             "orbit harmonics with slowly changing amplitude"
             + (
+                f"; the unexplained signal of {', '.join(sm['proxies_in_model'])} in the model"
+                if sm.get("proxies_in_model")
+                else ""
+            )
+            + (
                 f"; instrument effects must stay significant given the other axes "
                 f"({', '.join(sm['signal_proxies'])})"
                 if sm.get("signal_proxies")

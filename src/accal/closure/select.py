@@ -51,7 +51,6 @@ from accal.closure.epochprofile import add_epoch_uncertainties
 from accal.closure.final import covariances, describe, refer_exponentials
 from accal.closure.inputs import (
     MIN_SAMPLES,
-    base_design,
     prepared_inputs,
     screen_channels,
     usable_proxies,
@@ -60,10 +59,10 @@ from accal.closure.jumpfit import add_jump_covariance, jump_columns, jump_effect
 from accal.closure.jumps import jumps_first
 from accal.closure.kinds import EFFECT_NAMES, kind_of, unit_of
 from accal.closure.lagprofile import add_lag_uncertainties
-from accal.closure.nuisance import OrbitTemplate, template_order
+from accal.closure.nullsetup import NullSetup
 from accal.closure.outliers import OUTLIER_SIGMAS, edge_runs, outliers, spikes
-from accal.closure.period import estimate_period
-from accal.closure.residual import characterise, make_grid, projection_bias
+from accal.closure.proxybasis import leak_cov
+from accal.closure.residual import characterise
 from accal.closure.results import BaseCoefficient, ClosureResult, Effect
 from accal.closure.search import Found, Search, run, swap_smooth
 from accal.closure.significance import describe_smooth, unexplained_test
@@ -121,13 +120,15 @@ def _families(builders, orbit_period, template: bool) -> int:
     return max(n, 1)
 
 
-def _signal_model(template, proxies: SignalProxies | None) -> dict[str, Any]:
-    """``ClosureResult.signal_model``: the template's description and the proxies used."""
+def _signal_model(template, proxies: SignalProxies | None, in_model=()) -> dict[str, Any]:
+    """``ClosureResult.signal_model``: the template's description, the proxies used and
+    those whose unexplained signal is in the model (``in_model``)."""
     if template is None:
         return {}
     out = dict(template.describe())
     if proxies is not None:
         out["signal_proxies"] = list(proxies.names)
+        out["proxies_in_model"] = list(in_model)
     return out
 
 
@@ -322,7 +323,7 @@ def close_loop(
         signal_model = "orbit" if ref_all is None and orbit_period else "none"
     builders = _resolve(candidates)
     fixed = bool(opts.get("orbit_period_fixed", False))
-    setup = _Setup(t_all, y_all, base, chan_all, names, signal_model, orbit_period, fixed)
+    setup = NullSetup(t_all, y_all, base, chan_all, names, signal_model, orbit_period, fixed)
     st, use, notes, families, jumps, proxies = _null_model(
         setup, use, aux_all, builders, alpha, proxies_all
     )
@@ -333,6 +334,7 @@ def close_loop(
     search, st = _select(make, st, use, setup, max_effects, stop)
     st, jumps = _given_back(search, setup, st, jumps)
     reject_boxes(search, *_final_fit(search, setup, st)[::2])
+    st = _proxies_off_effects(search, setup, st)
     floored = stop is not None and stop(search)
     noise_psd = _updated_psd(search, setup, st, jumps.jumps, use, noise_psd, psd_update)
     return _finish(
@@ -340,7 +342,7 @@ def close_loop(
     )
 
 
-def _given_back(search: Search, setup: _Setup, st, scan):
+def _given_back(search: Search, setup: NullSetup, st, scan):
     """Edge-scan jumps a least-squares step gives back put back into the data
     (:func:`~accal.closure.boxes.give_back`), the null fit rebuilt: ``(st, scan)``."""
     kept = give_back(search, *_final_fit(search, setup, st)[::2], scan.jumps)
@@ -354,7 +356,21 @@ def _given_back(search: Search, setup: _Setup, st, scan):
     return st, dataclasses.replace(scan, jumps=kept)
 
 
-def _updated_psd(search: Search, setup: _Setup, st, jumps, use, noise_psd, psd_update):
+def _proxies_off_effects(search: Search, setup: NullSetup, st):
+    """The null fit rebuilt with the proxies orthogonal to the effects found
+    (:func:`~accal.closure.proxybasis.add_proxies`' ``exclude``), for the final fit."""
+    if not setup.proxies_in_model or not search.found:
+        return st
+    setup.proxy_exclude = np.column_stack([f.model_prop.columns for f in search.found])
+    st = setup.build(search.use)
+    search.basis0, search.beta = st["basis0"], st["beta"]
+    search.drop_caches()
+    search.cache["template"] = st["template"]
+    search.cache["null_basis"] = st["basis0"]
+    return st
+
+
+def _updated_psd(search: Search, setup: NullSetup, st, jumps, use, noise_psd, psd_update):
     """``noise_psd``, or what ``psd_update`` (:func:`close_loop`) returns for the fitted
     sum of the effects found (NaN where the search left samples out: a channel made
     up there) when the search found any."""
@@ -377,21 +393,25 @@ def _search_settings(st, builders, families: int, alpha: float) -> dict[str, Any
     }
 
 
-def _null_model(setup: _Setup, use, aux_all, builders, alpha: float, proxies_all):
+def _null_model(setup: NullSetup, use, aux_all, builders, alpha: float, proxies_all):
     """The null fit on the samples left after spikes and outliers, with the bias jumps
     told by their edge taken out: ``(st, use, notes, families, jumps, proxies)``
     (``proxies``: the usable signal proxies, with an orbit template only)."""
     use, n_spikes = _spikes_out(setup.t_all, setup.y_all, setup.chan_all, use)
+    proxy_notes: dict[tuple, dict[str, Any]] = {}
+    setup.proxies = usable_proxies(proxies_all, use, proxy_notes)
     st = setup.build(use)
     st, use, notes = _leave_out_outliers(setup, st, use, aux_all, n_spikes)
     families = _families(builders, setup.orbit_period, st["template"] is not None)
-    proxies = usable_proxies(proxies_all, use, notes) if st["template"] else None
+    proxies = setup.proxies if st["template"] else None
+    if proxies is not None:
+        notes.update(proxy_notes)
     level = alpha / (2.0 * families)
     st, jumps = _take_out_jumps(setup, st, use, builders, level, notes, proxies)
     return st, use, notes, families, jumps, proxies
 
 
-def _select(make, st, use, setup: _Setup, max_effects: int, stop) -> tuple[Search, dict]:
+def _select(make, st, use, setup: NullSetup, max_effects: int, stop) -> tuple[Search, dict]:
     """The search on the null fit ``st`` and its ``(search, st)``.
 
     Paused at the first coupling whose channel's history is unknown at used samples:
@@ -443,7 +463,7 @@ def _select(make, st, use, setup: _Setup, max_effects: int, stop) -> tuple[Searc
     return search, st
 
 
-def _final_fit(search: Search, setup: _Setup, st) -> tuple[list[Found], Basis, Any]:
+def _final_fit(search: Search, setup: NullSetup, st) -> tuple[list[Found], Basis, Any]:
     """The final model's effects, its basis (the null model plus their columns) and fit."""
     final = _final_effects(search)
     basis = st["basis0"]
@@ -452,7 +472,7 @@ def _final_fit(search: Search, setup: _Setup, st) -> tuple[list[Found], Basis, A
     return final, basis, basis.fit(setup.y_all[search.use])
 
 
-def _effects_sum(search: Search, setup: _Setup, st, jumps) -> NDArray[np.float64]:
+def _effects_sum(search: Search, setup: NullSetup, st, jumps) -> NDArray[np.float64]:
     """The effects found, fitted as in :func:`_finish`, summed on every sample (NaN as 0)."""
     final, _, fit = _final_fit(search, setup, st)
     cols = [f.prop.columns for f in final]
@@ -462,7 +482,7 @@ def _effects_sum(search: Search, setup: _Setup, st, jumps) -> NDArray[np.float64
     return out
 
 
-def _take_out_jumps(setup: _Setup, st, use, builders, level: float, notes: dict, proxies):
+def _take_out_jumps(setup: NullSetup, st, use, builders, level: float, notes: dict, proxies):
     """Bias jumps told by their edge (:func:`~accal.closure.jumps.jumps_first`), taken
     out of ``setup.y_all`` (the rest of the search runs on that) with the null fit
     rebuilt: ``(st, scan)``."""
@@ -476,7 +496,7 @@ def _take_out_jumps(setup: _Setup, st, use, builders, level: float, notes: dict,
 
 
 def _search_maker(
-    setup: _Setup, builders, alpha: float, opts, aux_all, ref_all, proxies, notes
+    setup: NullSetup, builders, alpha: float, opts, aux_all, ref_all, proxies, notes
 ) -> Callable[[dict[str, Any], NDArray[np.bool_]], Search]:
     """``make(st, use)``: a fresh :class:`Search` of the null fit ``st`` on the samples ``use``."""
     t_all, y_all, orbit_period = setup.t_all, setup.y_all, setup.orbit_period
@@ -538,86 +558,6 @@ def _floor_stop(resolution: float | None) -> Callable[[Search], bool] | None:
     return at_floor
 
 
-class _Setup:
-    """Builds the null model for a set of used samples (again after outliers are left out)."""
-
-    def __init__(self, t_all, y_all, base, chan_all, names, signal_model, orbit_period, fixed):
-        self.t_all, self.y_all, self.base = t_all, y_all, base
-        self.y_all_given = y_all  # the data as given (y_all: less the jumps taken out)
-        self.chan_all, self.names = chan_all, names
-        self.signal_model, self.orbit_period = signal_model, orbit_period
-        self.period_fixed = bool(fixed)
-        self.t_first: float | None = None  # the first used sample of the first build
-
-    def build(self, use: NDArray[np.bool_]) -> dict[str, Any]:
-        t_u, y_u = self.t_all[use], self.y_all[use]
-        chan_u = None if self.chan_all is None else self.chan_all[use]
-        t0 = float(t_u[0])
-        if self.t_first is None:
-            self.t_first = t0
-        span = float(t_u[-1] - t_u[0]) or 1.0
-        grid = make_grid(t_u, chan_u)
-        bbase = base_design(self.base, self.t_all, t0, span, self.chan_all, self.names)
-        plain = Basis(bbase.block[use], bbase.columns[use], n_blocks=bbase.n_blocks)
-        if plain.rank_total + 10 > t_u.size:
-            raise ValidationError(
-                f"the base has rank {plain.rank_total} for {t_u.size} usable samples: "
-                "nothing is left to test"
-            )
-        template, basis0, bias0, signal0 = None, plain, None, None
-        if (
-            self.signal_model == "orbit"
-            and self.orbit_period
-            and chan_u is None
-            and bbase.n_blocks == 1
-            and isinstance(self.base, str)
-            and span >= 2.0 * self.orbit_period
-        ):
-            period = float(self.orbit_period)
-            if not self.period_fixed:
-                period = estimate_period(t_u, plain.fit(y_u).resid, period)
-                # the second build (outliers left out) keeps it
-                self.orbit_period, self.period_fixed = period, True
-            degree = int(self.base[-1]) if isinstance(self.base, str) else -1
-            template = OrbitTemplate(t_u, period, template_order(span / period), degree)
-            basis0 = Basis(bbase.block[use], bbase.columns[use], nuisance=template)
-            # the smooth curve counts with the bias for identifiability: a sharp step is
-            # told from the signal by its edge, however much of it the curve takes
-            smooth = template.smooth_columns
-            bias0 = plain.extend(smooth) if smooth.shape[1] else plain
-        elif bbase.signal:
-            keep = [j for j in range(bbase.p) if j not in bbase.signal]
-            bias0 = Basis(bbase.block[use], bbase.columns[use][:, keep], n_blocks=bbase.n_blocks)
-            if bbase.signal_extension is not None:
-                ext = np.column_stack([bbase.columns, bbase.signal_extension])[use]
-                signal0 = Basis(bbase.block[use], ext, n_blocks=bbase.n_blocks)
-        fit0, lev0, beta = _null_fit(basis0, grid, y_u)
-        return {
-            "t_u": t_u,
-            "chan_u": chan_u,
-            "t0": t0,
-            "span": span,
-            "grid": grid,
-            "bbase": bbase,
-            "basis0": basis0,
-            "bias0": bias0,
-            "signal0": signal0,
-            "template": template,
-            "fit0": fit0,
-            "lev0": lev0,
-            "beta": beta,
-        }
-
-
-def _null_fit(basis0: Basis, grid, y_u):
-    """The null model's fit, leverage spectrum and projection bias: (fit, lev, beta)."""
-    fit0 = basis0.fit(y_u)
-    lev_white = basis0.leverage(grid)
-    beta = projection_bias(grid, basis0, fit0.resid, lev_white)
-    nc = np.maximum(grid.counts, 1.0)[:, None]
-    return fit0, nc - (nc - lev_white) * beta, beta
-
-
 def _split(cols, chan_u, names):
     if not names:
         return cols
@@ -662,7 +602,7 @@ def _rejected_effect(f: Found, channel_units: dict[str, str]) -> Effect:
 
 
 def _finish(
-    search: Search, setup: _Setup, st, knots, noise_psd, floored, considered, opts, jumps=()
+    search: Search, setup: NullSetup, st, knots, noise_psd, floored, considered, opts, jumps=()
 ):
     """The final fit and the :class:`ClosureResult`.
 
@@ -678,6 +618,8 @@ def _finish(
     ps = [search.p_final(i, final) for i in range(len(final))] if final else []
     lev = search.leverage(basis)
     cov = covariances(grid, basis, fit, lev, basis0, fit0, st["lev0"], noise_psd)
+    if setup.proxy_exclude is not None and fit.k_kept:
+        cov["v_ww"] = cov["v_ww"] + leak_cov(grid, st["template"], fit.w_gamma, search.y_u)
     jcols = jump_columns(t_all, tuple(jumps))
     add_jump_covariance(cov, basis, jcols[use], tuple(jumps))
     units = dict(opts.get("channel_units", {}))
@@ -759,7 +701,7 @@ def _finish(
         eliminated=tuple(_rejected_effect(f, units) for f in search.removed),
         rejected=tuple(_rejected_effect(f, units) for f in search.rejected),
         considered=tuple(considered),
-        signal_model=_signal_model(st["template"], search.proxies),
+        signal_model=_signal_model(st["template"], search.proxies, setup.proxies_in_model),
     )
 
 
