@@ -226,17 +226,26 @@ def test_bad_mask_is_a_usage_error(run_csv, tmp_path, mask):
     assert code == 2 and "must be in [0, tau) s" in err and "Traceback" not in err
 
 
-def test_colliding_stems_are_a_usage_error_before_anything_runs(run_csv, tmp_path):
-    for d in ("a", "b"):
+def test_colliding_stems_fail_the_second_input_alone(run_csv, tmp_path):
+    """As grace-bias: the first input of a stem runs, the others fail with one line each
+    (QA, 2026-11-30: two runs of one stem in two directories stopped the whole call)."""
+    for d in ("a", "b", "c"):
         (tmp_path / d).mkdir()
-        (tmp_path / d / "run.csv").write_bytes(run_csv.read_bytes())
+    a = tmp_path / "a" / "run.csv"
+    b = tmp_path / "b" / "run.csv"
+    other = tmp_path / "c" / "other.csv"
+    for p in (a, b, other):
+        p.write_bytes(run_csv.read_bytes())
     out = tmp_path / "out"
-    code, _, err = invoke(
-        "demod", tmp_path / "a" / "run.csv", tmp_path / "b" / "run.csv",
-        "--tau", TAU, "--mask", MASK, "--out", out,
-    )  # fmt: skip
-    assert code == 2 and "would both write run.summary.json" in err
-    assert not out.exists()
+    code, _, err = invoke("demod", a, b, other, "--tau", TAU, "--mask", MASK, "--out", out)
+    assert code == 1, err
+    (line,) = [ln for ln in err.splitlines() if "would write the same outputs" in ln]
+    assert str(b) in line and str(a) in line and "run.summary.*" in line
+    assert (out / "run.summary.json").exists() and (out / "other.summary.json").exists()
+    summary = json.loads((out / "run.summary.json").read_text())
+    assert Path(summary["source"]) == a  # the first of the stem
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert len(manifest["entries"]) == 2
 
 
 # --- 5. second QA pass: cumulative --out, formats, σ, jitter, warnings, messages ----------

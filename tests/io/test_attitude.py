@@ -399,18 +399,46 @@ def _line_of(path, k):
     return header_lines(path) + 1 + k
 
 
-def test_non_unit_quaternion_names_file_and_line(tmp_path):
+def test_one_non_unit_quaternion_is_left_out_with_a_warning_naming_its_line(tmp_path):
+    """QA (2026-11-30): one changed digit in one record failed the whole day."""
+
     def edit(lines):
         f = lines[7].split(b" ")
         f[3] = b"0.7001211159413961"  # one changed digit of quatangle
         lines[7] = b" ".join(f)
         return lines
 
+    whole = read_attitude(SCA["A"])
+    p = write_variant(tmp_path, "A", edit)
+    a = read_attitude(p)
+    line = _line_of(SCA["A"], 7)
+    assert line == 36
+    (w,) = [w for w in a.warnings if "damaged" in w]
+    assert "1 record(s)" in w and f"line {line}" in w and "\n" not in w
+    assert len(a) == len(whole) - 1
+    assert whole.time[7] not in a.time
+    assert a.meta["attitude"]["max_norm_deviation"] < NORM_TOLERANCE
+    # the rotation at the lost epoch is interpolated across the hole (SLERP over 10 s;
+    # the real attitude's control wobble leaves 2e-4 rad): within 1e-3 of the record's
+    v = np.array([[-2e-7, 3e-8, 1e-8]])
+    at = whole.time[7:8]
+    exact = rotate_to_srf(at, v, whole)
+    assert np.linalg.norm(rotate_to_srf(at, v, a) - exact) < 1e-3 * np.linalg.norm(v)
+
+
+def test_many_non_unit_quaternions_are_an_error_naming_the_first_line(tmp_path):
+    def edit(lines):
+        for k in range(3, 20, 2):
+            f = lines[k].split(b" ")
+            f[3] = b"0.7" + f[3][3:][::-1]  # scrambled digits
+            lines[k] = b" ".join(f)
+        return lines
+
     p = write_variant(tmp_path, "A", edit)
     with pytest.raises(FormatError) as exc:
         read_attitude(p)
-    line = _line_of(SCA["A"], 7)
-    assert exc.value.line == line == 36
+    line = _line_of(SCA["A"], 3)
+    assert exc.value.line == line
     assert str(exc.value).startswith(f"{p}:{line}: quaternion norm ")
     assert "not a rotation" in str(exc.value) and "\n" not in str(exc.value)
 

@@ -72,7 +72,7 @@ def demod(
     from accal.run_sampling import too_coarse_for_tau
 
     try:
-        output_paths(runs, out, fmt)  # a run given twice, colliding stems: usage errors
+        output_paths(runs, out, fmt)  # a run given twice: a usage error
         opts = DemodOptions(
             tau=tau,
             mask=mask,

@@ -19,7 +19,8 @@ options, solver and Rd of every source are in the table metadata
 Summaries: with one input ``DIR/summary.json`` and ``DIR/summary.md``; with
 several ``DIR/<stem>.summary.json`` and ``DIR/<stem>.summary.md`` where ``<stem>``
 is the input name without its suffixes (``run1.csv.gz`` → ``run1``); inputs whose
-stems collide are refused before anything runs.  One input into a directory that
+stems collide (or whose file names do) fail, each but the first, with a one-line
+message; the others run.  One input into a directory that
 already holds the summary of another run (one run per call, from cron) is named
 after its stem too, so the earlier run's summary stays beside its rows.  An input's summaries and its
 rows in the table are written together (temporary files renamed at the end):
@@ -69,6 +70,7 @@ from accal.demodjob.outputs import (
     json_text,
     output_paths,
     remove_stale_summaries,
+    stem_clashes,
 )
 from accal.demodjob.reading import estimate, load_psd
 from accal.demodjob.report import summary_markdown, summary_warnings
@@ -294,8 +296,8 @@ def run_demod(
     Raises
     ------
     AccalError
-        Before any input is processed: unreadable ``--psd`` table, colliding output
-        names, a periods table of the other ``--format`` in ``out_dir``, another
+        Before any input is processed: unreadable ``--psd`` table, a run given
+        twice, a periods table of the other ``--format`` in ``out_dir``, another
         run holding ``out_dir`` (:class:`accal.batch.LockedError`).
     accal.batch.Interrupted
         On Ctrl-C, after writing the runs that finished.
@@ -305,7 +307,7 @@ def run_demod(
     check_output_format(out_dir, opts.fmt)
     if psd is None:
         psd = load_psd(opts.psd)
-    job = DemodJob(opts, psd, dict(zip(paths, targets, strict=True)))
+    job = DemodJob(opts, psd, dict(zip(paths, targets, strict=True)), stem_clashes(paths))
     return run_batch(
         job,
         paths,
@@ -331,12 +333,22 @@ class DemodJob(BatchJob):
     targets : dict
         ``(periods table, summary.json, summary.md)`` of each run
         (:func:`accal.demodjob.outputs.output_paths`).
+    clashes : dict, optional
+        The runs another run of the call writes the outputs of, with their messages
+        (:func:`accal.demodjob.outputs.stem_clashes`): failed, not run.
     """
 
     command = "demod"
 
-    def __init__(self, opts: DemodOptions, psd: Any, targets: dict[Path, Targets]) -> None:
+    def __init__(
+        self,
+        opts: DemodOptions,
+        psd: Any,
+        targets: dict[Path, Targets],
+        clashes: dict[Path, str] | None = None,
+    ) -> None:
         self.opts, self.psd, self.targets = opts, psd, targets
+        self.clashes = dict(clashes or {})
 
     def options_key(self) -> dict[str, Any]:
         """:func:`options_key` of the options."""
@@ -377,6 +389,10 @@ class DemodJob(BatchJob):
         todo: list[int] = []
         tabled: collections.Counter[str] | None = None
         for i, p in enumerate(paths):
+            if p in self.clashes:  # another input of this call writes its outputs
+                results[i] = RunOutcome(p, False, self.clashes[p])
+                rlog(f"FAILED {self.clashes[p]}")
+                continue
             entry = manifest.entries.get(manifest.key(p)) if not force else None
             names = {t.name for t in self.targets[p]}
             if (

@@ -61,28 +61,48 @@ def output_paths(paths: Sequence[Path], out_dir: Path, fmt: str) -> list[tuple[P
     """``(periods table, summary.json, summary.md)`` of each input (see :mod:`accal.demodjob.batch`).
 
     The periods table is the same cumulative ``DIR/periods.<fmt>`` for every input.
+    An input whose summaries (or ``source`` rows) another input of the call would
+    write too gets the same names: :func:`stem_clashes` says which, and the batch
+    fails it alone.
 
     Raises
     ------
     ValidationError
-        A run given twice (:func:`check_distinct_runs`), or two inputs that would
-        write the same summaries (or the same ``source`` rows).
+        A run given twice (:func:`check_distinct_runs`).
     """
     check_distinct_runs(paths)
     table = out_dir / f"periods.{fmt}"
     if len(paths) == 1 and not _summaries_of_other_runs(out_dir, Path(paths[0]).name):
         return [(table, out_dir / "summary.json", out_dir / "summary.md")]
-    seen: dict[str, Path] = {}
     out = []
     for p in paths:
         stem = output_stem(Path(p))
-        other = seen.get(stem) or next((q for q in seen.values() if q.name == Path(p).name), None)
-        if other is not None:
-            raise ValidationError(
-                f"inputs {other} and {p} would both write {stem}.summary.json; rename one"
-            )
-        seen[stem] = Path(p)
         out.append((table, out_dir / f"{stem}.summary.json", out_dir / f"{stem}.summary.md"))
+    return out
+
+
+def stem_clashes(paths: Sequence[Path]) -> dict[Path, str]:
+    """The inputs that would write the summaries (``<stem>.summary.*``) or the ``source``
+    rows (the file name) of an earlier input of the same call, each with its one-line
+    message; the first of each stem is not among them.
+
+    ``grace-bias`` fails such an input alone; ``demod`` refused the whole call before
+    2026-11-30 (QA: two days of one stem in two directories stopped an archive run).
+    """
+    seen: dict[str, Path] = {}
+    names: dict[str, Path] = {}
+    out = {}
+    for p in map(Path, paths):
+        stem = output_stem(p)
+        other = seen.get(stem) or names.get(p.name)
+        if other is not None:
+            out[p] = (
+                f"{p}: would write the same outputs ({stem}.summary.*, rows of source "
+                f"{p.name}) as {other} in this run; rename one or give it another --out"
+            )
+            continue
+        seen[stem] = p
+        names[p.name] = p
     return out
 
 

@@ -138,6 +138,10 @@ COLUMN_UNITS = {
 #: :class:`~accal.errors.FormatError`.  Accepted quaternions are used normalised
 #: (scipy normalises), so the tolerance does not bound the rotation's accuracy.
 NORM_TOLERANCE = 1e-6
+#: Largest share of an SCA1B file's records that may be damaged (quaternion norm off 1
+#: by more than :data:`NORM_TOLERANCE`) and be left out with a warning; more is an error
+#: (QA, 2026-11-30: one changed digit in one record failed the whole day).
+MAX_DAMAGED_SHARE = 0.1
 
 #: Default largest spacing [s] of two attitude records that is interpolated across.
 #: Twice the 5-s sampling of GRACE SCA1B (one missing record is bridged) and ten
@@ -636,14 +640,29 @@ def _parse_records(data: bytes, first_line: int, path: Path) -> dict[str, Any]:
     norm = np.linalg.norm(quat, axis=1)
     dev = np.abs(norm - 1.0)
     bad = np.flatnonzero(dev > NORM_TOLERANCE)
+    damaged = ""
     if bad.size:
         i = int(bad[0])
-        raise FormatError(
+        what = (
             f"quaternion norm {norm[i]:.10g} differs from 1 by {dev[i]:.3g} "
-            f"(more than {NORM_TOLERANCE:g}): not a rotation, a damaged record",
-            path,
-            lines[i],
+            f"(more than {NORM_TOLERANCE:g}): not a rotation, a damaged record"
         )
+        if bad.size > MAX_DAMAGED_SHARE * len(rows):
+            raise FormatError(
+                what + (f" ({bad.size} of {len(rows)} records)" if bad.size > 1 else ""),
+                path,
+                lines[i],
+            )
+        damaged = (
+            f"{bad.size} record(s) with a quaternion norm off 1 by more than "
+            f"{NORM_TOLERANCE:g} (damaged; the first at line {lines[i]}, norm "
+            f"{norm[i]:.10g}) left out: the attitude is interpolated across them"
+        )
+        keep = np.ones(len(rows), dtype=bool)
+        keep[bad] = False
+        time, ids, sca_id, quat = time[keep], ids[keep], sca_id[keep], quat[keep]
+        qual_rss, qualflg, dev = qual_rss[keep], qualflg[keep], dev[keep]
+        lines = [ln for ln, k in zip(lines, keep, strict=True) if k]
     return {
         "time": time,
         "ids": ids,
@@ -653,6 +672,7 @@ def _parse_records(data: bytes, first_line: int, path: Path) -> dict[str, Any]:
         "qualflg": qualflg,
         "lines": lines,
         "max_norm_deviation": float(dev.max()),
+        "damaged": damaged,
     }
 
 
@@ -679,8 +699,9 @@ def read_attitude(path: str | Path) -> Attitude:
         Missing, unreadable, empty or corrupt file, no end-of-header marker, a
         malformed record (wrong number of columns, a value that is not a number,
         a non-finite value, a satellite id other than A-D, a ``qualflg`` that is not
-        8 characters of 0/1), a quaternion whose norm differs from 1 by more than
-        :data:`NORM_TOLERANCE`, epochs outside 1980-2100 or far outside the header's
+        8 characters of 0/1), quaternions whose norm differs from 1 by more than
+        :data:`NORM_TOLERANCE` in more than :data:`MAX_DAMAGED_SHARE` of the records
+        (fewer are left out with a warning), epochs outside 1980-2100 or far outside the header's
         day, mixed satellite ids.  The message names the file and, for a record,
         its 1-based line (``str(err)`` is ``FILE:LINE: what is wrong``).
     UnsupportedFormatError
@@ -714,6 +735,8 @@ def read_attitude(path: str | Path) -> Attitude:
         )
         letter = uniq[0]
     lines = cols["lines"]
+    if cols["damaged"]:
+        warn.append(cols["damaged"])
     warn += check_header_span(cols["time"], info["span"], path, lambda i: lines[i])
     arrays = {k: cols[k] for k in ("quat", "sca_id", "qual_rss", "qualflg")}
     t = tidy(cols["time"], arrays)
@@ -749,6 +772,7 @@ def read_attitude(path: str | Path) -> Attitude:
 __all__ = [
     "COLUMNS",
     "DEFAULT_MAX_GAP",
+    "MAX_DAMAGED_SHARE",
     "NORM_TOLERANCE",
     "Attitude",
     "continuous_quaternions",
