@@ -154,6 +154,28 @@ def table_rows(
     return rows
 
 
+def _short_record_warning(series: AccSeries, use: np.ndarray, opts: GraceBiasOptions) -> AccSeries:
+    """``series`` with a warning when its used samples span less than one orbit.
+
+    The σ come from the record's own residual spectrum, which holds no noise slower
+    than the record: on 10 samples of a real GRACE-FO day they were 20× smaller than
+    on its 100 (QA, 2026-11-30: "~1000× smaller than a full day's, with only a
+    record-count warning"), and such a bias is the mean level of a few seconds, not a
+    day's bias.
+    """
+    t = series.time[use]
+    span = float(t[-1] - t[0]) if t.size else 0.0
+    orbit = float(opts.orbit_period or 5600.0)
+    if span >= orbit:
+        return series
+    return with_warnings(
+        series,
+        f"short record ({t.size} used samples over {span:.0f} s, under one orbit of "
+        f"{orbit:.0f} s): the bias is its mean level and its σ count only the noise within "
+        "it; noise slower than the record is not in them (not comparable to a day's)",
+    )
+
+
 def row_source(
     path: Path, series: AccSeries, opts: GraceBiasOptions, date: str, ax: str
 ) -> dict[str, Any]:
@@ -288,6 +310,7 @@ def fit_input(
         opts.methods[0],
         scale,
     )
+    series = _short_record_warning(series, use, opts)
     return InputFit(
         series=series,
         fit_series=fit_series,
