@@ -664,7 +664,7 @@ def auxiliary(ctx: Context) -> list[Proposal]:
     top_all = max_lag(ctx.options, ctx.span)
     fine = scans_every_lag(ctx)
     fft_path = not fine and ctx.n_chan == 1 and "null_basis" in ctx.cache
-    best = None  # (power, name, x, tc, lag, lag_step, top)
+    bests: dict[str, tuple] = {}  # per channel: (power, name, x, tc, lag, lag_step, top)
     mult = 0.0
     shared = []  # squares of coupled channels: on their channel's path, not searched
     for name, x in _channels(ctx):
@@ -698,8 +698,9 @@ def auxiliary(ctx: Context) -> list[Proposal]:
                 m = _raw_multiplicity(ctx, name, tc, hp, big, top)
             mult += m
             j = int(np.argmax(pw))
-            if best is None or pw[j] > best[0]:
-                best = (float(pw[j]), name, x, tc, float(lags[j] * step), lag_step, top)
+            if name not in bests or pw[j] > bests[name][0]:
+                bests[name] = (float(pw[j]), name, x, tc, float(lags[j] * step), lag_step, top)
+    best = _best_channel(ctx, bests, max(mult, 1.0))
     # a coupled channel's square on the same lag and low-pass (one thermal path: a
     # nonlinear sensitivity to the temperature the linear term sees), one member each;
     # the family then holds the search's best and these (Bonferroni over them)
@@ -720,6 +721,33 @@ def auxiliary(ctx: Context) -> list[Proposal]:
     lag = _shortest_lag(ctx, name, x, lag, tc, top)
     lag, tc = _polish(ctx, name, x, lag, tc, top)
     return _proposals(ctx, name, x, tc, lag, mult) + sq_props
+
+
+def _best_channel(ctx: Context, bests: dict[str, tuple], mult: float) -> tuple | None:
+    """The channel whose best grid coupling is the most significant, with its entry.
+
+    Each channel's best (τ, lag) is the one explaining the most residual power; across
+    channels that favours slow, heavily low-passed columns under a red residual, whose
+    power is mostly noise: on a QA storm day the voltage ``Vp`` at a 2,760 s lag and τ
+    1,000 s (Wald statistic 5.3) was proposed at every step, and the temperature's
+    1e-8 m/s²/K coupling at 282 s (statistic 43 when offered alone) never was.  So the
+    channels' bests are compared by their Wald test
+    (:func:`~accal.closure.significance.test_proposal`, the single column), the larger
+    power breaking ties.
+    """
+    live = [b for b in bests.values() if b[0] > 0]
+    if len(live) < 2:
+        return live[0] if live else None
+    n_fam = int(ctx.options.get("families", 1))
+
+    def score(b: tuple) -> tuple[float, float]:
+        prop = _proposals(ctx, b[1], b[2], b[3], b[4], mult)[0]
+        tested = test_proposal(
+            ctx.grid, ctx.basis, ctx.residual, ctx.leverage, prop, ctx.use, n_fam
+        )
+        return (tested.log_p if tested is not None else 0.0, -b[0])
+
+    return min(live, key=score)
 
 
 def _worth_refining(ctx: Context, props: list[Proposal]) -> bool:
