@@ -224,8 +224,8 @@ def lag_period(ctx: Context, name: str, x) -> float:
 
 
 def _seen_part(ctx: Context, values: NDArray[np.float64]) -> NDArray[np.float64]:
-    """The part of a channel (on the grid, from its first point) the coupling test sees: the channel at the
-    used samples less its projection on the model (NaN in gaps).
+    """The part of a channel (on the grid, from its first point) the coupling test sees:
+    the channel at the used samples less its projection on the model (NaN in gaps).
 
     A heater's cycles of 0.04 K under a 0.5 K daily drift and 0.05-0.25 K of
     orbit-periodic temperature do not make the whole channel repeat (autocorrelation

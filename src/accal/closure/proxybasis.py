@@ -12,15 +12,16 @@ the drag acceleration is ``a = −½ ρ (C_D A / m) |v_r| v_r`` (Doornbos 2012,
 eq. 2.12), so ``a_y = a_x · v_r,y / v_r,x`` and likewise for z.
 
 Left in the residual, they are the "noise" a coupling, step or drift on that axis
-is tested against: on a QA helper's GRACE-FO day (3 % density wiggles) a 1e-8
-m/s²/K coupling to a heater-cycled temperature on z had a Wald statistic of 21
-(not significant), 84 without the wiggles (2026-11-30).  :func:`with_proxies` adds
-to the null model's template, for each other axis ``p``, the part ``r`` of it that the null
-model does not explain and ``r·cos(2πt/P)``, ``r·sin(2πt/P)`` (a ratio changing
-once per revolution), all orthogonal to the null model.  The null model's own
-coefficients (bias, drift, template) do not move; an instrument effect of one axis
-cannot hide in them: their coefficients are pinned by the whole day's signal, and
-the other axes do not carry this axis's instrument.
+is tested against: on a QA helper's GRACE-FO day (3 % density wiggles) a 5e-9
+m/s²/K coupling to a heater-cycled temperature on z had a Wald statistic of 21-23
+at its lag (not significant among the search's 124 members), 125 with the along-track
+axis' unexplained signal in the model (2026-11-30).  :func:`add_proxies` adds to the
+null model's template, for each other axis ``p``, the part ``r`` of it that the null
+model does not explain and ``r·cos(2πt/P)``, ``r·sin(2πt/P)`` (a ratio changing once
+per revolution), all orthogonal to the null model.  The null model's own coefficients
+(bias, drift, template) do not move.  An instrument effect of the target cannot hide
+in the proxies' columns, whose coefficients the whole day's signal pins; one that
+the proxy carries too is handled by ``exclude`` and :func:`leak_cov`.
 """
 
 from __future__ import annotations
