@@ -13,7 +13,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from accal.closure.couplings import _polish, _power_at
+from accal.closure.couplings import _polish
+from accal.closure.couplingscan import power_at
 
 from .conftest import block_context
 
@@ -57,11 +58,11 @@ def test_a_real_low_pass_is_refined_not_dropped():
     """A coupling through a 40 s low-pass, started off the optimum: the Gauss-Newton
     steps reach it (the power at the start is below the optimum's)."""
     ctx, x = _context(2, lag=200.0, tau=40.0)
-    p_start = _power_at(ctx, "x", x, 20.0, 215.0)
+    p_start = power_at(ctx, "x", x, 20.0, 215.0)
     lag, tc = _polish(ctx, "x", x, 215.0, 20.0, 600.0)
     assert tc == pytest.approx(40.0, rel=0.1)  # measured 40.0 s
     assert lag == pytest.approx(200.0, abs=2.0)  # measured 200.0 s
-    assert _power_at(ctx, "x", x, tc, lag) > p_start
+    assert power_at(ctx, "x", x, tc, lag) > p_start
 
 
 @settings(max_examples=25, deadline=None)
@@ -73,7 +74,7 @@ def test_a_real_low_pass_is_refined_not_dropped():
 def test_polish_never_explains_less(lag0, tc0, seed):
     """Whatever the start, the polished (lag, τ) explains at least the start's power."""
     ctx, x = _context(seed, lag=150.0, tau=30.0, n_blocks=8)
-    p0 = _power_at(ctx, "x", x, tc0, lag0)
+    p0 = power_at(ctx, "x", x, tc0, lag0)
     lag, tc = _polish(ctx, "x", x, lag0, tc0, 590.0)
     assert 0.0 <= lag <= 590.0 and tc >= 0.0
-    assert _power_at(ctx, "x", x, tc, lag) >= p0 * (1 - 1e-12)
+    assert power_at(ctx, "x", x, tc, lag) >= p0 * (1 - 1e-12)

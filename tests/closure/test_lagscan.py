@@ -57,7 +57,7 @@ def _channel(rng, size: int, block_len: int) -> np.ndarray:
 
 
 def _direct(ctx: Context, h: np.ndarray, big: int) -> np.ndarray:
-    """The power at every lag as couplings._scan_direct forms it: row by row."""
+    """The power at every lag as couplingscan.scan_direct forms it: row by row."""
     h = h - h.mean()
     z = np.stack([h[ctx.grid.idx + big - lag] for lag in range(big + 1)])
     return channel_power(ctx, z)

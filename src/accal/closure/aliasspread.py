@@ -55,7 +55,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from accal.closure.candidates import Context
-from accal.closure.couplings import SQUARED, _column, square_about_mean
+from accal.closure.couplings import SQUARED
+from accal.closure.couplingscan import column, square_about_mean
 from accal.closure.validation import SIGNAL_STEP_REASON
 from accal.closure.widen import add_base_covariance, scale_variance
 
@@ -74,9 +75,9 @@ def base_shift(
     coefficients, one per data channel (NaN for a channel it has no sample on); None
     when it has none.  ``pair``: the channel with its square, at the same lag and
     response (:func:`accal.closure.couplings._proposals`; the square's columns last)."""
-    col = [_column(ctx, name, x, tau, lag)]
+    col = [column(ctx, name, x, tau, lag)]
     if pair:
-        col.append(_column(ctx, name + SQUARED, square_about_mean(x), tau, lag))
+        col.append(column(ctx, name + SQUARED, square_about_mean(x), tau, lag))
     cols, _, _ = ctx.split(np.column_stack(col), (name, name + SQUARED)[: len(col)])
     z = cols[ctx.use]
     keep = np.flatnonzero(np.any(z != 0.0, axis=0))

@@ -26,23 +26,32 @@ the lag grid directly.
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 from numpy.typing import NDArray
-from scipy.linalg import lapack
 from scipy.optimize import minimize, minimize_scalar
 
-from accal.closure.candidates import SQUARED, Context, Proposal, channel_power
-from accal.closure.kinds import channel_class
-from accal.closure.lagscan import (
-    block_scan,
-    block_spectra,
-    channel_period,
-    correlate_valid,
-    projected_width,
-    scan_power,
+from accal.closure.candidates import SQUARED, Context, Proposal
+from accal.closure.couplingscan import (
+    AUX_TAUS,
+    N_LAGS,
+    column,
+    first_order,
+    lag_multiplicity,
+    lag_powers,
+    max_lag,
+    on_grid,
+    power_at,
+    raw_multiplicity,
+    response,
+    scan_direct,
+    scan_fft,
+    scan_fine,
+    scans_every_lag,
+    square_about_mean,
+    used_rows,
 )
+from accal.closure.kinds import channel_class
+from accal.closure.lagscan import channel_period
 from accal.closure.scaleband import band_limited
 from accal.closure.significance import test_proposal
 
@@ -57,10 +66,6 @@ __all__ = [
     "square_about_mean",
 ]
 
-#: Time constants of the first-order response searched [s] (0: none).
-AUX_TAUS = (0.0, 300.0, 1000.0, 3000.0)
-#: Lags on the search grid.
-N_LAGS = 31
 #: Longest lag searched for a coupling to an angular acceleration [s]: a lever-arm
 #: coupling is instantaneous (the linear and angular channels share their filters).
 ANGULAR_MAX_LAG = 10.0
@@ -71,121 +76,6 @@ TAU_BEYOND = 2.0
 #: The grid's best coupling is refined only when its corrected p-value is below this
 #: (:func:`_worth_refining`).
 REFINE_GATE = 0.5
-#: Responses at time constants off the grid kept per channel (:func:`_response`;
-#: ~0.7 MB each on a 1 Hz day).
-OFF_GRID_RESPONSES = 8
-#: Columns evaluated together by :func:`_powers_at` (memory: 8·N bytes each).
-POWER_BATCH = 32
-
-
-def first_order(x: NDArray[np.float64], dt: float, tau: float) -> NDArray[np.float64]:
-    """First-order low-pass ``τ ẏ + y = x`` on a uniform grid (exact for piecewise-constant x).
-
-    The difference equation ``y[k] − a·y[k − 1] = (1 − a)·x[k]``, ``a = exp(−dt/τ)``
-    (zero-order hold), is solved as the lower-bidiagonal triangular system it is, by
-    LAPACK's banded triangular solve ``dtbtrs`` (forward substitution: the same
-    operations as :func:`scipy.signal.lfilter`, bit for bit; importing
-    ``scipy.signal`` costs ~0.6 s, an eighth of a demod day's closure budget).
-    The filter starts settled on ``x[0]`` (its state before the record is unknown;
-    the first few ``τ`` of the response carry that assumption).
-    """
-    x = np.asarray(x, dtype=np.float64)
-    if tau <= 0 or x.size == 0:
-        return x
-    a = np.exp(-dt / tau)
-    band = np.empty((2, x.size))
-    band[0] = 1.0
-    band[1] = -a
-    y, info = lapack.dtbtrs(band, ((1 - a) * (x - x[0]))[:, None], uplo="L")
-    if info != 0:  # pragma: no cover - a unit diagonal is never singular
-        raise RuntimeError(f"dtbtrs failed (info {info})")
-    return y[:, 0] + x[0]
-
-
-def square_about_mean(x: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``(x − mean x)²``, the mean over the finite values (channel ``NAME^2``)."""
-    x = np.asarray(x, dtype=np.float64)
-    return (x - np.nanmean(x)) ** 2
-
-
-def max_lag(options: dict[str, Any], span: float) -> float:
-    """Longest lag searched [s]: ``options["max_lag"]`` or min(span/20, 1 h)."""
-    return float(options.get("max_lag", min(span / 20.0, 3600.0)))
-
-
-def lag_multiplicity(h: NDArray[np.float64], step: float, top_lag: float) -> float:
-    """Independent lags in ``[0, top_lag]`` for a response ``h`` on a grid of ``step`` [s].
-
-    A continuous lag search over a channel that decorrelates after ``τ_c`` (the lag
-    where its autocorrelation, mean removed, first falls below 1/2) tests about
-    ``top_lag/τ_c + 1`` independent members; at least the :data:`N_LAGS` of the grid
-    (a white channel is independent at every lag), at most one per sample.
-    """
-    if top_lag <= 0:
-        return 1.0
-    x = h - np.mean(h)
-    n = x.size
-    nfft = 1 << int(np.ceil(np.log2(2 * n)))
-    spec = np.abs(np.fft.rfft(x, nfft)) ** 2
-    acf = np.fft.irfft(spec, nfft)[:n]
-    if not acf[0] > 0:
-        return 1.0
-    below = np.flatnonzero(acf / acf[0] < 0.5)
-    tau_c = (below[0] if below.size else n) * step
-    m = top_lag / max(tau_c, step) + 1.0
-    return float(min(max(m, min(N_LAGS, top_lag / step + 1.0)), top_lag / step + 1.0))
-
-
-def _response(
-    ctx: Context, name: str, x: NDArray[np.float64], lead: int, tc: float, cache: bool = True
-) -> NDArray[np.float64]:
-    """The channel's first-order response on the used samples' grid, from ``lead`` steps early.
-
-    The channel is put on the nominal grid from its own first value on (holes
-    interpolated; before its first and after its last value held constant) and
-    filtered from there, so the filter's state at the record's start carries the
-    channel's history (a filter started on the record's first value left a decay of
-    its time constant, which an exponential drift then "explained").  Returns the
-    response at grid points ``−lead .. N−1``.  Cached per selection: with ``cache``
-    the grid's time constants; otherwise the :data:`OFF_GRID_RESPONSES` most recently
-    used other ones (a profile evaluates many lags at one refined τ, and the lag
-    profile with τ re-fitted the same first τs of its bounded search at every lag:
-    a platform coupling run's responses filtered 235 → 72 times with 8 kept by
-    recent use instead of 4 by age); the channel on the grid, which does not depend
-    on τ, always.
-    """
-    key = ("response", name, lead, tc)
-    if key in ctx.cache:
-        return ctx.cache[key]
-    recent = ctx.cache.setdefault(("recent responses", name, lead), {})
-    if tc in recent:
-        recent[tc] = recent.pop(tc)  # the most recently used last
-        return recent[tc]
-    pre, xg = _on_grid(ctx, name, x, lead)
-    h = first_order(xg, ctx.grid.step, tc)[pre - lead :]
-    if cache:
-        ctx.cache[key] = h
-    else:
-        if len(recent) >= OFF_GRID_RESPONSES:
-            del recent[next(iter(recent))]  # the least recently used
-        recent[tc] = h
-    return h
-
-
-def _on_grid(ctx: Context, name: str, x: NDArray[np.float64], lead: int):
-    """``(pre, values)``: the channel interpolated on the nominal grid from ``pre ≥ lead``
-    steps before the record's start (from its own first value on), cached per
-    selection."""
-    key = ("on grid", name, lead)
-    if key not in ctx.cache:
-        step = ctx.grid.step
-        ok = np.isfinite(x) & np.isfinite(ctx.t_all)
-        tu, first = np.unique(ctx.t_all[ok], return_index=True)
-        xv = x[ok][first]
-        pre = max(lead, int(np.ceil((ctx.t0 - tu[0]) / step)))
-        tg = ctx.t0 + step * np.arange(-pre, ctx.grid.size)
-        ctx.cache[key] = (pre, np.interp(tg, tu, xv))
-    return ctx.cache[key]
 
 
 def _channels(ctx: Context) -> list[tuple[str, NDArray[np.float64]]]:
@@ -216,7 +106,7 @@ def lag_period(ctx: Context, name: str, x) -> float:
         return period
     key = ("channel period", name)
     if key not in ctx.cache:
-        pre, values = _on_grid(ctx, name, x, 0)
+        pre, values = on_grid(ctx, name, x, 0)
         ctx.cache[key] = channel_period(_seen_part(ctx, values[pre:]), ctx.grid.step) or (
             channel_period(values, ctx.grid.step)
         )
@@ -265,7 +155,7 @@ def _shortest_lag(ctx: Context, name: str, x, lag: float, tc: float, top: float)
     period = lag_period(ctx, name, x)
     if period <= 0 or lag < 0.5 * period:
         return lag
-    here = _power_at(ctx, name, x, tc, lag)
+    here = power_at(ctx, name, x, tc, lag)
     for k in range(int(lag // period), 0, -1):  # shortest first
         cand = lag - k * period
         lo, hi = max(0.0, cand - 0.25 * period), min(top, cand + 0.25 * period)
@@ -273,161 +163,6 @@ def _shortest_lag(ctx: Context, name: str, x, lag: float, tc: float, top: float)
         if power >= 0.98 * here:
             return best
     return lag
-
-
-def _scan_fft(
-    ctx: Context, hp: NDArray[np.float64], lags: NDArray[np.int64], key: tuple
-) -> NDArray[np.float64]:
-    """Explained power of every lag (in samples) of ``hp`` (grid from ``L`` steps early).
-
-    ``hp[k + L]`` is the response at grid point ``k``; the column of lag ``l`` on
-    used sample ``i`` is ``hp[idx_i + L − l]``.  The numerator by FFT correlation with
-    the residual (on the first scan of a channel, from the columns the denominator
-    needs anyway); the denominator (the column's norm with the null model projected
-    out) depends on the channel only and is computed once per channel and response,
-    exactly, for every lag of the grid.  The channel's mean is taken out first (the
-    base holds the constant; a 293 K channel otherwise loses its variation to
-    cancellation).
-    """
-    grid = ctx.grid
-    big = int(lags.max()) if lags.size else 0
-    hp = hp - float(np.mean(hp))
-    if key not in ctx.cache:
-        null = ctx.cache["null_basis"]
-        z = hp[grid.idx[:, None] + (big - lags)[None, :]]
-        ctx.cache[key] = np.einsum("ij,ij->j", z, z) - null.captured(z)
-        num = (ctx.residual @ z) ** 2  # the columns are at hand: no correlation needed
-    else:
-        rg = np.zeros(grid.size)
-        rg[grid.idx] = ctx.residual
-        num = correlate_valid(hp, rg)[big - lags] ** 2
-    den = ctx.cache[key]
-    z2 = np.maximum(den, 0.0)
-    return np.where(z2 > 1e-9 * np.max(z2, initial=0.0), num / np.maximum(z2, 1e-300), 0.0)
-
-
-def _raw_multiplicity(ctx: Context, name: str, tc: float, hp, big: int, top: float) -> float:
-    """:func:`lag_multiplicity` of the channel's response as read, cached per selection."""
-    key = ("m", name, tc, big)
-    if key not in ctx.cache:
-        ctx.cache[key] = lag_multiplicity(hp[big:], ctx.grid.step, top)
-    return ctx.cache[key]
-
-
-def scans_every_lag(ctx: Context) -> bool:
-    """Whether the lags are scanned at every sample (:mod:`accal.closure.lagscan`): a
-    base of several blocks without a nuisance projection, unless ``options["lag_scan"]``
-    is ``"grid"``."""
-    if ctx.options.get("lag_scan", "fine") != "fine":
-        return False
-    basis = ctx.basis
-    return basis.nuisance is None and basis.n_blocks > 1 and ctx.grid.idx.size > 0
-
-
-def _scan_fine(ctx: Context, name: str, tc: float, hp, big: int, top: float):
-    """``(power at every lag 0 .. big samples, multiplicity)`` for a block base.
-
-    The power is exact (:func:`accal.closure.lagscan.scan_power`).  Multiplicity:
-    ``top/w + 1`` independent lags with ``w`` the projected columns' decorrelation
-    width (:func:`accal.closure.lagscan.projected_width`), at least the channel's
-    as read (:func:`lag_multiplicity`) and at most one per sample; both measured
-    once per channel and time constant, with the design of the first step.
-    """
-    # contexts sharing a cache may differ in their used samples (the search without a
-    # coupled channel's unknown start) or block base: both are part of the key
-    key = ("fine scan", name, tc, big, np.packbits(ctx.use).tobytes())
-    hit = ctx.cache.get(key)
-    if hit is None or hit[0] is not ctx.basis.q:
-        scan = block_scan(ctx.grid, ctx.basis, hp, big, _block_spectra(ctx, big, key[-1]))
-        width = projected_width(ctx.grid, ctx.basis, scan, big) * ctx.grid.step
-        m = min(max(top / width + 1.0, _raw_multiplicity(ctx, name, tc, hp, big, top)), big + 1.0)
-        hit = ctx.cache[key] = (ctx.basis.q, scan, float(m))
-    _, scan, m = hit
-    return scan_power(ctx.grid, ctx.basis, ctx.residual, scan, big), m
-
-
-def _block_spectra(ctx: Context, big: int, use_key: bytes):
-    """:func:`accal.closure.lagscan.block_spectra` of the context's blocks, shared by
-    its channels and time constants; only the latest used-sample set is kept (~10 MB a
-    base column on a day)."""
-    hit = ctx.cache.get("block spectra")
-    if hit is None or hit[0] is not ctx.basis.q or hit[1] != (big, use_key):
-        hit = None
-        ctx.cache.pop("block spectra", None)  # freed before the new one is made
-        hit = (ctx.basis.q, (big, use_key), block_spectra(ctx.grid, ctx.basis, big))
-        ctx.cache["block spectra"] = hit
-    return hit[2]
-
-
-def _scan_direct(ctx: Context, hp: NDArray[np.float64], lags: NDArray[np.int64]):
-    """The same as :func:`_scan_fft`, exactly, lag by lag (block bases, several channels).
-
-    The channel's mean is taken out first, as in :func:`_scan_fft`: each channel's
-    bias holds the constant, and a 293 K temperature's norm with the base projected
-    out is its 0.1 K variation, 1e-8 of its own norm, lost to cancellation (QA: every
-    platform coupling scanned as zero power, 0/16 found).
-    """
-    big = int(lags.max()) if lags.size else 0
-    idx = ctx.grid.idx
-    hp = hp - float(np.mean(hp))
-    z = np.stack([hp[idx + big - lag] for lag in lags])
-    return channel_power(ctx, z)
-
-
-def _column(ctx: Context, name: str, x, tc: float, lag: float) -> NDArray[np.float64]:
-    """The coupling's regressor on *all* samples: ``(h_τ * x)(t − lag)``."""
-    return _columns(ctx, name, x, tc, (lag,))[:, 0]
-
-
-def _columns(ctx: Context, name: str, x, tc: float, lags) -> NDArray[np.float64]:
-    """:func:`_column` at each of ``lags`` (N, len(lags)), the response computed once."""
-    tg, h = _grid_response(ctx, name, x, tc, lags)
-    return np.column_stack([np.interp(ctx.t_all - lag, tg, h) for lag in lags])
-
-
-def _grid_response(ctx: Context, name: str, x, tc: float, lags):
-    """``(times, response)``: the channel's response on the grid from early enough for
-    the longest of ``lags`` (and of the search) to the record's end."""
-    step = ctx.grid.step
-    lead = int(np.ceil(max(max(lags), max_lag(ctx.options, ctx.span)) / step)) + 2
-    h = _response(ctx, name, x, lead, tc, cache=tc in AUX_TAUS)
-    return ctx.t0 + step * np.arange(-lead, ctx.grid.size), h
-
-
-def _power_at(ctx: Context, name: str, x, tc: float, lag: float) -> float:
-    """Explained power of the coupling at (``lag``, ``τ``), the column's mean taken out
-    (the base holds the constant; see :func:`_scan_direct`)."""
-    return float(_powers_at(ctx, name, x, tc, (lag,))[0])
-
-
-def _powers_at(ctx: Context, name: str, x, tc: float, lags) -> NDArray[np.float64]:
-    """:func:`_power_at` at each of ``lags`` (one τ), :data:`POWER_BATCH` columns at a
-    time (a profile's grid: one pass over the design per batch, not per lag)."""
-    lags = np.atleast_1d(np.asarray(lags, dtype=np.float64))
-    out = np.empty(lags.size)
-    for k in range(0, lags.size, POWER_BATCH):
-        rows = _used_rows(ctx, name, x, tc, lags[k : k + POWER_BATCH])
-        rows -= np.mean(rows, axis=1, keepdims=True)
-        out[k : k + POWER_BATCH] = channel_power(ctx, rows)
-    return out
-
-
-def _used_rows(ctx: Context, name: str, x, tc: float, lags) -> NDArray[np.float64]:
-    """:func:`_columns` on the used samples only, one row per lag (len(lags), n): the
-    regressor interpolated at the used samples' distinct times (the platform's two
-    axes share each time) and spread to the samples (profile of a platform coupling
-    day: 3.2 of 25 s in building all-sample columns, then selecting and transposing)."""
-    tg, h = _grid_response(ctx, name, x, tc, lags)
-    key = ("used times", np.packbits(ctx.use).tobytes())  # contexts of one cache may differ
-    if key not in ctx.cache:
-        tu, inv = np.unique(ctx.t_all[ctx.use], return_inverse=True)
-        ctx.cache[key] = (tu, None if tu.size == inv.size else inv)
-    tu, inv = ctx.cache[key]
-    rows = np.empty((len(lags), int(ctx.use.sum())))
-    for j, lag in enumerate(lags):
-        v = np.interp(tu - lag, tg, h)
-        rows[j] = v if inv is None else v[inv]
-    return rows
 
 
 def _taus(ctx: Context, name: str) -> tuple[float, ...]:
@@ -442,7 +177,7 @@ def _taus(ctx: Context, name: str) -> tuple[float, ...]:
 def _refine(ctx: Context, name: str, x, lag: float, tc: float, lag_step: float, top: float):
     """(lag, τ, power) refined: lag continuous near the grid's best, then lag and τ
     together within the channel's time constants (:func:`_taus`)."""
-    p0 = _power_at(ctx, name, x, tc, lag)
+    p0 = power_at(ctx, name, x, tc, lag)
     lo, hi = max(0.0, lag - lag_step), min(top, lag + lag_step)
     if hi > lo:
         best, power = _best_lag_in(ctx, name, x, tc, lo, hi)
@@ -464,7 +199,7 @@ def _refine(ctx: Context, name: str, x, lag: float, tc: float, lag_step: float, 
     if simplex[1, 0] == start[0]:
         simplex[1, 0] = max(start[0] - d_lag, 0.0)
     res = minimize(
-        lambda v: -_power_at(ctx, name, x, float(v[1]), float(v[0])),
+        lambda v: -power_at(ctx, name, x, float(v[1]), float(v[0])),
         start,
         method="Nelder-Mead",
         bounds=[(0.0, max(top, 0.0)), (lo_tau, hi_tau)],
@@ -510,7 +245,7 @@ def _polish(ctx: Context, name: str, x, lag: float, tc: float, top: float) -> tu
     if tc <= 0:
         return lag, tc
     step, top = ctx.grid.step, max(top, 0.0)
-    p0 = _power_at(ctx, name, x, tc, lag)
+    p0 = power_at(ctx, name, x, tc, lag)
     # the ridge's end first: no low-pass, the lag taking up τ
     lag_end, p_end = _lag_near(ctx, name, x, min(lag + tc, top), top, p0)
     if p_end > p0:
@@ -525,7 +260,7 @@ def _polish(ctx: Context, name: str, x, lag: float, tc: float, top: float) -> tu
             tc1 = tc * float(np.exp(np.clip(shrink * d[1], -3.0, 3.0)))
             if tc1 < TAU_MIN_STEPS * step:  # a low-pass of a few samples is a lag
                 lag1, tc1 = min(lag1 + tc1, top), 0.0
-            p1 = _power_at(ctx, name, x, tc1, lag1)
+            p1 = power_at(ctx, name, x, tc1, lag1)
             if p1 > p0:
                 lag, tc, p0, moved = lag1, tc1, p1, True
                 break
@@ -569,7 +304,7 @@ def _best_lag_in(ctx: Context, name: str, x, tc: float, lo: float, hi: float):
             if not hi > lo:
                 return float(lags[k]), float(pw[k])
     res = minimize_scalar(
-        lambda lg: -_power_at(ctx, name, x, tc, lg),
+        lambda lg: -power_at(ctx, name, x, tc, lg),
         bounds=(lo, hi),
         method="bounded",
         options={"xatol": 0.25 * step, "maxiter": 25},
@@ -578,19 +313,6 @@ def _best_lag_in(ctx: Context, name: str, x, tc: float, lo: float, hi: float):
     if dense is not None and inside.size and pw[k] > power:
         return float(lags[k]), float(pw[k])
     return lag, power
-
-
-def lag_powers(ctx: Context, name: str, x, tc: float):
-    """``(lags [s], explained power)`` at every sample lag ``0 .. max_lag`` at time
-    constant ``tc`` (:mod:`accal.closure.lagscan`, the current model and residual), or
-    None where the lags are not scanned so (:func:`scans_every_lag`)."""
-    if not scans_every_lag(ctx):
-        return None
-    step = ctx.grid.step
-    big = int(np.rint(max_lag(ctx.options, ctx.span) / step))
-    hp = _response(ctx, name, np.asarray(x, dtype=np.float64), big, tc, cache=tc in AUX_TAUS)
-    pw, _ = _scan_fine(ctx, name, tc, hp, big, big * step)
-    return step * np.arange(big + 1), pw
 
 
 def _gauss_newton_step(ctx: Context, name: str, x, lag: float, tc: float):
@@ -605,9 +327,9 @@ def _gauss_newton_step(ctx: Context, name: str, x, lag: float, tc: float):
     step = ctx.grid.step
     eps, dl = 1e-3, 0.5 * step
     lo = max(lag - dl, 0.0)
-    rows = _used_rows(ctx, name, x, tc, (lag, lag + dl, lo))
-    up = _used_rows(ctx, name, x, tc * np.exp(eps), (lag,))[0]
-    down = _used_rows(ctx, name, x, tc / np.exp(eps), (lag,))[0]
+    rows = used_rows(ctx, name, x, tc, (lag, lag + dl, lo))
+    up = used_rows(ctx, name, x, tc * np.exp(eps), (lag,))[0]
+    down = used_rows(ctx, name, x, tc / np.exp(eps), (lag,))[0]
     base = np.column_stack(
         [rows[0], (rows[1] - rows[2]) / (lag + dl - lo), (up - down) / (2 * eps)]
     )
@@ -630,10 +352,10 @@ def _jacobian(ctx: Context, name: str, x, lag: float, tc: float):
 
     def jac() -> list[tuple[str, NDArray[np.float64]]]:
         eps = 1e-3
-        up = _column(ctx, name, x, tc * np.exp(eps), lag)
-        down = _column(ctx, name, x, tc / np.exp(eps), lag)
+        up = column(ctx, name, x, tc * np.exp(eps), lag)
+        down = column(ctx, name, x, tc / np.exp(eps), lag)
         dl = 0.5 * ctx.grid.step
-        dlag = _column(ctx, name, x, tc, lag + dl) - _column(ctx, name, x, tc, max(lag - dl, 0))
+        dlag = column(ctx, name, x, tc, lag + dl) - column(ctx, name, x, tc, max(lag - dl, 0))
         dlag /= lag + dl - max(lag - dl, 0.0)
         parts = [("tau", (up - down) / (2 * eps)), ("lag", dlag)]
         return [(k, ctx.split(d[:, None], (f"aux:{name}",))[0]) for k, d in parts]
@@ -686,16 +408,16 @@ def auxiliary(ctx: Context) -> list[Proposal]:
             lags = np.arange(big + 1)
         lag_step = float((lags[1] - lags[0]) * step) if lags.size > 1 else 0.0
         for tc in taus:
-            hp = _response(ctx, name, x, big, tc)
+            hp = response(ctx, name, x, big, tc)
             if fine:
-                pw, m = _scan_fine(ctx, name, tc, hp, big, top)
+                pw, m = scan_fine(ctx, name, tc, hp, big, top)
             else:
                 pw = (
-                    _scan_fft(ctx, hp, lags, ("den", name, tc, big))
+                    scan_fft(ctx, hp, lags, ("den", name, tc, big))
                     if fft_path
-                    else _scan_direct(ctx, hp, lags)
+                    else scan_direct(ctx, hp, lags)
                 )
-                m = _raw_multiplicity(ctx, name, tc, hp, big, top)
+                m = raw_multiplicity(ctx, name, tc, hp, big, top)
             mult += m
             j = int(np.argmax(pw))
             if name not in bests or pw[j] > bests[name][0]:
@@ -777,7 +499,7 @@ def _worth_refining(ctx: Context, props: list[Proposal]) -> bool:
 def _proposals(ctx: Context, name: str, x, tc: float, lag: float, mult: float) -> list[Proposal]:
     """The coupling to ``name`` at (``lag``, ``τ``) and, for a channel that is not an
     angular acceleration or a square, the pair with the channel's square."""
-    col = _column(ctx, name, x, tc, lag)
+    col = column(ctx, name, x, tc, lag)
     cols, labs, axes = ctx.split(col[:, None], (f"aux:{name}",))
     out = [
         Proposal(
@@ -796,7 +518,7 @@ def _proposals(ctx: Context, name: str, x, tc: float, lag: float, mult: float) -
         # quadratic dependence masks the linear one (QA: c1·T + 2e-9·(T − 20 K)² gave
         # "unexplained" structure only); the selection takes the pair only when no
         # single coupling is significant, and at twice the multiplicity
-        sq = _column(ctx, name + SQUARED, square_about_mean(x), tc, lag)
+        sq = column(ctx, name + SQUARED, square_about_mean(x), tc, lag)
         c2, l2, a2 = ctx.split(np.column_stack([col, sq]), (f"aux:{name}", f"aux:{name}{SQUARED}"))
         n_c = max(ctx.n_chan, 1)
         parts = [

@@ -63,16 +63,15 @@ from numpy.typing import NDArray
 from scipy.optimize import minimize_scalar
 
 from accal.closure.candidates import Context, row_fit
-from accal.closure.couplings import (
-    ANGULAR_MAX_LAG,
-    SQUARED,
-    _column,
-    _power_at,
-    _powers_at,
-    _used_rows,
+from accal.closure.couplings import ANGULAR_MAX_LAG, SQUARED
+from accal.closure.couplingscan import (
+    column,
     lag_powers,
     max_lag,
+    power_at,
+    powers_at,
     scans_every_lag,
+    used_rows,
 )
 from accal.closure.kinds import channel_class
 from accal.closure.peaks import prominent_peaks
@@ -196,10 +195,10 @@ def lag_uncertainty(
     top = max(float(top), float(lag))
 
     def power(lg: float) -> float:
-        return _power_at(ctx, name, x, tau, float(min(max(lg, 0.0), top)))
+        return power_at(ctx, name, x, tau, float(min(max(lg, 0.0), top)))
 
     def powers(lgs: NDArray[np.float64]) -> NDArray[np.float64]:
-        return _powers_at(ctx, name, x, tau, np.clip(lgs, 0.0, top))
+        return powers_at(ctx, name, x, tau, np.clip(lgs, 0.0, top))
 
     # the per-period base's period only: a channel's own cycle (lag_period) picks the
     # search's lag, but aliases a cycle apart here would widen the interval over lags
@@ -212,7 +211,7 @@ def lag_uncertainty(
         def free(lg: float) -> float:  # τ profiled out: the lag/low-pass ridge
             lg = float(min(max(lg, 0.0), top))
             res = minimize_scalar(
-                lambda tc: -_power_at(ctx, name, x, float(tc), lg),
+                lambda tc: -power_at(ctx, name, x, float(tc), lg),
                 bounds=(0.0, tau_hi),
                 method="bounded",
                 options={"xatol": max(step, 0.05 * tau_hi), "maxiter": 12},
@@ -529,9 +528,9 @@ def lag_sandwich_sigma(
     channels each has its coefficient; their informations add.  NaN when undefined.
     """
     use = ctx.use
-    z0 = _column(ctx, name, x, tau, lag)[use]
+    z0 = column(ctx, name, x, tau, lag)[use]
     lo, hi = max(lag - half, 0.0), lag + half
-    zd = (_column(ctx, name, x, tau, hi)[use] - _column(ctx, name, x, tau, lo)[use]) / (hi - lo)
+    zd = (column(ctx, name, x, tau, hi)[use] - column(ctx, name, x, tau, lo)[use]) / (hi - lo)
     r = ctx.residual
     info = 0.0
     for m in ctx.channel_masks():
@@ -609,7 +608,7 @@ def coefficient_interval(
 
     def fits(tc: float, lg) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """``ĉ_k`` and ``P_k`` (channels × lags) at one τ."""
-        z = _used_rows(ctx, name, x, float(tc), lg)
+        z = used_rows(ctx, name, x, float(tc), lg)
         z -= z.mean(axis=1, keepdims=True)
         c_k, p_k = [], []
         for m in masks:
@@ -622,7 +621,7 @@ def coefficient_interval(
     c = np.concatenate([a for a, _ in parts], axis=1)
     p = np.concatenate([b for _, b in parts], axis=1)
     total = p.sum(axis=0)
-    p_hat = max(float(total.max()), _power_at(ctx, name, x, tau, lag), 1e-300)
+    p_hat = max(float(total.max()), power_at(ctx, name, x, tau, lag), 1e-300)
     dw = wald * (1.0 - total / p_hat)
     if len(masks) == 1:
         p_hat_k, w_k, best = np.array([p_hat]), np.array([wald]), [(coef, sigma)]

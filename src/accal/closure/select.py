@@ -335,18 +335,21 @@ def close_loop(
     st, jumps = _given_back(search, setup, st, jumps)
     reject_boxes(search, *_final_fit(search, setup, st)[::2])
     st = _proxies_off_effects(search, setup, st)
-    floored = stop is not None and stop(search)
     noise_psd = _updated_psd(search, setup, st, jumps.jumps, use, noise_psd, psd_update)
+    floored = stop is not None and stop(search)
     args = (catchall_knots, noise_psd, floored, considered, opts, jumps.jumps)
+    return _determined_result(search, setup, st, args)
+
+
+def _determined_result(search: Search, setup: NullSetup, st, args: tuple) -> ClosureResult:
+    """:func:`_finish`'s result, refitted without the effects the data do not determine
+    (:func:`reject_undetermined`) when there are any."""
     res = _finish(search, setup, st, *args)
-    if reject_undetermined(search, res, len(jumps.jumps)):
-        setup.proxy_exclude = None
-        st = _proxies_off_effects(search, setup, setup.build(search.use))
-        search.basis0, search.beta = st["basis0"], st["beta"]
-        search.drop_caches()
-        search.cache["template"], search.cache["null_basis"] = st["template"], st["basis0"]
-        res = _finish(search, setup, st, *args)
-    return res
+    if not reject_undetermined(search, res, len(args[-1])):
+        return res
+    setup.proxy_exclude = None
+    st = _installed(search, setup.build(search.use))
+    return _finish(search, setup, _proxies_off_effects(search, setup, st), *args)
 
 
 #: An instrument effect whose final coefficient is within this many of its σ of zero
@@ -413,11 +416,15 @@ def _proxies_off_effects(search: Search, setup: NullSetup, st):
     if not setup.proxies_in_model or not search.found:
         return st
     setup.proxy_exclude = np.column_stack([f.model_prop.columns for f in search.found])
-    st = setup.build(search.use)
+    return _installed(search, setup.build(search.use))
+
+
+def _installed(search: Search, st: dict[str, Any]) -> dict[str, Any]:
+    """``st``, a null fit rebuilt on ``search.use``, made the search's null model (its
+    caches dropped, as :func:`_search_maker` sets them up); returned."""
     search.basis0, search.beta = st["basis0"], st["beta"]
     search.drop_caches()
-    search.cache["template"] = st["template"]
-    search.cache["null_basis"] = st["basis0"]
+    search.cache["template"], search.cache["null_basis"] = st["template"], st["basis0"]
     return st
 
 
